@@ -1,0 +1,85 @@
+"""Entry point of the `ktcs-bench` command; discovers subcommands in `ktcs_bench.cli`."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from collections.abc import Sequence
+
+from ktcs_bench import __version__
+from ktcs_bench.errors import ConfigError, KtcsError, PeerError, UsageError
+
+EXIT_OK = 0
+EXIT_CHECK_FAILED = 1
+EXIT_USAGE = 2
+EXIT_PEER = 3
+EXIT_INTERRUPTED = 130
+
+DESCRIPTION = """\
+ktcs-bench: a kTCS signalling laboratory in a box.
+
+Run an emulated CTC, interlockings, wayside ATC, trackside I/O, track circuits and trains, linked
+by the real Type I (serial) and Type II (TCP) protocols; decode, monitor, replay and fault-inject
+any link; check a device against the protocol conformance suite.
+"""
+
+EPILOG = """\
+examples:
+  ktcs-bench decode protocols/captures/fig7.hex --profile auto
+  ktcs-bench decode '02 00 00 10 06 00 03 87 00 00 03'
+  ktcs-bench encode --protocol type1 --seq 0x10 --op REQUEST_ALL --data '00 00 FF FF'
+
+exit codes: 0 ok, 1 a check failed (bad CRC, failed case), 2 usage/config error,
+            3 peer or I/O failure, 130 interrupted.
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ktcs-bench",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"ktcs-bench {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    import ktcs_bench.cli as cli_pkg
+
+    for info in sorted(pkgutil.iter_modules(cli_pkg.__path__), key=lambda m: m.name):
+        if info.name.startswith("_") or info.name == "main":
+            continue
+        module = importlib.import_module(f"ktcs_bench.cli.{info.name}")
+        register = getattr(module, "register", None)
+        if register is not None:
+            register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler = getattr(args, "handler", None)
+    if handler is None:
+        parser.print_help()
+        return EXIT_USAGE
+    try:
+        return int(handler(args))
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        return EXIT_OK
+    except (ConfigError, UsageError) as exc:
+        print(f"ktcs-bench: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except PeerError as exc:
+        print(f"ktcs-bench: peer error: {exc}", file=sys.stderr)
+        return EXIT_PEER
+    except KtcsError as exc:
+        print(f"ktcs-bench: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())
