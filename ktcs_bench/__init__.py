@@ -1,4 +1,4 @@
-"""ktcs-bench: an emulated kTCS signalling laboratory (CTC, IXL, ATC, trackside, trains) on one machine.
+"""ktcs-bench: an emulated kTCS signalling lab (CTC, IXL, ATC, trackside, trains) on one machine.
 
 The package is sans-I/O at its core (codecs, link state machines, interlocking, ATP) with thin
 adapters at the edge (ptys, TCP, clocks) and one CLI on top (`ktcs-bench`).
