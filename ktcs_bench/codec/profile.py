@@ -1,0 +1,332 @@
+"""Frame profiles read from `protocols/*.yaml`, checked key by key, with the fast-path layout derived.
+
+A profile says where each header field sits, what LEN counts, what the CRC covers and how wide it
+is on the wire. The hot path never looks at the YAML again: it uses the `struct.Struct` for the
+header and the offsets computed here once.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from ktcs_bench.codec.crc import CrcFunction, CrcSpec
+from ktcs_bench.codec.opcodes import FieldSpec, Opcode, OpcodeTable
+from ktcs_bench.datafiles import data_dir, load_yaml
+from ktcs_bench.errors import ConfigError, UsageError
+
+HEADER_FIELDS = ("len", "seq", "op", "sub")
+_SIZE_FMT = {1: "B", 2: "H", 4: "I"}
+# A LEN wider than this cannot be a serial/TCP frame of ours; it also bounds every buffer.
+MAX_LEN_CEILING = 65535
+
+
+@dataclass(frozen=True)
+class FrameProfile:
+    """One wire profile. Offsets are from the STX byte; `data` starts at `header_size`."""
+
+    name: str
+    protocol: str
+    description: str
+    source: str
+    stx: int
+    etx: int | None
+    little: bool
+    header: tuple[tuple[str, int], ...]
+    length_counts: frozenset[str]
+    max_len: int
+    crc_spec: CrcSpec
+    crc_first: str
+    crc_last: str
+    crc_size: int
+    crc_pad: int
+    opcodes: OpcodeTable
+    nak_reasons: Mapping[int, str]
+
+    # -- derived layout (computed once, used by the hot path) --
+    @property
+    def header_size(self) -> int:
+        """STX plus the header fields: where DATA starts."""
+        return 1 + sum(size for _, size in self.header)
+
+    @property
+    def trailer_size(self) -> int:
+        return self.crc_size + self.crc_pad + (0 if self.etx is None else 1)
+
+    def offset_of(self, name: str) -> tuple[int, int]:
+        """(offset, size) of a header field; STX is at 0."""
+        if name == "stx":
+            return 0, 1
+        off = 1
+        for fname, size in self.header:
+            if fname == name:
+                return off, size
+            off += size
+        raise KeyError(name)
+
+    @property
+    def has_sub(self) -> bool:
+        return any(n == "sub" for n, _ in self.header)
+
+    @property
+    def fixed_counted(self) -> int:
+        """Header bytes that LEN counts (the rest of LEN is DATA)."""
+        return sum(size for n, size in self.header if n in self.length_counts)
+
+    @property
+    def max_data(self) -> int:
+        return self.max_len - self.fixed_counted
+
+    def frame_size(self, data_len: int) -> int:
+        return self.header_size + data_len + self.trailer_size
+
+    def crc_span(self, data_len: int) -> tuple[int, int]:
+        """[start, end) of the bytes the CRC covers in a frame with `data_len` bytes of DATA."""
+        start = self.offset_of(self.crc_first)[0]
+        if self.crc_last == "data":
+            return start, self.header_size + data_len
+        off, size = self.offset_of(self.crc_last)
+        return start, off + size
+
+    def header_struct(self) -> struct.Struct:
+        order = "<" if self.little else ">"
+        return struct.Struct(order + "".join(_SIZE_FMT[size] for _, size in self.header))
+
+    def crc_function(self) -> CrcFunction:
+        return _crc_function(self.crc_spec)
+
+    def nak_reason_name(self, reason: int) -> str:
+        return self.nak_reasons.get(reason, f"reason {reason}")
+
+
+@cache
+def _crc_function(spec: CrcSpec) -> CrcFunction:
+    return spec.function()
+
+
+class _Reader:
+    """Reads one YAML mapping, turning every problem into a ConfigError with its key path."""
+
+    def __init__(self, file: Path) -> None:
+        self.file = file
+
+    def fail(self, place: str, problem: str) -> ConfigError:
+        return ConfigError(self.file, place, problem)
+
+    def mapping(self, value: Any, place: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.fail(place, f"must be a mapping, not {type(value).__name__}")
+        return value
+
+    def get(self, m: Mapping[str, Any], key: str, place: str, kind: type | tuple[type, ...]) -> Any:
+        where = f"{place}.{key}" if place else key
+        if key not in m:
+            raise self.fail(where, "missing key")
+        value = m[key]
+        if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+            names = (
+                kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
+            )
+            raise self.fail(where, f"must be {names}, not {value!r}")
+        return value
+
+    def byte(self, m: Mapping[str, Any], key: str, place: str) -> int:
+        value = self.get(m, key, place, int)
+        if not 0 <= value <= 255:
+            raise self.fail(f"{place}.{key}", f"must be a byte value 0..255, not {value}")
+        return int(value)
+
+
+def _field_specs(r: _Reader, raw: Any, place: str) -> tuple[FieldSpec, ...]:
+    if not isinstance(raw, list):
+        raise r.fail(place, "must be a list of {name, type}")
+    specs = []
+    for i, f in enumerate(raw):
+        fm = r.mapping(f, f"{place}[{i}]")
+        name = r.get(fm, "name", f"{place}[{i}]", str)
+        typ = r.get(fm, "type", f"{place}[{i}]", str)
+        if typ not in ("u8", "u16", "u32"):
+            raise r.fail(f"{place}[{i}].type", f"must be u8, u16 or u32, not {typ!r}")
+        specs.append(FieldSpec(name, typ))
+    return tuple(specs)
+
+
+def _int_names(r: _Reader, raw: Any, place: str) -> dict[int, str]:
+    if raw is None:
+        return {}
+    m = r.mapping(raw, place)
+    out: dict[int, str] = {}
+    for k, v in m.items():
+        if not isinstance(k, int):
+            raise r.fail(f"{place}.{k}", "keys must be integers")
+        out[k] = str(v)
+    return out
+
+
+def _opcode(r: _Reader, raw: Any, place: str, little: bool) -> Opcode:
+    m = r.mapping(raw, place)
+    op = r.get(m, "op", place, int)
+    name = r.get(m, "name", place, str)
+    shapes = [k for k in ("items", "statuses") if m.get(k)]
+    if len(shapes) > 1:
+        raise r.fail(place, "an opcode carries items or statuses, not both")
+    return Opcode(
+        op=op,
+        name=name.upper(),
+        little=little,
+        fields=_field_specs(r, m.get("fields", []), f"{place}.fields"),
+        items=_field_specs(r, m.get("items", []), f"{place}.items"),
+        statuses=bool(m.get("statuses", False)),
+        control=bool(m.get("control", False)),
+        subs=_int_names(r, m.get("subs"), f"{place}.subs"),
+        reasons=_int_names(r, m.get("reasons"), f"{place}.reasons"),
+    )
+
+
+def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
+    """Every profile defined in one protocol YAML file, validated."""
+    file = Path(path)
+    r = _Reader(file)
+    top = r.mapping(load_yaml(file), "")
+    protocol = r.get(top, "protocol", "", str)
+    if protocol not in ("type1", "type2"):
+        raise r.fail("protocol", f"must be type1 or type2, not {protocol!r}")
+    crcs: dict[str, CrcSpec] = {}
+    for cname, craw in r.mapping(r.get(top, "crc_algorithms", "", dict), "crc_algorithms").items():
+        place = f"crc_algorithms.{cname}"
+        cm = r.mapping(craw, place)
+        spec = CrcSpec(
+            str(cname),
+            r.get(cm, "poly", place, int),
+            bool(r.get(cm, "reflect", place, bool)),
+            r.get(cm, "init", place, int),
+            r.get(cm, "xor_out", place, int),
+            cm.get("check"),
+        )
+        if spec.check is not None and spec.function()(b"123456789") != spec.check:
+            raise r.fail(place, f"check value over '123456789' is not {spec.check:#06x}")
+        crcs[str(cname)] = spec
+    nak_reasons = _int_names(r, top.get("nak_reasons"), "nak_reasons")
+    raw_opcodes = r.get(top, "opcodes", "", list)
+    profiles: dict[str, FrameProfile] = {}
+    for pname, praw in r.mapping(r.get(top, "profiles", "", dict), "profiles").items():
+        place = f"profiles.{pname}"
+        pm = r.mapping(praw, place)
+        order = pm.get("byte_order", "little")
+        if order not in ("little", "big"):
+            raise r.fail(f"{place}.byte_order", f"must be little or big, not {order!r}")
+        little = order == "little"
+        header: list[tuple[str, int]] = []
+        for i, h in enumerate(r.get(pm, "header", place, list)):
+            hp = f"{place}.header[{i}]"
+            hm = r.mapping(h, hp)
+            hname = r.get(hm, "name", hp, str)
+            size = r.get(hm, "size", hp, int)
+            if hname not in HEADER_FIELDS:
+                raise r.fail(f"{hp}.name", f"must be one of {', '.join(HEADER_FIELDS)}")
+            if size not in _SIZE_FMT:
+                raise r.fail(f"{hp}.size", f"must be 1, 2 or 4, not {size}")
+            if any(n == hname for n, _ in header):
+                raise r.fail(f"{hp}.name", f"field {hname!r} appears twice")
+            header.append((hname, size))
+        for needed in ("len", "seq", "op"):
+            if all(n != needed for n, _ in header):
+                raise r.fail(f"{place}.header", f"needs a {needed!r} field")
+        counts = r.get(pm, "length_counts", place, list)
+        for i, c in enumerate(counts):
+            if c not in ("seq", "op", "sub", "data"):
+                raise r.fail(f"{place}.length_counts[{i}]", f"unknown part {c!r}")
+        if "data" not in counts:
+            raise r.fail(f"{place}.length_counts", "LEN must count data")
+        max_len = r.get(pm, "max_len", place, int)
+        if not 1 <= max_len <= MAX_LEN_CEILING:
+            raise r.fail(f"{place}.max_len", f"must be 1..{MAX_LEN_CEILING}, not {max_len}")
+        len_size = dict(header)["len"]
+        if max_len >= 1 << (8 * len_size):
+            raise r.fail(f"{place}.max_len", f"does not fit the {len_size}-byte len field")
+        crc = r.mapping(r.get(pm, "crc", place, dict), f"{place}.crc")
+        algo = r.get(crc, "algorithm", f"{place}.crc", str)
+        if algo not in crcs:
+            raise r.fail(f"{place}.crc.algorithm", f"unknown algorithm {algo!r}")
+        covers = r.get(crc, "covers", f"{place}.crc", list)
+        names = ("stx", *(n for n, _ in header), "data")
+        if len(covers) != 2 or any(c not in names for c in covers):
+            raise r.fail(f"{place}.crc.covers", f"must be [first, last] from {', '.join(names)}")
+        if names.index(covers[0]) > names.index(covers[1]) or covers[0] == "data":
+            raise r.fail(f"{place}.crc.covers", "first must come before last")
+        crc_size = r.get(crc, "size", f"{place}.crc", int)
+        if crc_size not in (1, 2, 4) or crcs[algo].width_bits > 8 * crc_size:
+            raise r.fail(f"{place}.crc.size", f"cannot carry a {crcs[algo].width_bits}-bit CRC")
+        etx = pm.get("etx")
+        if etx is not None:
+            etx = r.byte(pm, "etx", place)
+        table = {}
+        for i, oraw in enumerate(raw_opcodes):
+            o = _opcode(r, oraw, f"opcodes[{i}]", little)
+            table[o.op] = o
+        for i, oraw in enumerate(pm.get("opcode_overrides", []) or []):
+            o = _opcode(r, oraw, f"{place}.opcode_overrides[{i}]", little)
+            table[o.op] = o
+        profiles[str(pname)] = FrameProfile(
+            name=str(pname),
+            protocol=protocol,
+            description=str(pm.get("description", "")),
+            source=str(file),
+            stx=r.byte(pm, "stx", place),
+            etx=etx,
+            little=little,
+            header=tuple(header),
+            length_counts=frozenset(counts),
+            max_len=max_len,
+            crc_spec=crcs[algo],
+            crc_first=covers[0],
+            crc_last=covers[1],
+            crc_size=crc_size,
+            crc_pad=int(crc.get("pad", 0)),
+            opcodes=OpcodeTable.of(table.values()),
+            nak_reasons=nak_reasons,
+        )
+    return profiles
+
+
+@cache
+def shipped_profiles() -> dict[str, FrameProfile]:
+    """Profiles of every `protocols/*.yaml` shipped with the package, by name."""
+    out: dict[str, FrameProfile] = {}
+    for path in sorted(data_dir("protocols").glob("*.yaml")):
+        for name, prof in load_profiles(path).items():
+            if name in out:
+                raise ConfigError(path, f"profiles.{name}", f"also defined in {out[name].source}")
+            out[name] = prof
+    return out
+
+
+DEFAULT_PROFILE = {"type1": "ktcs-type1", "type2": "ktcs-type2"}
+
+
+def profile_names(protocol: str | None = None) -> list[str]:
+    return [n for n, p in shipped_profiles().items() if protocol in (None, p.protocol)]
+
+
+def get_profile(name: str) -> FrameProfile:
+    """A shipped profile by name, or a `FILE.yaml:NAME` / `FILE.yaml` path to a profile of one's own."""
+    if name.endswith((".yaml", ".yml")) or ".yaml:" in name or ".yml:" in name:
+        path, _, pname = name.partition(":") if ":" in name else (name, "", "")
+        profiles = load_profiles(path)
+        if not pname:
+            if len(profiles) != 1:
+                raise UsageError(f"{path} holds several profiles; name one as {path}:NAME")
+            return next(iter(profiles.values()))
+        if pname not in profiles:
+            raise UsageError(f"{path} has no profile {pname!r} (has {', '.join(profiles)})")
+        return profiles[pname]
+    profiles = shipped_profiles()
+    if name in DEFAULT_PROFILE:
+        name = DEFAULT_PROFILE[name]
+    if name not in profiles:
+        raise UsageError(f"unknown profile {name!r} (shipped: {', '.join(profiles)})")
+    return profiles[name]

@@ -1,0 +1,260 @@
+"""The streaming decoder: bytes in any chunking -> frames, error frames and garbage, with offsets.
+
+Framing is by LEN (no byte stuffing), so STX may occur inside DATA and inside garbage. The decoder
+treats every STX as a candidate and resynchronises as SPEC §3.1 says:
+
+* a candidate whose LEN is out of range, or whose CRC or ETX fails, is an error frame -- unless a
+  complete valid frame starts inside it, in which case it was a false STX and its bytes are garbage;
+* while a candidate waits for more bytes, any complete valid frame that starts after it wins, so a
+  false STX in garbage announcing a long frame never swallows the good frame behind it;
+* after an error frame, candidates inside the failed frame's extent that fail too are garbage, not
+  further errors (one corrupted frame = one error record = one NAK);
+* memory is bounded by the profile's largest frame: LEN is checked against `max_len` before it is
+  used, and nothing is ever allocated from it.
+
+`close()` reports a frame still incomplete at the end of input as "truncated"; `abandon()` does the
+same mid-stream, for a receiver whose ΔR timer expired.
+"""
+
+from __future__ import annotations
+
+from ktcs_bench.codec.frame import Frame, Garbage, Record
+from ktcs_bench.codec.profile import FrameProfile
+
+# Garbage with no STX in it is held back (to merge byte-at-a-time input into one span) up to this.
+GARBAGE_HOLD = 4096
+
+
+class StreamDecoder:
+    """Feed bytes with `feed()`; get records in stream order. Offsets count from `offset`."""
+
+    def __init__(self, profile: FrameProfile, offset: int = 0) -> None:
+        self.profile = profile
+        p = profile
+        self._buf = bytearray()
+        self._base = offset  # stream offset of _buf[0]
+        self._stx = p.stx
+        self._etx = p.etx
+        self._hsize = p.header_size
+        self._header = p.header_struct()
+        names = [n for n, _ in p.header]
+        self._i_len = names.index("len")
+        self._i_seq = names.index("seq")
+        self._i_op = names.index("op")
+        self._i_sub = names.index("sub") if "sub" in names else None
+        self._fixed = p.fixed_counted
+        self._max_len = p.max_len
+        self._trailer = p.trailer_size
+        self._crc = p.crc_function()
+        self._crc_size = p.crc_size
+        self._crc_pad = p.crc_pad
+        self._crc_little = p.little
+        self._crc_from = p.offset_of(p.crc_first)[0]
+        self._crc_to_header = None if p.crc_last == "data" else sum(p.offset_of(p.crc_last))
+        self._suspect_until = 0  # absolute offset: failures before it are garbage
+        self._probe_for = -1  # absolute offset of the pending candidate the probe state is for
+        self._probe_next = 0  # absolute offset from which candidates are not yet classified
+        self._probe_wait: list[tuple[int, int]] = []  # (candidate, absolute end) incomplete
+
+    # -- public API --------------------------------------------------------------------------
+    @property
+    def pending(self) -> bool:
+        """True while a frame has begun (STX seen) but is not yet complete."""
+        return self._pending_at() is not None
+
+    @property
+    def buffered(self) -> int:
+        return len(self._buf)
+
+    def feed(self, data: bytes | bytearray | memoryview) -> list[Record]:
+        self._buf += data
+        return self._process(final=False)
+
+    def close(self) -> list[Record]:
+        """End of input: report what is left (a truncated frame, trailing garbage)."""
+        out = self._process(final=False)
+        j = self._pending_at()
+        buf = self._buf
+        if j is not None:
+            if j:
+                out.append(Garbage(self._base, bytes(buf[:j])))
+            out.append(self._truncated(j, len(buf)))
+        elif buf:
+            out.append(Garbage(self._base, bytes(buf)))
+        self._consume(len(buf))
+        return out
+
+    def abandon(self) -> list[Record]:
+        """Give up on the pending frame (ΔR expired): report it truncated, resume after its STX."""
+        j = self._pending_at()
+        if j is None:
+            return []
+        out: list[Record] = []
+        if j:
+            out.append(Garbage(self._base, bytes(self._buf[:j])))
+        nxt = self._buf.find(self._stx, j + 1)
+        end = len(self._buf) if nxt < 0 else nxt
+        out.append(self._truncated(j, end))
+        self._consume(end)
+        out.extend(self._process(final=False))
+        return out
+
+    # -- internals ---------------------------------------------------------------------------
+    def _pending_at(self) -> int | None:
+        j = self._buf.find(self._stx)
+        return None if j < 0 else j
+
+    def _consume(self, n: int) -> None:
+        if n:
+            del self._buf[:n]
+            self._base += n
+
+    def _truncated(self, j: int, end: int) -> Frame:
+        raw = bytes(self._buf[j:end])
+        seq = op = sub = None
+        if len(raw) >= self._hsize:
+            h = self._header.unpack_from(raw, 1)
+            seq, op = h[self._i_seq], h[self._i_op]
+            sub = None if self._i_sub is None else h[self._i_sub]
+        return Frame(self._base + j, raw, seq, op, sub, self._hsize, len(raw), None, None,
+                     "truncated")  # fmt: skip
+
+    def _check(
+        self, buf: bytearray, j: int, total: int, data_len: int
+    ) -> tuple[int, int, str | None]:
+        """(crc in packet, crc computed, error) for a complete candidate at j."""
+        hs = self._hsize
+        c_end = j + hs + data_len if self._crc_to_header is None else j + self._crc_to_header
+        calc = self._crc(memoryview(buf)[j + self._crc_from : c_end])
+        at = j + hs + data_len
+        packet = int.from_bytes(
+            buf[at : at + self._crc_size], "little" if self._crc_little else "big"
+        )
+        pad_end = at + self._crc_size + self._crc_pad
+        if packet != calc or (self._crc_pad and any(buf[at + self._crc_size : pad_end])):
+            return packet, calc, "crc"
+        if self._etx is not None and buf[j + total - 1] != self._etx:
+            return packet, calc, "etx"
+        return packet, calc, None
+
+    def _valid_at(self, buf: bytearray, q: int, n: int) -> bool | None:
+        """Whether a complete valid frame starts at q: True/False, None if not yet decidable."""
+        if n - q < self._hsize:
+            return None
+        length = self._header.unpack_from(buf, q + 1)[self._i_len]
+        data_len = length - self._fixed
+        if data_len < 0 or length > self._max_len:
+            return False
+        total = self._hsize + data_len + self._trailer
+        if n - q < total:
+            return None
+        return self._check(buf, q, total, data_len)[2] is None
+
+    def _probe(self, buf: bytearray, j: int, limit: int) -> int | None:
+        """First q in (j, limit) where a complete valid frame starts, remembering what was ruled out."""
+        base = self._base
+        n = len(buf)
+        if self._probe_for != base + j:
+            self._probe_for = base + j
+            self._probe_next = base + j + 1
+            self._probe_wait = []
+        still: list[tuple[int, int]] = []
+        found: int | None = None
+        for q_abs, end_abs in self._probe_wait:
+            if found is None and end_abs <= base + n:
+                if self._valid_at(buf, q_abs - base, n):
+                    found = q_abs - base
+            else:
+                still.append((q_abs, end_abs))
+        self._probe_wait = still
+        if found is not None and found < limit:
+            return found
+        q = self._probe_next - base
+        while True:
+            q = buf.find(self._stx, q, min(limit, n))
+            if q < 0:
+                self._probe_next = base + min(limit, n)
+                return None
+            verdict = self._valid_at(buf, q, n)
+            if verdict:
+                return q
+            if verdict is None:
+                if n - q < self._hsize:
+                    self._probe_next = base + q  # header incomplete: look again next time
+                    return None
+                length = self._header.unpack_from(buf, q + 1)[self._i_len]
+                end = q + self._hsize + length - self._fixed + self._trailer
+                self._probe_wait.append((base + q, base + end))
+            q += 1
+
+    def _process(self, final: bool) -> list[Record]:
+        out: list[Record] = []
+        buf = self._buf
+        n = len(buf)
+        i = 0
+        base = self._base
+        stx = self._stx
+        hs = self._hsize
+        unpack = self._header.unpack_from
+        i_len, i_seq, i_op, i_sub = self._i_len, self._i_seq, self._i_op, self._i_sub
+        fixed, max_len, trailer = self._fixed, self._max_len, self._trailer
+        g = -1  # start of the current garbage run, -1 for none
+        while i < n:
+            j = buf.find(stx, i)
+            if j < 0:
+                if g < 0:
+                    g = i
+                i = n
+                break
+            if j > i and g < 0:
+                g = i
+            if n - j < hs:
+                i = j
+                break
+            h = unpack(buf, j + 1)
+            length = h[i_len]
+            data_len = length - fixed
+            if data_len < 0 or length > max_len:
+                error: str | None = "length"
+                total = hs
+                packet = calc = None
+            else:
+                total = hs + data_len + trailer
+                if n - j < total:
+                    q = self._probe(buf, j, n)
+                    if q is None:
+                        i = j
+                        break
+                    if g < 0:
+                        g = j
+                    i = q
+                    continue
+                packet, calc, error = self._check(buf, j, total, data_len)
+            if error is not None:
+                q = self._probe(buf, j, j + total) if error != "length" else None
+                if q is not None or base + j < self._suspect_until:
+                    if g < 0:
+                        g = j
+                    i = j + 1 if q is None else q
+                    continue
+                nxt = buf.find(stx, j + 1, j + total)
+                end = j + total if nxt < 0 else nxt
+                self._suspect_until = base + j + total
+            else:
+                end = j + total
+            if g >= 0:
+                out.append(Garbage(base + g, bytes(buf[g:j])))
+                g = -1
+            out.append(
+                Frame(base + j, bytes(buf[j:end]), h[i_seq], h[i_op],
+                      None if i_sub is None else h[i_sub], hs, hs + max(0, data_len),
+                      packet, calc, error)
+            )  # fmt: skip
+            i = end
+        # i is where unconsumed input starts (a pending candidate, or n)
+        if g >= 0 and (i > g) and (i < n or i - g >= GARBAGE_HOLD or final):
+            out.append(Garbage(base + g, bytes(buf[g:i])))
+            g = -1
+        keep_from = g if g >= 0 else i
+        self._consume(keep_from)
+        return out
