@@ -51,6 +51,8 @@ class StreamDecoder:
         self._crc_little = p.little
         self._crc_from = p.offset_of(p.crc_first)[0]
         self._crc_to_header = None if p.crc_last == "data" else sum(p.offset_of(p.crc_last))
+        self._held = 0  # bytes at the start of _buf already known to be garbage, not yet reported
+        self._pending = False  # _buf[_held] is an STX whose frame is still incomplete
         self._suspect_until = 0  # absolute offset: failures before it are garbage
         self._probe_for = -1  # absolute offset of the pending candidate the probe state is for
         self._probe_next = 0  # absolute offset from which candidates are not yet classified
@@ -60,7 +62,7 @@ class StreamDecoder:
     @property
     def pending(self) -> bool:
         """True while a frame has begun (STX seen) but is not yet complete."""
-        return self._pending_at() is not None
+        return self._pending
 
     @property
     def buffered(self) -> int:
@@ -82,6 +84,7 @@ class StreamDecoder:
         elif buf:
             out.append(Garbage(self._base, bytes(buf)))
         self._consume(len(buf))
+        self._held, self._pending = 0, False
         return out
 
     def abandon(self) -> list[Record]:
@@ -96,18 +99,19 @@ class StreamDecoder:
         end = len(self._buf) if nxt < 0 else nxt
         out.append(self._truncated(j, end))
         self._consume(end)
+        self._held, self._pending = 0, False
         out.extend(self._process(final=False))
         return out
 
     # -- internals ---------------------------------------------------------------------------
     def _pending_at(self) -> int | None:
-        j = self._buf.find(self._stx)
-        return None if j < 0 else j
+        return self._held if self._pending else None
 
     def _consume(self, n: int) -> None:
         if n:
             del self._buf[:n]
             self._base += n
+            self._held = max(0, self._held - n)
 
     def _truncated(self, j: int, end: int) -> Frame:
         raw = bytes(self._buf[j:end])
@@ -191,14 +195,15 @@ class StreamDecoder:
         out: list[Record] = []
         buf = self._buf
         n = len(buf)
-        i = 0
+        i = self._held
+        g = 0 if i else -1  # start of the current garbage run, -1 for none
+        pending = False
         base = self._base
         stx = self._stx
         hs = self._hsize
         unpack = self._header.unpack_from
         i_len, i_seq, i_op, i_sub = self._i_len, self._i_seq, self._i_op, self._i_sub
         fixed, max_len, trailer = self._fixed, self._max_len, self._trailer
-        g = -1  # start of the current garbage run, -1 for none
         while i < n:
             j = buf.find(stx, i)
             if j < 0:
@@ -209,7 +214,7 @@ class StreamDecoder:
             if j > i and g < 0:
                 g = i
             if n - j < hs:
-                i = j
+                i, pending = j, True
                 break
             h = unpack(buf, j + 1)
             length = h[i_len]
@@ -223,7 +228,7 @@ class StreamDecoder:
                 if n - j < total:
                     q = self._probe(buf, j, n)
                     if q is None:
-                        i = j
+                        i, pending = j, True
                         break
                     if g < 0:
                         g = j
@@ -251,10 +256,13 @@ class StreamDecoder:
                       packet, calc, error)
             )  # fmt: skip
             i = end
-        # i is where unconsumed input starts (a pending candidate, or n)
-        if g >= 0 and (i > g) and (i < n or i - g >= GARBAGE_HOLD or final):
+        # i is where unconsumed input starts (a pending candidate, or n). Garbage before it is
+        # held back, so that how the input was chunked never changes how garbage is reported.
+        if g >= 0 and (i - g >= GARBAGE_HOLD or final):
             out.append(Garbage(base + g, bytes(buf[g:i])))
             g = -1
         keep_from = g if g >= 0 else i
+        self._pending = pending
         self._consume(keep_from)
+        self._held = i - keep_from
         return out
