@@ -7,8 +7,10 @@ Chart file (one per link and direction, under `code_charts/`):
     direction: IXL->CTC             # sender->receiver
     station: 20                     # optional
     codes:                          # number = 1-based position in this list
-      - {name: LOC20, type: LOC, status: "1 local mode"}
-      - {name: CTC20, type: CTC, status: "1 center mode"}
+      - {name: LOC20, type: LOC, sequence: 1, status: "1 local mode"}
+      - {name: CTC20, type: CTC, sequence: 2, status: "1 center mode"}
+
+`sequence` (Table 2's column) is optional; when present it must equal the code's position.
 """
 
 from __future__ import annotations
@@ -80,6 +82,11 @@ def load_chart(path: str | Path) -> CodeChart:
             other = f"codes[{seen[name]}]"
             raise ConfigError(path, f"{place}.name", f"duplicate code {name!r} (also {other})")
         seen[name] = i
+        seq = item.get("sequence")
+        if seq is not None and seq != i + 1:
+            raise ConfigError(
+                path, f"{place}.sequence", f"is {seq!r}, but the code is number {i + 1}"
+            )
         codes.append(Code(i + 1, name, str(item.get("type", "")), str(item.get("status", ""))))
     station = raw.get("station")
     if station is not None and not isinstance(station, int):
