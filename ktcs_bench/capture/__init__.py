@@ -1,0 +1,157 @@
+"""Captures behind one front (python-can's Logger/LogReader shape): hex logs and pcapng.
+
+Owns: the capture record, the hex-log and pcapng formats (pure encode/parse functions) and thin
+file writers/readers chosen by the file name (`.pcapng` -> pcapng, anything else -> hex log).
+Must not touch: sockets, ptys, clocks -- records arrive with their time already set.
+
+    with open_writer("link.pcapng", link="type1") as w:
+        w.write(CaptureRecord(time.time(), "ixl>atc", frame))
+    capture = read_capture("link.hex")      # .records, .profile, .link, .start
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import BinaryIO, Protocol
+
+from ktcs_bench.capture.hexlog import HexLogWriter, parse_hex_log
+from ktcs_bench.capture.pcapng import PcapngEncoder, is_pcapng, parse_pcapng
+from ktcs_bench.capture.records import (
+    CaptureRecord,
+    normalise_direction,
+    reverse_direction,
+    split_direction,
+    valid_direction,
+)
+from ktcs_bench.errors import UsageError
+
+__all__ = [
+    "Capture",
+    "CaptureRecord",
+    "CaptureWriter",
+    "HexLogWriter",
+    "PcapngWriter",
+    "normalise_direction",
+    "open_writer",
+    "read_capture",
+    "reverse_direction",
+    "split_direction",
+    "valid_direction",
+]
+
+
+class CaptureWriter(Protocol):
+    def write(self, record: CaptureRecord) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class PcapngWriter:
+    """Writes records to a binary stream as pcapng (see `ktcs_bench.capture.pcapng`)."""
+
+    def __init__(
+        self,
+        stream: BinaryIO,
+        *,
+        link: str = "type1",
+        endpoints: Mapping[str, tuple[str, int]] | None = None,
+        close_stream: bool = False,
+    ) -> None:
+        self._stream = stream
+        self.encoder = PcapngEncoder(link, endpoints)
+        self._close_stream = close_stream
+        self._stream.write(self.encoder.start())
+        self._stream.flush()
+
+    def write(self, record: CaptureRecord) -> None:
+        self._stream.write(self.encoder.encode(record))
+        self._stream.flush()
+
+    def close(self) -> None:
+        self._stream.flush()
+        if self._close_stream:
+            self._stream.close()
+
+
+class _Closing:
+    """Context-manager wrapper so `with open_writer(...) as w:` closes the file."""
+
+    def __init__(self, writer: HexLogWriter | PcapngWriter) -> None:
+        self.writer = writer
+
+    def write(self, record: CaptureRecord) -> None:
+        self.writer.write(record)
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def __enter__(self) -> _Closing:
+        return self
+
+    def __exit__(
+        self, t: type[BaseException] | None, e: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+def capture_kind(path: str | Path) -> str:
+    """ "pcapng" for *.pcapng, else "hex"."""
+    return "pcapng" if str(path).lower().endswith(".pcapng") else "hex"
+
+
+def open_writer(
+    path: str | Path,
+    *,
+    link: str = "type1",
+    profile: str | None = None,
+    start: float | None = None,
+    endpoints: Mapping[str, tuple[str, int]] | None = None,
+) -> _Closing:
+    """A writer for `path`, the format chosen by its suffix; `link` is type1/type2 (pcapng)."""
+    try:
+        if capture_kind(path) == "pcapng":
+            return _Closing(
+                PcapngWriter(open(path, "wb"), link=link, endpoints=endpoints, close_stream=True)
+            )
+        stream = open(path, "w", encoding="utf-8")
+    except OSError as exc:
+        raise UsageError(f"cannot write capture {path}: {exc.strerror}") from None
+    return _Closing(
+        HexLogWriter(stream, start=start, profile=profile, link=link, close_stream=True)
+    )
+
+
+@dataclass
+class Capture:
+    records: list[CaptureRecord] = field(default_factory=list)
+    kind: str = "hex"
+    profile: str | None = None
+    link: str | None = None
+    start: float | None = None
+
+    @property
+    def directions(self) -> list[str]:
+        """Directions in order of first appearance."""
+        seen: dict[str, None] = {}
+        for r in self.records:
+            seen.setdefault(r.direction, None)
+        return list(seen)
+
+
+def parse_capture(data: bytes) -> Capture:
+    """A capture from its bytes: pcapng by its magic, else hex text of any form `decode` reads."""
+    if is_pcapng(data):
+        return Capture(parse_pcapng(data), "pcapng")
+    log = parse_hex_log(data.decode("utf-8", errors="replace"))
+    return Capture(log.records, "hex", log.profile, log.link, log.start)
+
+
+def read_capture(path: str | Path) -> Capture:
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise UsageError(f"cannot read capture {path}: {exc.strerror}") from None
+    return parse_capture(data)
