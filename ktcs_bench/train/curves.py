@@ -116,9 +116,13 @@ class CurveTimes:
 
     def bec(self, v: float, v_target: float = 0.0, a_est: float = 0.0) -> tuple[float, float]:
         """(V_bec, D_bec) for a train at speed v accelerating at a_est (§3.13.9.3.2)."""
+        t_tr = self.t_traction
+        t_rem = self.t_be - t_tr if self.t_be > t_tr else 0.0
+        if a_est <= 0.0 and v >= v_target:  # the common case, kept cheap for the ATP cycle
+            return v, v * (t_tr + t_rem)
         a = max(0.0, min(a_est, 0.4))
-        dv1 = a * self.t_traction
-        dv2 = a * self.t_berem
+        dv1 = a * t_tr
+        dv2 = a * t_rem
         v_bec = max(v + dv1, v_target) + dv2
         d_bec = (
             max(v + dv1 / 2.0, v_target) * self.t_traction
@@ -245,11 +249,14 @@ class Grid:
         return cls(start + step * np.arange(n, dtype=np.float64), decel)
 
 
-def ebd_on_grid(grid: Grid, target: Target, fixed: FixedValues, v_cap: float) -> FloatArray:
+def ebd_on_grid(
+    grid: Grid, target: Target, fixed: FixedValues, v_cap: float, x_from: float = -math.inf
+) -> FloatArray:
     """EBD speed (m/s) at every grid location towards one target; inf beyond the target.
 
     For a STOP target the speed beyond it is 0 (no movement past it is allowed). Computation stops
     once the curve exceeds v_cap (the rest is set to inf): nothing above it is ever supervised.
+    Locations before `x_from` are left at inf (not computed): the ATP only looks ahead.
     """
     x = grid.x
     out = np.full(x.shape, np.inf)
@@ -262,14 +269,15 @@ def ebd_on_grid(grid: Grid, target: Target, fixed: FixedValues, v_cap: float) ->
     h_t = float(np.interp(target.location, x, grid.h))
     xs, hs = target.location, h_t
     v2s = target.foot_speed(fixed) ** 2
-    hi = k  # x[:hi] still to fill
+    hi = k  # x[lo:hi] still to fill
+    lo = max(int(np.searchsorted(x, x_from, side="left")) - 1, 0)
     steps = list(brake.steps)
-    while hi > 0:
+    while hi > lo:
         v_now = math.sqrt(v2s)
         a = brake(v_now + _EPS)
         # v² over the remaining slice with this band's brake deceleration
-        seg_x = x[:hi]
-        v2 = v2s + 2.0 * a * (xs - seg_x) + 2.0 * (hs - grid.h[:hi])
+        seg_x = x[lo:hi]
+        v2 = v2s + 2.0 * a * (xs - seg_x) + 2.0 * (hs - grid.h[lo:hi])
         nxt = next((s for s in steps if s > v_now + _EPS), math.inf)
         limit = min(nxt, v_cap)
         # v2 decreases with index; find the first index (from the end) where v² >= limit²
@@ -277,12 +285,13 @@ def ebd_on_grid(grid: Grid, target: Target, fixed: FixedValues, v_cap: float) ->
         j = int(np.searchsorted(-rev, -(limit * limit), side="left"))  # count below limit²
         # positions hi-j .. hi-1 are within the band
         start = hi - j
-        out[start:hi] = np.sqrt(np.maximum(v2[start:], 0.0))
-        if start == 0 or not math.isfinite(limit) or limit >= v_cap:
+        out[start:hi] = np.sqrt(np.maximum(v2[start - lo :], 0.0))
+        if start == lo or not math.isfinite(limit) or limit >= v_cap:
             break
         # crossing between x[start-1] (above) and x[start] (below): interpolate in v²
         i0 = start - 1
-        v2a, v2b = float(v2[i0]), float(v2[start]) if start < hi else v2s
+        v2a = float(v2[i0 - lo])
+        v2b = float(v2[start - lo]) if start < hi else v2s
         xb = float(x[start]) if start < hi else xs
         hb = float(grid.h[start]) if start < hi else hs
         frac = (limit * limit - v2b) / (v2a - v2b) if v2a != v2b else 0.0

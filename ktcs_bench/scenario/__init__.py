@@ -1,0 +1,1 @@
+"""Deterministic scenario runs: YAML scenario → endpoints in virtual time → assertions → report."""

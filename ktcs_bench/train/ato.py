@@ -1,0 +1,158 @@
+"""Urban ATO of seed 002: the application state machine (Table 2, a–j) and the driving laws.
+
+Owns when the ATO may drive and how: time-optimal (full traction or full service brake) far from
+the target speed, PI control near it, and precision stop by distance to go (the deceleration needed
+to stop at the mark, recomputed every cycle). Target speed = ATC code − 3 km/h in normal mode,
+− 2 km/h in recovery mode.
+
+Seed 002's Fig. 4 (the diagram) is not in the text; Table 2 gives only the conditions a–j. The
+from/to states below are our reading of it and are listed in `TRANSITIONS`:
+a Passive→Active-Idle, b Active-*→Passive, c Active-Idle→Active-Operating, d Active-Operating→
+Active-Idle, e Operating: code stop (speed command 0 → brake to standstill), f Active-Idle: ATO
+Ready withdrawn, g Operating: berthed at a station (standstill within ±DLS/2), h berthed: hold while
+the speed command is 0, i any→Error, j Error→Passive on time-out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+
+from ktcs_bench.train.units import kmh
+
+
+class AtoState(Enum):
+    PASSIVE = "passive"
+    ACTIVE_IDLE = "active-idle"
+    ACTIVE_OPERATING = "active-operating"
+    ERROR = "error"
+
+
+TRANSITIONS: dict[str, tuple[str, str, str]] = {
+    "a": ("passive", "active-idle", "Cab Active = True"),
+    "b": ("active-*", "passive", "Cab Active = False"),
+    "c": ("active-idle", "active-operating", "Activate ATO ∧ comm OK ∧ valid TWC ∧ speed = 0"),
+    "d": ("active-operating", "active-idle", "¬Activate ATO ∨ comm not OK ∨ invalid TWC"),
+    "e": ("active-operating", "active-operating", "speed command = 0: code stop"),
+    "f": ("active-idle", "active-idle", "¬Activate ATO ∨ comm not OK: ATO Ready withdrawn"),
+    "g": ("active-operating", "active-operating", "speed = 0 ∧ at station ± DLS/2: berthed"),
+    "h": ("active-operating", "active-operating", "speed command = 0 while berthed: hold"),
+    "i": ("*", "error", "unrecoverable error"),
+    "j": ("error", "passive", "time-out"),
+}
+
+
+@dataclass(frozen=True)
+class AtoInputs:
+    cab_active: bool = True
+    activate_ato: bool = True
+    comm_ok: bool = True
+    twc_valid: bool = True
+    speed: float = 0.0
+    speed_command: float = 0.0
+    """ATC code speed under the antenna, m/s."""
+    at_station: bool = False
+    error: bool = False
+
+
+@dataclass
+class AtoStateMachine:
+    state: AtoState = AtoState.PASSIVE
+    berthed: bool = False
+    code_stop: bool = False
+    ready: bool = False
+    error_since: float | None = None
+    error_timeout: float = 5.0
+
+    def step(self, i: AtoInputs, now: float) -> list[str]:
+        """Apply Table 2; returns the letters of the transitions taken this cycle."""
+        taken: list[str] = []
+        s = self.state
+        if i.error and s is not AtoState.ERROR:
+            self.state, self.error_since = AtoState.ERROR, now
+            return ["i"]
+        if s is AtoState.ERROR:
+            if self.error_since is not None and now - self.error_since >= self.error_timeout:
+                self.state = AtoState.PASSIVE
+                taken.append("j")
+            return taken
+        if s is AtoState.PASSIVE:
+            if i.cab_active:
+                self.state = AtoState.ACTIVE_IDLE
+                taken.append("a")
+            return taken
+        if not i.cab_active:
+            self.state, self.berthed, self.code_stop = AtoState.PASSIVE, False, False
+            return ["b"]
+        if s is AtoState.ACTIVE_IDLE:
+            ok = i.activate_ato and i.comm_ok and i.twc_valid
+            if ok and i.speed <= 0.0:
+                self.state, self.berthed, self.code_stop = AtoState.ACTIVE_OPERATING, False, False
+                taken.append("c")
+            elif self.ready and not (i.activate_ato and i.comm_ok):
+                taken.append("f")
+            self.ready = i.activate_ato and i.comm_ok
+            return taken
+        # ACTIVE_OPERATING
+        if not (i.activate_ato and i.comm_ok and i.twc_valid):
+            self.state, self.berthed, self.code_stop = AtoState.ACTIVE_IDLE, False, False
+            return ["d"]
+        if i.speed <= 0.0 and i.at_station and not self.berthed:
+            self.berthed = True
+            taken.append("g")
+        if i.speed_command <= 0.0:
+            if self.berthed:
+                taken.append("h") if not self.code_stop else None
+            elif not self.code_stop:
+                taken.append("e")
+            self.code_stop = True
+        else:
+            self.code_stop = False
+        return taken
+
+
+@dataclass
+class AtoController:
+    """The driving laws; output is (traction 0..1, brake demand m/s²)."""
+
+    service_decel: float
+    max_traction: float
+    stop_decel: float = 0.6
+    """Nominal deceleration the precision-stop profile is planned with, m/s²."""
+    band: float = kmh(4.0)
+    """Speed error beyond which the time-optimal law acts."""
+    kp: float = 1.2
+    ki: float = 0.15
+    integral: float = 0.0
+    mode: str = "idle"
+
+    def target_speed(self, code_speed: float, recovery: bool) -> float:
+        return max(code_speed - kmh(2.0 if recovery else 3.0), 0.0)
+
+    def command(
+        self, v: float, v_target: float, distance_to_go: float, dt: float
+    ) -> tuple[float, float]:
+        """One cycle of control towards v_target with a stop `distance_to_go` ahead (inf: none)."""
+        if math.isfinite(distance_to_go):
+            s = max(distance_to_go, 0.0)
+            need = v * v / (2.0 * s) if s > 0.01 else (self.service_decel if v > 0 else 0.0)
+            if need >= 0.9 * self.stop_decel or s < 0.05:
+                self.mode = "precision-stop"
+                self.integral = 0.0
+                if s <= 0.05:
+                    return 0.0, self.service_decel
+                return 0.0, min(need, self.service_decel)
+            v_profile = math.sqrt(2.0 * self.stop_decel * s)
+            v_target = min(v_target, v_profile)
+        e = v_target - v
+        if abs(e) > self.band:
+            self.mode = "time-optimal"
+            self.integral = 0.0
+            return (1.0, 0.0) if e > 0 else (0.0, self.service_decel)
+        self.mode = "pi"
+        self.integral = max(min(self.integral + e * dt, 5.0), -5.0)
+        u = self.kp * e + self.ki * self.integral
+        if u >= 0:
+            return min(u / max(self.max_traction, 1e-6), 1.0), 0.0
+        return 0.0, min(-u, self.service_decel)
