@@ -242,6 +242,8 @@ class Grid:
         mids = 0.5 * (self.x[1:] + self.x[:-1])
         ag = self.decel.gradient_accel_grid(mids)
         self.h = np.concatenate(([0.0], np.cumsum(ag * np.diff(self.x))))
+        self.a_min = min(self.decel.brake.values) + (float(ag.min()) if ag.size else 0.0)
+        """Lowest safe deceleration anywhere: bounds how far back a curve can stay below a cap."""
 
     @classmethod
     def uniform(cls, start: float, stop: float, step: float, decel: SafeDeceleration) -> Grid:
@@ -270,6 +272,9 @@ def ebd_on_grid(
     xs, hs = target.location, h_t
     v2s = target.foot_speed(fixed) ** 2
     hi = k  # x[lo:hi] still to fill
+    if grid.a_min > 0.0 and math.isfinite(v_cap):
+        reach = (v_cap * v_cap - target.foot_speed(fixed) ** 2) / (2.0 * grid.a_min)
+        x_from = max(x_from, target.location - max(reach, 0.0) - 2.0)
     lo = max(int(np.searchsorted(x, x_from, side="left")) - 1, 0)
     steps = list(brake.steps)
     while hi > lo:
@@ -282,7 +287,7 @@ def ebd_on_grid(
         limit = min(nxt, v_cap)
         # v2 decreases with index; find the first index (from the end) where v² >= limit²
         rev = v2[::-1]
-        j = int(np.searchsorted(-rev, -(limit * limit), side="left"))  # count below limit²
+        j = int(np.searchsorted(rev, limit * limit, side="left"))  # count below limit²
         # positions hi-j .. hi-1 are within the band
         start = hi - j
         out[start:hi] = np.sqrt(np.maximum(v2[start - lo :], 0.0))
