@@ -1,0 +1,74 @@
+"""A blocking client for a tap's control port: send commands, or subscribe to its traffic."""
+
+from __future__ import annotations
+
+import json
+import socket
+from collections.abc import Iterator
+from typing import Any
+
+from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.tap.registry import resolve_tap
+
+
+class TapClient:
+    """`TapClient("st18-ixl-atc").command("cut")`; `for ev in TapClient(addr).subscribe(): ...`."""
+
+    def __init__(self, tap: str | tuple[str, int], timeout: float = 5.0) -> None:
+        self.address = resolve_tap(tap) if isinstance(tap, str) else tap
+        try:
+            self._sock = socket.create_connection(self.address, timeout=timeout)
+        except OSError as exc:
+            host, port = self.address
+            raise PeerError(f"cannot reach the tap's control port {host}:{port}: {exc}") from None
+        self._file = self._sock.makefile("rwb")
+
+    def close(self) -> None:
+        self._file.close()
+        self._sock.close()
+
+    def __enter__(self) -> TapClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _readline(self) -> str:
+        try:
+            line = self._file.readline()
+        except OSError as exc:
+            raise PeerError(f"tap control port: {exc}") from None
+        if not line:
+            raise PeerError("the tap closed its control port")
+        return line.decode("utf-8", errors="replace").rstrip("\n")
+
+    def command(self, line: str) -> str:
+        """Send one command; the reply without its `ok ` prefix. Raises UsageError on `error`."""
+        self._file.write(line.strip().encode() + b"\n")
+        self._file.flush()
+        reply = self._readline()
+        if reply.startswith("error"):
+            raise UsageError(f"tap: {reply[6:]}")
+        return reply[3:] if reply.startswith("ok ") else reply
+
+    def status(self) -> dict[str, Any]:
+        result: dict[str, Any] = json.loads(self.command("status"))
+        return result
+
+    def subscribe(
+        self, history: bool = False, timeout: float | None = None
+    ) -> Iterator[dict[str, Any]]:
+        """The header ({profile, names, ...}) first, then one dict per record or event."""
+        header = self.command("subscribe history" if history else "subscribe")
+        self._sock.settimeout(timeout)
+        yield json.loads(header)
+        while True:
+            try:
+                line = self._file.readline()
+            except TimeoutError:
+                return
+            except OSError as exc:
+                raise PeerError(f"tap control port: {exc}") from None
+            if not line:
+                return
+            yield json.loads(line)

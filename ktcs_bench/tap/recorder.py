@@ -1,0 +1,62 @@
+"""What a tap saw, as timestamped frames: delivered bytes per direction in, capture records out.
+
+Sans-I/O. Each direction is framed with the `StreamDecoder` of the link's profile, so a record is
+one frame (or one span of garbage); a partial frame is reported as it stands once the direction
+has been idle for `idle_flush` seconds. A record's time is when its last byte passed the tap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ktcs_bench.capture.records import CaptureRecord
+from ktcs_bench.codec.profile import FrameProfile
+from ktcs_bench.codec.stream import StreamDecoder
+
+IDLE_FLUSH = 0.2
+
+
+@dataclass
+class _Direction:
+    decoder: StreamDecoder
+    last: float = 0.0
+    total: int = 0
+
+
+@dataclass
+class Recorder:
+    profile: FrameProfile
+    idle_flush: float = IDLE_FLUSH
+    _dirs: dict[str, _Direction] = field(default_factory=dict)
+
+    def _get(self, direction: str) -> _Direction:
+        d = self._dirs.get(direction)
+        if d is None:
+            d = self._dirs[direction] = _Direction(StreamDecoder(self.profile))
+        return d
+
+    def feed(self, direction: str, data: bytes, now: float) -> list[CaptureRecord]:
+        d = self._get(direction)
+        d.last = now
+        d.total += len(data)
+        return [CaptureRecord(now, direction, r.raw) for r in d.decoder.feed(data)]
+
+    def poll(self, now: float) -> list[CaptureRecord]:
+        out: list[CaptureRecord] = []
+        for name, d in self._dirs.items():
+            if d.decoder.buffered and now - d.last >= self.idle_flush:
+                out += [CaptureRecord(d.last, name, r.raw) for r in d.decoder.close()]
+                d.decoder = StreamDecoder(self.profile, offset=d.total)
+        return out
+
+    def flush(self) -> list[CaptureRecord]:
+        """Everything still buffered, as it stands (the tap is stopping or reconnecting)."""
+        out: list[CaptureRecord] = []
+        for name, d in self._dirs.items():
+            out += [CaptureRecord(d.last, name, r.raw) for r in d.decoder.close()]
+            d.decoder = StreamDecoder(self.profile, offset=d.total)
+        return out
+
+    def next_deadline(self) -> float | None:
+        times = [d.last + self.idle_flush for d in self._dirs.values() if d.decoder.buffered]
+        return min(times) if times else None
