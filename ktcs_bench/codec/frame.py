@@ -7,6 +7,7 @@ receiver can NAK it and a monitor can show it; `Garbage` is a span of bytes that
 
 from __future__ import annotations
 
+import operator
 import struct
 from dataclasses import dataclass
 from typing import Any
@@ -55,38 +56,43 @@ class FrameCodec:
     """Encoder and whole-frame helpers for one profile (the streaming decoder is `StreamDecoder`)."""
 
     def __init__(self, profile: FrameProfile) -> None:
-        self.profile = profile
-        p = profile
-        self._crc = p.crc_function()
-        self._names = [n for n, _ in p.header]
-        self._header = p.header_struct()
+        self.profile = p = profile
         order = "<" if p.little else ">"
-        self._crc_struct = struct.Struct(order + {1: "B", 2: "H", 4: "I"}[p.crc_size])
-        self._pad = bytes(p.crc_pad)
-        self._etx = b"" if p.etx is None else bytes([p.etx])
-        self._stx = bytes([p.stx])
+        sizes = {1: "B", 2: "H", 4: "I"}
+        # STX and the header in one struct; arguments picked from (len, seq, op, sub) by position
+        self._head = struct.Struct(order + "B" + "".join(sizes[size] for _, size in p.header))
+        self._pick = operator.itemgetter(*("len seq op sub".split().index(n) for n, _ in p.header))
+        tail_fmt = order + sizes[p.crc_size] + (f"{p.crc_pad}s" if p.crc_pad else "")
+        tail_fmt += "" if p.etx is None else "B"
+        self._tail = struct.Struct(tail_fmt)
+        self._tail_extra = ((bytes(p.crc_pad),) if p.crc_pad else ()) + (
+            () if p.etx is None else (p.etx,)
+        )
+        self._kernel = p.crc_spec.kernel()
         self._fixed = p.fixed_counted
-        first, _ = p.offset_of(p.crc_first)
-        self._crc_from = first
+        self._max_data = p.max_data
+        self._crc_from = p.offset_of(p.crc_first)[0]
         self._crc_to_header = None if p.crc_last == "data" else sum(p.offset_of(p.crc_last))
-        seq_bits = 8 * dict(p.header)["seq"]
-        self.seq_modulo = 1 << seq_bits
+        self.seq_modulo = 1 << (8 * dict(p.header)["seq"])
 
     def encode(self, seq: int, op: int, data: bytes = b"", sub: int | None = None) -> bytes:
         """One complete frame. Raises UsageError for values that do not fit the profile."""
-        p = self.profile
-        length = self._fixed + len(data)
-        if len(data) > p.max_data:
-            raise UsageError(f"{len(data)} DATA bytes exceed the profile's maximum {p.max_data}")
-        values = {"len": length, "seq": seq, "op": op, "sub": 0 if sub is None else sub}
+        if len(data) > self._max_data:
+            raise UsageError(
+                f"{len(data)} DATA bytes exceed the profile's maximum {self._max_data}"
+            )
         try:
-            head = self._stx + self._header.pack(*(values[n] for n in self._names))
+            body = self._head.pack(
+                self.profile.stx, *self._pick((self._fixed + len(data), seq, op, sub or 0))
+            )
         except struct.error as exc:
             raise UsageError(f"a header value does not fit its field: {exc}") from None
-        body = head + data
+        body += data
+        fn, init, table, xor = self._kernel
         end = len(body) if self._crc_to_header is None else self._crc_to_header
-        crc = self._crc(body[self._crc_from : end])
-        return body + self._crc_struct.pack(crc) + self._pad + self._etx
+        crc = xor ^ fn(body[self._crc_from : end] if self._crc_from or end != len(body) else body,
+                       init, table)  # fmt: skip
+        return body + self._tail.pack(crc, *self._tail_extra)
 
     def opcode(self, op: int) -> Opcode | None:
         return self.profile.opcodes.get(op)

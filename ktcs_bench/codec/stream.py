@@ -18,6 +18,8 @@ same mid-stream, for a receiver whose ΔR timer expired.
 
 from __future__ import annotations
 
+import struct
+
 from ktcs_bench.codec.frame import Frame, Garbage, Record
 from ktcs_bench.codec.profile import FrameProfile
 
@@ -46,6 +48,15 @@ class StreamDecoder:
         self._max_len = p.max_len
         self._trailer = p.trailer_size
         self._crc = p.crc_function()
+        self._kernel = p.crc_spec.kernel()
+        order = "<" if p.little else ">"
+        tail_fmt = order + {1: "B", 2: "H", 4: "I"}[p.crc_size]
+        tail_fmt += f"{p.crc_pad}s" if p.crc_pad else ""
+        tail_fmt += "" if p.etx is None else "B"
+        self._tail = struct.Struct(tail_fmt)  # CRC, pad, ETX in one unpack on the hot path
+        self._tail_ok = ((bytes(p.crc_pad),) if p.crc_pad else ()) + (
+            () if p.etx is None else (p.etx,)
+        )
         self._crc_size = p.crc_size
         self._crc_pad = p.crc_pad
         self._crc_little = p.little
@@ -53,6 +64,23 @@ class StreamDecoder:
         self._crc_to_header = None if p.crc_last == "data" else sum(p.offset_of(p.crc_last))
         self._held = 0  # bytes at the start of _buf already known to be garbage, not yet reported
         self._pending = False  # _buf[_held] is an STX whose frame is still incomplete
+        self._hot = (
+            self._stx,
+            self._hsize,
+            self._header.unpack_from,
+            self._i_len,
+            self._i_seq,
+            self._i_op,
+            self._i_sub,
+            self._fixed,
+            self._max_len,
+            self._trailer,
+            *self._kernel,
+            self._crc_from,
+            self._crc_to_header,
+            self._tail.unpack_from,
+            self._tail_ok,
+        )  # fmt: skip -- everything the hot loop needs, unpacked into locals in one step
         self._suspect_until = 0  # absolute offset: failures before it are garbage
         self._probe_for = -1  # absolute offset of the pending candidate the probe state is for
         self._probe_next = 0  # absolute offset from which candidates are not yet classified
@@ -199,68 +227,80 @@ class StreamDecoder:
         g = 0 if i else -1  # start of the current garbage run, -1 for none
         pending = False
         base = self._base
-        stx = self._stx
-        hs = self._hsize
-        unpack = self._header.unpack_from
-        i_len, i_seq, i_op, i_sub = self._i_len, self._i_seq, self._i_op, self._i_sub
-        fixed, max_len, trailer = self._fixed, self._max_len, self._trailer
-        while i < n:
-            j = buf.find(stx, i)
-            if j < 0:
-                if g < 0:
+        (stx, hs, unpack, i_len, i_seq, i_op, i_sub, fixed, max_len, trailer, crc_fn, crc_init,
+         crc_table, crc_xor, crc_from, crc_to, tail_unpack, tail_ok) = self._hot  # fmt: skip
+        find = buf.find
+        mv = memoryview(buf)
+        try:
+            while i < n:
+                j = i if buf[i] == stx else find(stx, i)
+                if j < 0:
+                    if g < 0:
+                        g = i
+                    i = n
+                    break
+                if j > i and g < 0:
                     g = i
-                i = n
-                break
-            if j > i and g < 0:
-                g = i
-            if n - j < hs:
-                i, pending = j, True
-                break
-            h = unpack(buf, j + 1)
-            length = h[i_len]
-            data_len = length - fixed
-            if data_len < 0 or length > max_len:
-                error: str | None = "length"
-                total = hs
-                packet = calc = None
-            else:
-                total = hs + data_len + trailer
-                if n - j < total:
-                    q = self._probe(buf, j, n)
-                    if q is None:
-                        i, pending = j, True
-                        break
-                    if g < 0:
-                        g = j
-                    i = q
-                    continue
-                packet, calc, error = self._check(buf, j, total, data_len)
-            if error is not None:
-                q = self._probe(buf, j, j + total) if error != "length" else None
-                if q is not None or base + j < self._suspect_until:
-                    if g < 0:
-                        g = j
-                    i = j + 1 if q is None else q
-                    continue
-                nxt = buf.find(stx, j + 1, j + total)
-                end = j + total if nxt < 0 else nxt
-                self._suspect_until = base + j + total
-            else:
-                end = j + total
-            if g >= 0:
-                out.append(Garbage(base + g, bytes(buf[g:j])))
+                if n - j < hs:
+                    i, pending = j, True
+                    break
+                h = unpack(buf, j + 1)
+                length = h[i_len]
+                data_len = length - fixed
+                packet: int | None
+                calc: int | None
+                if data_len < 0 or length > max_len:
+                    error: str | None = "length"
+                    total = hs
+                    packet = calc = None
+                else:
+                    total = hs + data_len + trailer
+                    if n - j < total:
+                        q = self._probe(buf, j, n)
+                        if q is None:
+                            i, pending = j, True
+                            break
+                        if g < 0:
+                            g = j
+                        i = q
+                        continue
+                    at = j + hs + data_len
+                    c_end = at if crc_to is None else j + crc_to
+                    calc = crc_xor ^ crc_fn(mv[j + crc_from : c_end], crc_init, crc_table)
+                    tail = tail_unpack(buf, at)
+                    packet = tail[0]
+                    if packet == calc and tail[1:] == tail_ok:
+                        error = None
+                    else:  # slow path: which check failed
+                        packet, calc, error = self._check(buf, j, total, data_len)
+                if error is not None:
+                    q = self._probe(buf, j, j + total) if error != "length" else None
+                    if q is not None or base + j < self._suspect_until:
+                        if g < 0:
+                            g = j
+                        i = j + 1 if q is None else q
+                        continue
+                    nxt = find(stx, j + 1, j + total)
+                    end = j + total if nxt < 0 else nxt
+                    self._suspect_until = base + j + total
+                else:
+                    end = j + total
+                if g >= 0:
+                    out.append(Garbage(base + g, mv[g:j].tobytes()))
+                    g = -1
+                out.append(
+                    Frame(base + j, mv[j:end].tobytes(), h[i_seq], h[i_op],
+                          None if i_sub is None else h[i_sub], hs,
+                          hs + data_len if data_len > 0 else hs, packet, calc, error)
+                )  # fmt: skip
+                i = end
+            # i is where unconsumed input starts (a pending candidate, or n). Garbage before it is
+            # held back, so that how the input was chunked never changes how garbage is reported.
+            if g >= 0 and (i - g >= GARBAGE_HOLD or final):
+                out.append(Garbage(base + g, mv[g:i].tobytes()))
                 g = -1
-            out.append(
-                Frame(base + j, bytes(buf[j:end]), h[i_seq], h[i_op],
-                      None if i_sub is None else h[i_sub], hs, hs + max(0, data_len),
-                      packet, calc, error)
-            )  # fmt: skip
-            i = end
-        # i is where unconsumed input starts (a pending candidate, or n). Garbage before it is
-        # held back, so that how the input was chunked never changes how garbage is reported.
-        if g >= 0 and (i - g >= GARBAGE_HOLD or final):
-            out.append(Garbage(base + g, bytes(buf[g:i])))
-            g = -1
+        finally:
+            mv.release()
         keep_from = g if g >= 0 else i
         self._pending = pending
         self._consume(keep_from)
