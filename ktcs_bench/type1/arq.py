@@ -1,0 +1,153 @@
+"""The Type I ARQ state machine (SPEC §3.4 ①②③): stop-and-wait per direction, no framing, no I/O.
+
+Owns: which SEQ a message gets, when a frame is (re)sent, when the sender gives up, and whether an
+incoming SEQ is new, a duplicate or a gap. Knows nothing of bytes on the wire or of clocks: the link
+(`type1.link`) tells it the times.
+
+Sender: a queue, and at most one outstanding frame. Each transmission is counted when its bytes
+are handed to the wire; its ACK deadline runs from the end of its bytes on the wire. A NAK or an
+ACK timeout asks for a retransmission with the same SEQ, until `max_transmissions` sends have
+failed: then the sender gives up (communication error) and moves on to the next SEQ.
+
+Receiver: remembers the last accepted SEQ. The same SEQ again is a duplicate (ACK it, do not
+deliver); any other SEQ is accepted, and a gap is noted when it is not the next one.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ktcs_bench.type1.events import Message
+
+
+class Verdict(enum.Enum):
+    RETRANSMIT = "retransmit"
+    GIVE_UP = "give up"
+    IGNORE = "ignore"
+
+
+@dataclass(slots=True)
+class Outstanding:
+    """The one data frame awaiting its ACK."""
+
+    seq: int
+    message: Message
+    frame: bytes
+    transmissions: int = 0  # sends handed to the wire so far
+    due: bool = True  # bytes waiting to be handed to the wire
+    ack_deadline: float | None = None
+
+
+class Sender:
+    def __init__(self, seq_modulo: int, max_transmissions: int, first_seq: int = 0) -> None:
+        self.seq_modulo = seq_modulo
+        self.max_transmissions = max_transmissions
+        self.next_seq = first_seq % seq_modulo
+        self.queue: deque[Message] = deque()
+        self.outstanding: Outstanding | None = None
+
+    @property
+    def idle(self) -> bool:
+        return self.outstanding is None and not self.queue
+
+    def push(self, message: Message, front: bool = False) -> None:
+        if front:
+            self.queue.appendleft(message)
+        else:
+            self.queue.append(message)
+
+    def holds(self, op: int) -> bool:
+        """A message with this opcode is queued or outstanding."""
+        out = self.outstanding
+        return (out is not None and out.message.op == op) or any(m.op == op for m in self.queue)
+
+    def promote(self, encode: Callable[[int, Message], bytes]) -> Outstanding | None:
+        """Make the queue head outstanding (assigning the next SEQ) if nothing is."""
+        if self.outstanding is None and self.queue:
+            message = self.queue.popleft()
+            seq = self.next_seq
+            self.next_seq = (seq + 1) % self.seq_modulo
+            self.outstanding = Outstanding(seq, message, encode(seq, message))
+        return self.outstanding
+
+    def transmitted(self, wire_end: float, ack_timeout: float) -> Outstanding:
+        """The outstanding frame's bytes went to the wire, finishing at `wire_end`."""
+        out = self.outstanding
+        assert out is not None and out.due
+        out.due = False
+        out.transmissions += 1
+        out.ack_deadline = wire_end + ack_timeout
+        return out
+
+    def ack(self, seq: int) -> Outstanding | None:
+        """An ACK with `seq`: the outstanding frame if it is the one acknowledged."""
+        out = self.outstanding
+        if out is None or out.seq != seq or out.transmissions == 0:
+            return None
+        self.outstanding = None
+        return out
+
+    def nak(self) -> Verdict:
+        """A NAK: retransmit the outstanding frame (unless a send of it is already pending)."""
+        out = self.outstanding
+        if out is None or out.due or out.transmissions == 0:
+            return Verdict.IGNORE
+        return self._failed(out)
+
+    def timeout(self, now: float) -> Verdict:
+        out = self.outstanding
+        if out is None or out.due or out.ack_deadline is None or now < out.ack_deadline:
+            return Verdict.IGNORE
+        return self._failed(out)
+
+    def _failed(self, out: Outstanding) -> Verdict:
+        if out.transmissions >= self.max_transmissions:
+            return Verdict.GIVE_UP
+        out.due = True
+        out.ack_deadline = None
+        return Verdict.RETRANSMIT
+
+    def give_up(self) -> tuple[Outstanding, tuple[Message, ...]]:
+        """Drop the outstanding frame and everything queued behind it."""
+        out = self.outstanding
+        assert out is not None
+        self.outstanding = None
+        return out, self.discard()
+
+    def discard(self) -> tuple[Message, ...]:
+        dropped = tuple(self.queue)
+        self.queue.clear()
+        return dropped
+
+    def deadline(self) -> float | None:
+        out = self.outstanding
+        return None if out is None or out.due else out.ack_deadline
+
+
+@dataclass(frozen=True, slots=True)
+class Acceptance:
+    duplicate: bool
+    gap_expected: int | None  # the SEQ we expected when this one skipped ahead
+
+
+class Receiver:
+    def __init__(self, seq_modulo: int) -> None:
+        self.seq_modulo = seq_modulo
+        self.last_seq: int | None = None
+        self.last_time: float = 0.0
+
+    def accept(self, seq: int, now: float) -> Acceptance:
+        last = self.last_seq
+        if last is not None and seq == last:
+            return Acceptance(True, None)
+        expected = None if last is None else (last + 1) % self.seq_modulo
+        self.last_seq = seq
+        self.last_time = now
+        return Acceptance(False, expected if expected is not None and expected != seq else None)
+
+    def forget(self) -> None:
+        """The peer may have restarted: the next SEQ is new whatever its value."""
+        self.last_seq = None
