@@ -1,0 +1,240 @@
+"""Taps over real ptys (os.openpty + pyserial) and real TCP sockets on 127.0.0.1."""
+
+from __future__ import annotations
+
+import os
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import serial
+
+from ktcs_bench.capture import open_writer, read_capture
+from ktcs_bench.codec import FrameCodec, get_profile
+from ktcs_bench.tap import BitErrors, DropFrame, PtyTap, TapClient, TcpTap
+
+CODEC1 = FrameCodec(get_profile("ktcs-type1"))
+CODEC2 = FrameCodec(get_profile("ktcs-type2"))
+
+
+def wait_until(cond: Callable[[], bool], timeout: float = 5.0) -> None:
+    end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached in time")
+        time.sleep(0.01)
+
+
+def read_exactly(port: serial.Serial, n: int, timeout: float = 5.0) -> bytes:
+    out = bytearray()
+    end = time.monotonic() + timeout
+    while len(out) < n and time.monotonic() < end:
+        out += port.read(n - len(out))
+    return bytes(out)
+
+
+@pytest.fixture
+def pty_link() -> Iterator[tuple[PtyTap, serial.Serial, serial.Serial]]:
+    tap = PtyTap(names=("ixl", "atc"), seed=7)
+    with tap:
+        a = serial.Serial(tap.paths["ixl"], 9600, timeout=0.2)
+        b = serial.Serial(tap.paths["atc"], 9600, timeout=0.2)
+        try:
+            yield tap, a, b
+        finally:
+            a.close()
+            b.close()
+
+
+def test_pty_tap_forwards_both_directions_byte_exact_and_records(
+    pty_link: tuple[PtyTap, serial.Serial, serial.Serial],
+) -> None:
+    tap, a, b = pty_link
+    blob = bytes(range(256)) * 64  # every byte value, 16 KiB: raw mode, no line discipline
+    a.write(blob)
+    assert read_exactly(b, len(blob)) == blob
+    fs = [CODEC1.encode(k, 1, bytes([1, 0, 2, 3])) for k in range(3)]
+    b.write(b"".join(fs))
+    assert read_exactly(a, sum(map(len, fs))) == b"".join(fs)
+    wait_until(lambda: sum(r.direction == "atc>ixl" for r in tap.records()) == 3)
+    back = [r for r in tap.records() if r.direction == "atc>ixl"]
+    assert [r.data for r in back] == fs
+    assert all(r.time is not None for r in back)
+    sent = b"".join(r.data for r in tap.records() if r.direction == "ixl>atc")
+    wait_until(lambda: b"".join(r.data for r in tap.records() if r.direction == "ixl>atc") == blob)
+    assert sent == blob[: len(sent)]
+
+
+def test_pty_tap_drop_frame_removes_exactly_one(
+    pty_link: tuple[PtyTap, serial.Serial, serial.Serial],
+) -> None:
+    tap, a, b = pty_link
+    fs = [CODEC1.encode(k, 3) for k in range(4)]
+    tap.inject(DropFrame(direction="ixl>atc"))
+    a.write(b"".join(fs))
+    want = b"".join(fs[1:])
+    assert read_exactly(b, len(want)) == want
+    assert b.read(100) == b""
+    assert tap.status()["directions"]["ixl>atc"]["stats"]["frames_dropped"] == 1
+
+
+def test_pty_tap_bit_errors_at_about_the_rate(
+    pty_link: tuple[PtyTap, serial.Serial, serial.Serial],
+) -> None:
+    tap, a, b = pty_link
+    tap.inject(BitErrors(0.01, direction="atc>ixl"))
+    zeros = bytes(20_000)
+    b.write(zeros)
+    got = read_exactly(a, len(zeros))
+    assert len(got) == len(zeros)
+    flipped = sum(bin(x).count("1") for x in got)
+    assert 0.8 * 1600 < flipped < 1.2 * 1600
+    a.write(b"\x00" * 100)  # the other direction is untouched
+    assert read_exactly(b, 100) == bytes(100)
+
+
+def test_pty_tap_cut_stops_traffic_and_restore_resumes(
+    pty_link: tuple[PtyTap, serial.Serial, serial.Serial],
+) -> None:
+    tap, a, b = pty_link
+    tap.cut()
+    a.write(b"lost")
+    b.write(b"lost too")
+    assert b.read(10) == b"" and a.read(10) == b""
+    tap.restore()
+    a.write(b"hello")
+    assert read_exactly(b, 5) == b"hello"
+
+
+def test_control_port_commands_and_subscribe(
+    pty_link: tuple[PtyTap, serial.Serial, serial.Serial],
+) -> None:
+    tap, a, b = pty_link
+    assert tap.control_address is not None
+    with TapClient(tap.control_address) as sub_client, TapClient(tap.control_address) as ctl:
+        events = sub_client.subscribe(timeout=5)
+        header = next(events)
+        assert header["profile"] == "ktcs-type1" and header["names"] == ["ixl", "atc"]
+        ctl.command("garbage ixl->atc 02 ff 00")
+        assert read_exactly(b, 3) == b"\x02\xff\x00"
+        frame = CODEC1.encode(9, 6)
+        ctl.command(f"send atc->ixl {frame.hex()}")
+        assert read_exactly(a, len(frame)) == frame
+        seen = []
+        for ev in events:
+            seen.append(ev)
+            if ev.get("direction") == "atc>ixl":
+                break
+        assert any(ev.get("command", "").startswith("garbage") for ev in seen)
+        assert seen[-1]["hex"] == frame.hex() and isinstance(seen[-1]["time"], float)
+        status = ctl.status()
+        assert status["paths"] == tap.paths
+        with pytest.raises(Exception, match="unknown command"):
+            ctl.command("explode")
+
+
+class EchoServer:
+    """A TCP server on 127.0.0.1 that echoes what it gets (the tap's target)."""
+
+    def __init__(self) -> None:
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.address = self.sock.getsockname()[:2]
+        self.conns: list[socket.socket] = []
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                return
+            self.conns.append(conn)
+            threading.Thread(target=self._echo, args=(conn,), daemon=True).start()
+
+    @staticmethod
+    def _echo(conn: socket.socket) -> None:
+        with conn:
+            while True:
+                try:
+                    data = conn.recv(65536)
+                except OSError:
+                    return
+                if not data:
+                    return
+                conn.sendall(data)
+
+    def close(self) -> None:
+        self.sock.shutdown(socket.SHUT_RDWR)
+        self.sock.close()
+        for c in self.conns:
+            try:
+                c.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        self.thread.join(5)
+
+
+def recv_exactly(sock: socket.socket, n: int) -> bytes:
+    out = bytearray()
+    while len(out) < n:
+        chunk = sock.recv(n - len(out))
+        if not chunk:
+            break
+        out += chunk
+    return bytes(out)
+
+
+@pytest.fixture
+def echo() -> Iterator[EchoServer]:
+    server = EchoServer()
+    yield server
+    server.close()
+
+
+def test_tcp_tap_forwards_records_and_writes_pcapng(echo: EchoServer, tmp_path: Path) -> None:
+    path = tmp_path / "t2.pcapng"
+    writer = open_writer(path, link="type2")
+    with TcpTap(("127.0.0.1", 0), echo.address, names=("ixl", "ctc"), writers=[writer]) as tap:
+        assert isinstance(tap, TcpTap) and tap.listen_address is not None
+        fs = [CODEC2.encode(k, 0x40, b"", 0) for k in range(3)]
+        with socket.create_connection(tap.listen_address, timeout=5) as s:
+            s.sendall(b"".join(fs))
+            assert recv_exactly(s, sum(map(len, fs))) == b"".join(fs)
+            wait_until(lambda: len(tap.records()) == 6)
+        dirs = [r.direction for r in tap.records()]
+        assert dirs.count("ixl>ctc") == 3 and dirs.count("ctc>ixl") == 3
+        assert [r.data for r in tap.records() if r.direction == "ctc>ixl"] == fs
+    cap = read_capture(path)
+    assert [r.data for r in cap.records if r.direction == "ixl>ctc"] == fs
+
+
+def test_tcp_tap_cut_closes_and_refuses_restore_reconnects(echo: EchoServer) -> None:
+    with TcpTap(("127.0.0.1", 0), echo.address) as tap:
+        assert isinstance(tap, TcpTap) and tap.listen_address is not None
+        s = socket.create_connection(tap.listen_address, timeout=5)
+        s.sendall(b"ping")
+        assert recv_exactly(s, 4) == b"ping"
+        tap.cut()
+        assert s.recv(10) == b""  # the tap closed the connection
+        s.close()
+        with socket.create_connection(tap.listen_address, timeout=5) as s2:
+            assert s2.recv(10) == b""  # refused while cut
+        tap.restore()
+        with socket.create_connection(tap.listen_address, timeout=5) as s3:
+            s3.sendall(b"again")
+            assert recv_exactly(s3, 5) == b"again"
+
+
+def test_tap_creation_failure_leaves_nothing_open() -> None:
+    busy = socket.create_server(("127.0.0.1", 0))
+    try:
+        tap = TcpTap(busy.getsockname()[:2], ("127.0.0.1", 9))
+        with pytest.raises(Exception, match="cannot open"):
+            tap.start()
+    finally:
+        busy.close()
+    assert os.path.exists("/proc/self/fd")
