@@ -171,7 +171,7 @@ def load_scenario(path: str | Path) -> Scenario:
     tags: list[float] = []
     if "tags" in line_m:
         tm = r.mapping(line_m["tags"], "line.tags")
-        r.known(tm, {"spacing_m", "first_m", "at_m"}, "line.tags")
+        r.known(tm, {"spacing_m", "first_m", "at_m", "extra_m"}, "line.tags")
         if "at_m" in tm:
             tags = [float(x) for x in r.seq(tm["at_m"], "line.tags.at_m")]
         else:
@@ -179,6 +179,8 @@ def load_scenario(path: str | Path) -> Scenario:
             first = r.num(tm, "first_m", "line.tags", default=0.0)
             n = int(math.floor((length - first) / spacing + 1e-9)) + 1
             tags = [first + i * spacing for i in range(n)]
+        extra = [float(x) for x in r.seq(tm.get("extra_m", []), "line.tags.extra_m")]
+        tags = sorted(set(tags) | set(extra))
     grads: list[tuple[float, float]] = []
     for i, g in enumerate(r.seq(line_m.get("gradients", []), "line.gradients")):
         gm = r.mapping(g, f"line.gradients[{i}]")

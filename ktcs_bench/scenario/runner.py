@@ -18,6 +18,8 @@ from ktcs_bench.train.resources import ResourceManager
 from ktcs_bench.train.supervision import Status
 from ktcs_bench.train.t2t import T2TMessage
 
+STILL_S = 60.0
+"""With stop_when_all_stopped, the run ends after every train has stood still this long."""
 RECORD_LIMITS_EVERY = 10
 """Cycles between samples of the supervision limits at the train (they cost a few bisections)."""
 
@@ -67,6 +69,7 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
     n_steps = int(round(scn.duration / scn.dt))
     now = 0.0
     rm_seen = 0
+    still = 0
     for k in range(n_steps):
         now = k * scn.dt
         if rm is not None:
@@ -112,12 +115,11 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
             rm_seen = len(rm.events)
         if progress is not None and k % 50 == 0:
             progress(now / scn.duration)
-        if (
-            scn.stop_when_all_stopped
-            and k > 10
-            and all(t.state.speed <= 0.0 and t.status is not Status.INTERVENTION for t in trains)
-            and now > max(t.cfg.depart_at for t in trains) + 30.0
-        ):
+        if all(t.state.speed <= 0.0 and t.status is not Status.INTERVENTION for t in trains):
+            still += 1
+        else:
+            still = 0
+        if scn.stop_when_all_stopped and still * scn.dt >= STILL_S:
             break
     if progress is not None:
         progress(1.0)

@@ -280,7 +280,13 @@ class TrainEndpoint:
             return self._ato(now, dt, verdict, inputs, events)
         wish = cfg.driver_speed
         if not (cfg.inattentive_until_eb and self.eb_count == 0):
-            wish = min(wish, verdict.permitted - kmh(2.0))
+            # the driver looks ahead by the brake build-up time plus a reaction second
+            ahead = self.position.max_safe_front + s.speed * (p.brake_build_up + 1.0)
+            wish = min(
+                wish,
+                verdict.permitted - kmh(2.0),
+                self.supervisor.permitted_speed(self.limits, ahead) - kmh(2.0),
+            )
             # brake for a stop target in good time (the driver reads the DMI's target distance)
             dtg = self.target_point - self.position.max_safe_front
             if dtg < 5.0:
@@ -288,7 +294,7 @@ class TrainEndpoint:
         if s.speed < wish - kmh(1.0):
             return 1.0, 0.0
         if s.speed > wish + kmh(1.0):
-            return 0.0, p.service_decel * min(1.0, (s.speed - wish) / kmh(4.0) + 0.3)
+            return 0.0, p.service_decel
         return 0.0, 0.0
 
     def _ato(
@@ -310,6 +316,8 @@ class TrainEndpoint:
             )
         if self.ato_sm.state is not AtoState.ACTIVE_OPERATING:
             return 0.0, p.service_decel
+        if station is None and self.line.stations:
+            return 0.0, p.service_decel  # service over: held at the last station
         if self.ato_sm.berthed and station is not None:
             events.append(
                 Event(now, cfg.train_id, "berthed", f"{station.name} at {self.position.head:.2f} m")
