@@ -69,7 +69,7 @@ def _check(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"chart check: {exc}", file=sys.stderr)
         return 1
-    problems = check_charts(line, charts, emulators=False)
+    problems = check_charts(line, charts)
     for problem in problems:
         print(f"chart check: {problem}", file=sys.stderr)
     if problems:

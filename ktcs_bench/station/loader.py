@@ -328,6 +328,22 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
     )
 
 
+def onward(first: Route, then: Route) -> bool:
+    """`then` starts at `first`'s exit and shares with it only `first`'s overlap, set alike.
+
+    Such routes are not conflicting: `then` takes the overlap over (a train running through).
+    """
+    if first.exit != then.entry:
+        return False
+    overlap = set(first.overlap_track_circuits) | {s.point for s in first.overlap_points}
+    theirs = set(then.all_track_circuits) | {s.point for s in then.all_points}
+    mine = set(first.all_track_circuits) | {s.point for s in first.all_points}
+    if not (mine & theirs) <= overlap:
+        return False
+    want = {s.point: s.position for s in first.overlap_points}
+    return all(want[s.point] == s.position for s in then.all_points if s.point in want)
+
+
 def _check_conflicts(doc: _Doc, routes: list[Route], points: dict[str, Point]) -> None:
     index = {r.name: i for i, r in enumerate(routes)}
     for i, r in enumerate(routes):
@@ -346,7 +362,11 @@ def _check_conflicts(doc: _Doc, routes: list[Route], points: dict[str, Point]) -
             shared = sorted(mine & theirs)
             if r.entry == other.entry:
                 shared.append(f"entry signal {r.entry}")
-            if shared and other.name not in r.conflicts:
+            if (
+                shared
+                and not (onward(r, other) or onward(other, r))
+                and other.name not in r.conflicts
+            ):
                 raise doc.fail(
                     f"routes[{i}].conflicts",
                     f"route {r.name!r} shares {', '.join(shared)} with route {other.name!r} "
@@ -413,6 +433,17 @@ def load_line(path: str | Path | None = None) -> Line:
                     f"duplicate track circuit {t.name!r} (also in {owner_of[t.name]})",
                 )
             owner_of[t.name] = st.file
+
+    owned = {t.name: t.station for t in plain}
+    for st in stations.values():
+        for i, r in enumerate(st.routes):
+            for j, tc in enumerate(r.approach):
+                if tc in owned and owned[tc] != st.number:
+                    raise ConfigError(
+                        st.file,
+                        f"routes[{i}].approach[{j}]",
+                        f"track circuit {tc!r} belongs to station {owned[tc]}, not {st.number}",
+                    )
 
     def build_interval(o: dict[str, Any], place: str) -> Interval:
         nm = doc.string(o, "name", place)

@@ -1,0 +1,21 @@
+"""Wayside ATC and the track-circuit emulator (SPEC §6.4), sans-I/O.
+
+`TrackCircuitModel(line)`: train positions -> occupancy (with injectable faults) and the code under
+each train's antenna. `WaysideAtc(line, station)`: occupancy + IXL route state -> TC/TTC/IZC codes
+for the IXL and an `AtcCode` (speed code, target speed, gradient, target distance) per track
+circuit; the most restrictive code everywhere while its IXL link is in communication error.
+"""
+
+from ktcs_bench.atc.codes import AtcCode, most_restrictive
+from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
+from ktcs_bench.atc.wayside import AtcEvent, AtcOutput, WaysideAtc
+
+__all__ = [
+    "AtcCode",
+    "AtcEvent",
+    "AtcOutput",
+    "TrackCircuitModel",
+    "TrainPosition",
+    "WaysideAtc",
+    "most_restrictive",
+]

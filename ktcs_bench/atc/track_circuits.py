@@ -1,0 +1,105 @@
+"""The track-circuit emulator: owns the line, turns train positions into occupancy, and hands each
+train the code of the track circuit under its antenna (SPEC §6.4).
+
+A train is given as head and tail chainage (the antenna is at the head; the direction of travel is
+tail -> head) and the station track it uses where tracks run side by side. Faults per track
+circuit: "failed_occupied", "failed_clear" (wrong side: a train is not seen) and "no_code" (the
+code does not reach the antenna). Sans-I/O: `update` is called with positions, no clock.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from ktcs_bench.atc.codes import AtcCode
+from ktcs_bench.station.model import Line, TrackCircuit
+
+FAULTS = ("failed_occupied", "failed_clear", "no_code")
+
+
+@dataclass(frozen=True, slots=True)
+class TrainPosition:
+    train: str
+    head_m: float
+    tail_m: float
+    track: str = "1"  # station track in use (plain-line track circuits carry every track)
+
+
+class TrackCircuitModel:
+    def __init__(self, line: Line) -> None:
+        self.line = line
+        self.tcs: tuple[TrackCircuit, ...] = line.all_track_circuits()
+        self._by_name = {t.name: t for t in self.tcs}
+        self.trains: dict[str, TrainPosition] = {}
+        self.faults: dict[str, str] = {}
+        self.codes: dict[str, AtcCode] = {}
+        self._last = self.occupancy()
+
+    def update(self, trains: Iterable[TrainPosition]) -> dict[str, bool]:
+        """New train positions (all trains); returns the occupancy changes."""
+        self.trains = {t.train: t for t in trains}
+        return self._changes()
+
+    def fail(self, tc: str, kind: str) -> dict[str, bool]:
+        if kind not in FAULTS:
+            raise ValueError(f"unknown track-circuit fault {kind!r} {FAULTS}")
+        self._by_name[tc]  # KeyError on an unknown name
+        self.faults[tc] = kind
+        return self._changes()
+
+    def clear_fault(self, tc: str | None = None) -> dict[str, bool]:
+        if tc is None:
+            self.faults.clear()
+        else:
+            self.faults.pop(tc, None)
+        return self._changes()
+
+    def shunted(self, tc: TrackCircuit) -> bool:
+        """A train's axles are in the track circuit (before any fault)."""
+        for t in self.trains.values():
+            lo, hi = min(t.head_m, t.tail_m), max(t.head_m, t.tail_m)
+            if lo < tc.to_m and hi > tc.from_m and tc.on_track(t.track):
+                return True
+        return False
+
+    def occupancy(self) -> dict[str, bool]:
+        """Every track circuit of the line: occupied as its receiver reports it."""
+        out: dict[str, bool] = {}
+        for tc in self.tcs:
+            fault = self.faults.get(tc.name)
+            if fault == "failed_occupied":
+                out[tc.name] = True
+            elif fault == "failed_clear":
+                out[tc.name] = False
+            else:
+                out[tc.name] = self.shunted(tc)
+        return out
+
+    def set_codes(self, codes: Mapping[str, AtcCode]) -> None:
+        """Codes from the wayside ATCs, per track circuit."""
+        self.codes.update(codes)
+
+    def under_antenna(self, train: str) -> str | None:
+        t = self.trains[train]
+        up = t.head_m >= t.tail_m
+        for tc in self.tcs:
+            if not tc.on_track(t.track):
+                continue
+            inside = tc.from_m <= t.head_m < tc.to_m if up else tc.from_m < t.head_m <= tc.to_m
+            if inside:
+                return tc.name
+        return None
+
+    def code_for(self, train: str) -> AtcCode | None:
+        """The code the train's antenna picks up; None when no code reaches it."""
+        tc = self.under_antenna(train)
+        if tc is None or self.faults.get(tc) == "no_code":
+            return None
+        return self.codes.get(tc)
+
+    def _changes(self) -> dict[str, bool]:
+        now = self.occupancy()
+        changed = {k: v for k, v in now.items() if self._last.get(k) != v}
+        self._last = now
+        return changed

@@ -1,0 +1,204 @@
+"""The trackside I/O rack of one station: the IO end of the IXL's Type I relay-I/O link.
+
+Inputs by IXL->IO chart code (`receive`), train occupancy from the track-circuit model
+(`set_occupancy`), link state and `now`; outputs the IO->IXL code changes. When its link to the
+IXL is in communication error the rack puts every signal to stop (the vital outputs drop) and
+leaves the points where they are.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from ktcs_bench.charts import names as n
+from ktcs_bench.charts.generate import station_chart
+from ktcs_bench.field import points as point_faults
+from ktcs_bench.field import relays as relay_faults
+from ktcs_bench.field.points import PointMachine
+from ktcs_bench.field.relays import TrackRelay
+from ktcs_bench.field.signals import SignalHead
+from ktcs_bench.station.model import StationView
+
+
+@dataclass(frozen=True, slots=True)
+class FieldEvent:
+    time: float
+    kind: str  # point, signal, fault, link
+    text: str
+
+
+@dataclass
+class FieldOutput:
+    changes: list[tuple[str, int]] = field(default_factory=list)  # IO->IXL code changes
+    events: list[FieldEvent] = field(default_factory=list)
+    deadline: float | None = None
+
+
+class Trackside:
+    def __init__(self, view: StationView) -> None:
+        self.view = view
+        self.st = view.number
+        self.points = {p.name: PointMachine(p) for p in view.station.points}
+        self.signals = {s.name: SignalHead(s) for s in view.station.lamp_signals}
+        self.relays = {t.name: TrackRelay(t.name) for t in view.track_circuits}
+        self.link_up = False
+        self._sgc: dict[str, dict[str, int]] = {s: {} for s in self.signals}
+        self._demand: dict[str, tuple[int, int]] = {p: (1, 0) for p in self.points}
+        self._command_names = tuple(c.name for c in station_chart(view, "ixl_to_io").codes)
+        self._events: list[FieldEvent] = []
+        self.log: list[FieldEvent] = []
+        self._sent = self.full_state()
+
+    # ------------------------------------------------------------------ inputs
+
+    def receive(self, codes: Mapping[str, int], now: float) -> FieldOutput:
+        """IXL->IO code changes (or a full state): point demands PNC/PRC, lamp commands SGC."""
+        st = self.st
+        touched: set[str] = set()
+        for name, state in codes.items():
+            kind, obj = name[:3], name[3 + len(str(st)) :]
+            if kind in ("PNC", "PRC") and obj in self.points:
+                demand = (
+                    int(state) if kind == "PNC" else self._level(obj, "PNC"),
+                    int(state) if kind == "PRC" else self._level(obj, "PRC"),
+                )
+                self._demand[obj] = demand
+                if demand == (1, 0):
+                    self._throw(obj, "normal", now)
+                elif demand == (0, 1):
+                    self._throw(obj, "reverse", now)
+            elif kind == "SGC":
+                for sig in self.signals.values():
+                    prefix = n.sgc(st, sig.signal.name, "")
+                    aspect = name[len(prefix) :]
+                    if name.startswith(prefix) and aspect in sig.signal.aspects:
+                        self._sgc[sig.signal.name][aspect] = int(state)
+                        touched.add(sig.signal.name)
+                        break
+                else:
+                    self._event(now, "fault", f"unknown command {name!r} ignored")
+            else:
+                self._event(now, "fault", f"unknown command {name!r} ignored")
+        if self.link_up:
+            for s in touched:
+                self.signals[s].command_bits(self._sgc[s])
+        return self._finish(now)
+
+    def set_occupancy(self, occupied: Mapping[str, bool], now: float) -> FieldOutput:
+        """Train occupancy per track circuit (from the track-circuit model); others unchanged."""
+        for name, occ in occupied.items():
+            relay = self.relays.get(name)
+            if relay is not None:
+                relay.train = bool(occ)
+        return self._finish(now)
+
+    def link_state(self, up: bool, now: float) -> FieldOutput:
+        if up != self.link_up:
+            self.link_up = up
+            if up:
+                self._event(now, "link", "IXL link up")
+                for s, sig in self.signals.items():
+                    sig.command_bits(self._sgc[s])
+            else:
+                self._event(now, "link", "IXL link in communication error: all signals to stop")
+                for sig in self.signals.values():
+                    sig.commanded = "R"
+        return self._finish(now)
+
+    def tick(self, now: float) -> FieldOutput:
+        return self._finish(now)
+
+    # ------------------------------------------------------------------ faults
+
+    def fail_point(self, point: str, kind: str, now: float) -> FieldOutput:
+        """Inject a point fault: "detection" (indication lost) or "jammed" (never arrives)."""
+        if kind not in point_faults.FAULTS:
+            raise ValueError(f"unknown point fault {kind!r} {point_faults.FAULTS}")
+        self.points[point].fault = kind
+        self._event(now, "fault", f"point {point}: {kind} fault injected")
+        return self._finish(now)
+
+    def fail_lamp(self, signal: str, aspect: str, now: float) -> FieldOutput:
+        sig = self.signals[signal]
+        if aspect not in sig.signal.aspects:
+            raise ValueError(f"signal {signal} has no {aspect!r} lamp")
+        sig.failed.add(aspect)
+        self._event(now, "fault", f"signal {signal}: {aspect} lamp failed")
+        return self._finish(now)
+
+    def fail_track_circuit(self, tc: str, kind: str, now: float) -> FieldOutput:
+        """Inject "failed_occupied" or "failed_clear" (wrong-side) into a track relay."""
+        if kind not in relay_faults.FAULTS:
+            raise ValueError(f"unknown track fault {kind!r} {relay_faults.FAULTS}")
+        self.relays[tc].fault = kind
+        self._event(now, "fault", f"{tc}: relay {kind}")
+        return self._finish(now)
+
+    def clear_faults(self, now: float) -> FieldOutput:
+        for p in self.points.values():
+            p.fault = None
+        for s in self.signals.values():
+            s.failed.clear()
+        for r in self.relays.values():
+            r.fault = None
+        self._event(now, "fault", "all faults cleared")
+        return self._finish(now)
+
+    # ------------------------------------------------------------------ queries
+
+    def command_names(self) -> tuple[str, ...]:
+        return self._command_names
+
+    def next_deadline(self) -> float | None:
+        due = [p.deadline() for p in self.points.values()]
+        return min((d for d in due if d is not None), default=None)
+
+    def full_state(self) -> dict[str, int]:
+        """Every IO->IXL chart code: point indications, lamps, track relays."""
+        st = self.st
+        out: dict[str, int] = {}
+        for name, pm in self.points.items():
+            bits = pm.bits()
+            out[n.sni(st, name)] = bits["SNI"]
+            out[n.srn(st, name)] = bits["SRN"]
+            out[n.sri(st, name)] = bits["SRI"]
+            out[n.snr(st, name)] = bits["SNR"]
+        for name, sig in self.signals.items():
+            lit = sig.lit()
+            for a in sig.signal.aspects:
+                out[n.lps(st, name, a)] = int(lit == a)
+            out[n.lfi(st, name)] = int(sig.lamp_failure)
+        for name, relay in self.relays.items():
+            out[name] = int(relay.occupied)
+        return out
+
+    # ------------------------------------------------------------------ internals
+
+    def _level(self, point: str, kind: str) -> int:
+        pnc, prc = self._demand[point]
+        return pnc if kind == "PNC" else prc
+
+    def _throw(self, point: str, target: str, now: float) -> None:
+        pm = self.points[point]
+        if pm.command("normal" if target == "normal" else "reverse", now):
+            self._event(now, "point", f"point {point} moving to {target}")
+
+    def _finish(self, now: float) -> FieldOutput:
+        for name, pm in self.points.items():
+            if pm.tick(now):
+                self._event(now, "point", f"point {name} detected {pm.position}")
+        state = self.full_state()
+        out = FieldOutput(
+            changes=[(k, v) for k, v in state.items() if self._sent.get(k) != v],
+            events=self._events,
+            deadline=self.next_deadline(),
+        )
+        self._sent = state
+        self._events = []
+        return out
+
+    def _event(self, now: float, kind: str, text: str) -> None:
+        ev = FieldEvent(now, kind, text)
+        self._events.append(ev)
+        self.log.append(ev)

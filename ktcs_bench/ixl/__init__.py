@@ -1,0 +1,22 @@
+"""The electronic interlocking (SPEC §6.2) as a sans-I/O object: no sockets, no clock, no sleep.
+
+`Interlocking(view)` takes controls, Type I code changes, link states and `now`, and returns the
+indication, ATC and trackside code changes, control results, events and its next deadline.
+Modules: `modes` (center/local, CMR), `routes` (locking and release), `points`, `signals`,
+`reasons` (CONTROL_RESULT reason numbers), `interlocking` (the station as a whole).
+"""
+
+from ktcs_bench.ixl.interlocking import ControlResult, Event, Interlocking, IxlOutput
+from ktcs_bench.ixl.modes import Mode
+from ktcs_bench.ixl.reasons import Reason
+from ktcs_bench.ixl.routes import RouteStatus
+
+__all__ = [
+    "ControlResult",
+    "Event",
+    "Interlocking",
+    "IxlOutput",
+    "Mode",
+    "Reason",
+    "RouteStatus",
+]

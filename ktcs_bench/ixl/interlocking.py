@@ -1,0 +1,633 @@
+"""The station interlocking (SPEC §6.2), sans-I/O: inputs by chart code, outputs by chart code.
+
+Inputs: CTC controls (`control`, by code name or number), local-panel actions (`local`), Type I
+code changes from the ATC and the trackside (`receive`), link up/down (`link_state`) and timers
+(`tick`). Every call takes `now` (seconds) and returns an `IxlOutput`: indication changes for the
+CTC chart, code changes for the IXL->ATC and IXL->IO charts, control results, events and the next
+deadline. After every input the whole station is re-evaluated at once, so a failing condition
+puts a signal to stop in the same call that reported it (invariant 4: within one cycle).
+
+Fail-safe defaults: links start down; a track circuit is occupied until its source reports it
+clear and whenever a link that reports it is down; a point has no detection until the trackside
+reports it and whenever the trackside link is down.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+from ktcs_bench.charts import names as n
+from ktcs_bench.charts.generate import station_chart
+from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.ixl.modes import Mode, ModeControl
+from ktcs_bench.ixl.points import BITS, Detection, PointState
+from ktcs_bench.ixl.reasons import Reason
+from ktcs_bench.ixl.routes import RouteState, RouteStatus
+from ktcs_bench.ixl.signals import SignalState, downgrade, fit
+from ktcs_bench.station.loader import onward
+from ktcs_bench.station.model import Direction, Interval, PointPosition, Route, StationView
+
+LINKS = ("atc", "io")
+CHART_OF = {"ctc": "ixl_to_ctc", "atc": "ixl_to_atc", "io": "ixl_to_io"}
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    time: float
+    kind: str  # control, mode, route, point, signal, train, link, fault
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class ControlResult:
+    name: str | None  # None when the code number is not in the chart
+    number: int | None
+    accepted: bool
+    reason: Reason
+
+
+@dataclass
+class IxlOutput:
+    ctc: list[tuple[str, int]] = field(default_factory=list)  # IXL->CTC indication changes
+    atc: list[tuple[str, int]] = field(default_factory=list)  # IXL->ATC code changes
+    io: list[tuple[str, int]] = field(default_factory=list)  # IXL->trackside command changes
+    results: list[ControlResult] = field(default_factory=list)
+    events: list[Event] = field(default_factory=list)
+    deadline: float | None = None
+
+
+class Interlocking:
+    """One station's IXL. `tc_sources` names the links whose reports give track occupancy."""
+
+    def __init__(
+        self,
+        view: StationView,
+        *,
+        mode: Mode = Mode.LOCAL,
+        auto_grant_s: float | None = None,
+        tc_sources: Iterable[str] = ("atc",),
+        log_limit: int = 10_000,
+    ) -> None:
+        self.view = view
+        self.st = view.number
+        st = view.station
+        self.modes = ModeControl(mode, auto_grant_s)
+        self.tc_sources = tuple(tc_sources)
+        for src in self.tc_sources:
+            if src not in LINKS:
+                raise ValueError(f"unknown track-circuit source {src!r}")
+        self.tc_names = tuple(t.name for t in view.track_circuits)
+        self.points = {p.name: PointState(p) for p in st.points}
+        self.signals = {s.name: SignalState(s) for s in st.lamp_signals}
+        self.routes = {r.name: RouteState(r) for r in st.routes}
+        self.intervals: dict[str, Interval] = {iv.name: iv for iv in view.intervals}
+        self.direction: dict[str, Direction] = {
+            iv.name: iv.default_direction for iv in view.intervals
+        }
+        self.link_up = dict.fromkeys(LINKS, False)
+        self.tc_reports: dict[str, dict[str, int]] = {src: {} for src in LINKS}
+        self.izc: dict[str, int] = {}
+        self.ttc: dict[str, int] = {}
+        self._points_in = {p.name: p.track_circuits for p in st.points}
+        self._proceed_before: dict[str, bool] = dict.fromkeys(self.signals, False)
+        self._noticed: set[str] = set()
+        self.charts: dict[str, CodeChart] = {
+            k: station_chart(view, k)
+            for k in ("ixl_to_ctc", "ctc_to_ixl", "ixl_to_atc", "ixl_to_io", "atc_to_ixl")
+        }
+        self.charts["io_to_ixl"] = station_chart(view, "io_to_ixl")
+        self._controls = {c.name for c in self.charts["ctc_to_ixl"].codes}
+        self._inputs = {
+            "atc": {c.name for c in self.charts["atc_to_ixl"].codes},
+            "io": {c.name for c in self.charts["io_to_ixl"].codes},
+        }
+        self.log: list[Event] = []
+        self._log_limit = log_limit
+        self._events: list[Event] = []
+        self._results: list[ControlResult] = []
+        self._evaluate(0.0)
+        self._sent = {k: self.full_state(k) for k in CHART_OF}
+        self._events.clear()
+
+    # ------------------------------------------------------------------ public inputs
+
+    def control(self, code: str | int, value: int, now: float) -> IxlOutput:
+        """A CTC control (Type II CONTROL item): code name or chart number, and its value."""
+        self._results.append(self._control(code, value, now, source="ctc"))
+        return self._finish(now)
+
+    def local_control(self, code: str | int, value: int, now: float) -> IxlOutput:
+        """The same controls from the local panel: accepted only in local mode."""
+        self._results.append(self._control(code, value, now, source="local"))
+        return self._finish(now)
+
+    def local(self, action: str, now: float) -> IxlOutput:
+        """Local operator: "grant" / "refuse" a center-mode request, or "take" local control."""
+        if action == "grant":
+            if self.modes.grant():
+                self._event(now, "mode", "local operator granted center mode")
+        elif action == "refuse":
+            if self.modes.refuse():
+                self._event(now, "mode", "local operator refused center mode")
+        elif action == "take":
+            if self.modes.to_local():
+                self._event(now, "mode", "local operator took local control")
+        else:
+            raise ValueError(f"unknown local action {action!r} (grant, refuse, take)")
+        return self._finish(now)
+
+    def receive(self, link: str, codes: Mapping[str, int], now: float) -> IxlOutput:
+        """Code changes or a full state from a Type I peer: link "atc" or "io"."""
+        known = self._inputs[link]
+        for name, state in codes.items():
+            if name not in known:
+                self._event(now, "fault", f"{link}: unknown code {name!r} ignored")
+                continue
+            self._apply_input(link, name, int(state), now)
+        return self._finish(now)
+
+    def link_state(self, link: str, up: bool, now: float) -> IxlOutput:
+        """A Type I link came up or went into communication error."""
+        if link not in LINKS:
+            raise ValueError(f"unknown link {link!r}")
+        if self.link_up[link] != up:
+            self.link_up[link] = up
+            what = "up" if up else "in communication error"
+            self._event(now, "link", f"{link} link {what}")
+            if not up and link == "io":
+                for sig in self.signals.values():
+                    sig.lamp_reported = False
+        return self._finish(now)
+
+    def tick(self, now: float) -> IxlOutput:
+        """Timers: call at (or after) `next_deadline()`."""
+        return self._finish(now)
+
+    # ------------------------------------------------------------------ public queries
+
+    def next_deadline(self) -> float | None:
+        due = [self.modes.deadline()]
+        for rs in self.routes.values():
+            due += [rs.release_at, rs.overlap_at]
+        return min((d for d in due if d is not None), default=None)
+
+    def control_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.charts["ctc_to_ixl"].codes)
+
+    def input_names(self, link: str) -> tuple[str, ...]:
+        chart = "atc_to_ixl" if link == "atc" else "io_to_ixl"
+        return tuple(c.name for c in self.charts[chart].codes)
+
+    def occupied(self, tc: str) -> bool:
+        """Occupancy as the interlocking takes it (fail-safe: unknown or link down = occupied)."""
+        for src in self.tc_sources:
+            if not self.link_up[src] or self.tc_reports[src].get(tc, 1) != 0:
+                return True
+        return False
+
+    def detection(self, point: str) -> Detection:
+        if not self.link_up["io"]:
+            return "none"
+        return self.points[point].reported
+
+    def route_status(self, route: str) -> RouteStatus:
+        return self.routes[route].status
+
+    def aspect(self, signal: str) -> str:
+        """The commanded aspect."""
+        return self.signals[signal].commanded
+
+    def full_state(self, kind: str) -> dict[str, int]:
+        """Every code of the IXL->CTC ("ctc"), IXL->ATC ("atc") or IXL->IO ("io") chart."""
+        if kind == "ctc":
+            return self._ctc_state()
+        if kind == "atc":
+            return self._atc_state()
+        if kind == "io":
+            return self._io_state()
+        raise ValueError(f"unknown output {kind!r} (ctc, atc, io)")
+
+    # ------------------------------------------------------------------ controls
+
+    def _control(self, code: str | int, value: int, now: float, source: str) -> ControlResult:
+        chart = self.charts["ctc_to_ixl"]
+        if isinstance(code, int):
+            name = chart.name_of(code)
+            number: int | None = code
+        else:
+            name = code if code in self._controls else None
+            number = chart.number_of(code) if name is not None else None
+        if name is None:
+            self._event(now, "control", f"{source}: unknown control code {code!r} rejected")
+            return ControlResult(None, number, False, Reason.UNKNOWN_CODE)
+        reason = self._dispatch(name, value, now, source)
+        verdict = "accepted" if reason is Reason.NONE else f"rejected: {reason.text}"
+        self._event(now, "control", f"{source}: {name}={value} {verdict}")
+        return ControlResult(name, number, reason is Reason.NONE, reason)
+
+    def _dispatch(self, name: str, value: int, now: float, source: str) -> Reason:
+        st = self.st
+        if name == n.cmq(st):
+            if value and self.modes.request_center(now):
+                self._event(now, "mode", "center mode requested (CMR): awaiting local operator")
+            return Reason.NONE
+        if name == n.lmq(st):
+            if value and self.modes.mode is Mode.CENTER and self.modes.to_local():
+                self._event(now, "mode", "CTC handed the station back to local mode")
+            return Reason.NONE
+        wanted = Mode.CENTER if source == "ctc" else Mode.LOCAL
+        if self.modes.mode is not wanted:
+            return Reason.NOT_IN_CENTER_MODE
+        kind, obj = name[:3], name[3 + len(str(st)) :]
+        if kind in ("RSC", "RCC"):
+            if not value:
+                return Reason.NONE
+            return self._set_route(obj, now) if kind == "RSC" else self._cancel_route(obj, now)
+        if kind in ("SNC", "SRC"):
+            if not value:
+                return Reason.NONE
+            return self._move_point(obj, "normal" if kind == "SNC" else "reverse", now)
+        if kind == "SSC":
+            sig = self.signals[obj]
+            if sig.stop_held != bool(value):
+                sig.stop_held = bool(value)
+                held = "held at stop" if value else "released from stop"
+                self._event(now, "signal", f"signal {obj} {held} by the CTC")
+            return Reason.NONE
+        return Reason.UNKNOWN_CODE  # pragma: no cover - every chart control is handled above
+
+    def _holder_of(self, element: str, point: bool) -> RouteState | None:
+        for rs in self.routes.values():
+            if element in (rs.held_points if point else rs.held_tcs):
+                return rs
+        return None
+
+    def _set_route(self, name: str, now: float) -> Reason:
+        rs = self.routes[name]
+        r = rs.route
+        if rs.status in (RouteStatus.SETTING, RouteStatus.SET):
+            return Reason.NONE
+        if rs.status is not RouteStatus.IDLE:
+            return Reason.ROUTE_CONFLICTS
+        for other in r.conflicts:
+            if self.routes[other].whole:
+                self._event(now, "route", f"route {name} refused: conflicts with route {other}")
+                return Reason.ROUTE_CONFLICTS
+        handover: dict[str, RouteState] = {}  # our elements held as the overlap of a route into us
+        onward_holds: set[str] = set()  # our overlap, already held by the route from our exit
+        elements = [(tc, False) for tc in r.all_track_circuits]
+        elements += [(s.point, True) for s in r.all_points]
+        for element, is_point in elements:
+            holder = self._holder_of(element, point=is_point)
+            if holder is None:
+                continue
+            if onward(holder.route, r) and element in holder.overlap_elements:
+                handover[element] = holder
+            elif onward(r, holder.route) and element in rs.overlap_elements:
+                onward_holds.add(element)
+            else:
+                self._event(now, "route", f"route {name} refused: {element} locked")
+                return Reason.ROUTE_CONFLICTS
+        for tc in r.all_track_circuits:
+            if self.occupied(tc):
+                self._event(now, "route", f"route {name} refused: {tc} occupied")
+                return Reason.TRACK_OCCUPIED
+        for s in r.all_points:
+            if self.detection(s.point) == "none":
+                self._event(now, "route", f"route {name} refused: point {s.point} failed")
+                return Reason.POINT_FAILED
+        iv = self.view.interval_of_exit(r)
+        if iv is not None and self.direction[iv.name] != r.direction:
+            if self._interval_occupied(iv):
+                self._event(now, "route", f"route {name} refused: interval {iv.name} occupied")
+                return Reason.TRACK_OCCUPIED
+            self.direction[iv.name] = r.direction
+            self._event(now, "route", f"interval {iv.name} traffic direction now {r.direction}")
+        rs.lock()
+        if onward_holds:
+            rs.cede_overlap(rs.overlap_elements)
+        for holder in {id(h): h for h in handover.values()}.values():
+            holder.cede_overlap(holder.overlap_elements)
+            self._event(now, "route", f"route {name} takes over the overlap of {holder.route.name}")
+        self._event(now, "route", f"route {name} locked")
+        return Reason.NONE
+
+    def _cancel_route(self, name: str, now: float) -> Reason:
+        rs = self.routes[name]
+        if rs.status is RouteStatus.IDLE or rs.release_at is not None:
+            return Reason.NONE
+        if rs.status is RouteStatus.ENTERED:
+            # A route the train has stopped inside: time-release what it still holds.
+            if any(self.occupied(tc) for tc in rs.held_tcs):
+                return Reason.TRACK_OCCUPIED
+            self._start_timed_release(rs, now)
+            return Reason.NONE
+        approached = any(self.occupied(tc) for tc in rs.route.approach)
+        if rs.cleared_once and approached:
+            self._start_timed_release(rs, now)
+        else:
+            rs.release_all()
+            self._event(now, "route", f"route {name} cancelled and released")
+        return Reason.NONE
+
+    def _start_timed_release(self, rs: RouteState, now: float) -> None:
+        if rs.status is not RouteStatus.ENTERED:
+            rs.status = RouteStatus.CANCELLING
+        rs.release_at = now + rs.route.approach_release_s
+        self._event(
+            now,
+            "route",
+            f"route {rs.route.name} cancelled: approach locked, release in "
+            f"{rs.route.approach_release_s:g} s",
+        )
+
+    def _move_point(self, name: str, position: PointPosition, now: float) -> Reason:
+        ps = self.points[name]
+        if self._holder_of(name, point=True) is not None:
+            return Reason.POINT_LOCKED
+        if any(self.occupied(tc) for tc in ps.point.track_circuits):
+            return Reason.TRACK_OCCUPIED
+        if ps.demanded != position:
+            ps.demanded = position
+            self._event(now, "point", f"point {name} commanded {position}")
+        return Reason.NONE
+
+    # ------------------------------------------------------------------ inputs
+
+    def _apply_input(self, link: str, name: str, state: int, now: float) -> None:
+        st = self.st
+        if name in self.tc_names:
+            self.tc_reports[link][name] = state
+            return
+        kind = name[:3]
+        if link == "atc":
+            if kind == "IZC":
+                iv = name[3:]
+                before = self.izc.get(iv, 1)
+                self.izc[iv] = state
+                if state and not before:
+                    self._infer_direction(self.intervals[iv], now)
+            elif kind == "TTC":
+                self.ttc[name] = state
+            return
+        obj = name[3 + len(str(st)) :]
+        if kind in BITS:
+            self.points[obj].bits[kind] = state
+        elif kind == "LFI":
+            sig = self.signals[obj]
+            if sig.lamp_failed != bool(state):
+                sig.lamp_failed = bool(state)
+                if state:
+                    self._event(now, "fault", f"signal {obj}: lamp failure reported")
+        elif kind == "LPS":
+            for s in self.signals.values():
+                prefix = n.lps(st, s.signal.name, "")
+                if name.startswith(prefix) and name[len(prefix) :] in s.signal.aspects:
+                    s.lamp_bits[name[len(prefix) :]] = state
+                    s.lamp_reported = True
+                    break
+
+    def _interval_occupied(self, iv: Interval) -> bool:
+        if not self.link_up["atc"] or self.izc.get(iv.name, 1) != 0:
+            return True
+        return any(self.occupied(tc) for tc in self.view.owned_half(iv))
+
+    def _infer_direction(self, iv: Interval, now: float) -> None:
+        """A train entered the interval while no route of ours leads into it: it comes to us."""
+        for rs in self.routes.values():
+            if rs.holds_anything and self.view.interval_of_exit(rs.route) is iv:
+                return
+        toward = iv.toward(self.st)
+        if self.direction[iv.name] != toward:
+            self.direction[iv.name] = toward
+            self._event(now, "route", f"interval {iv.name}: train approaching, direction {toward}")
+
+    # ------------------------------------------------------------------ evaluation
+
+    def _finish(self, now: float) -> IxlOutput:
+        self._evaluate(now)
+        out = IxlOutput(results=self._results, events=self._events)
+        for kind in CHART_OF:
+            state = self.full_state(kind)
+            last = self._sent[kind]
+            changes = [(k, v) for k, v in state.items() if last.get(k) != v]
+            setattr(out, kind, changes)
+            self._sent[kind] = state
+        self._results, self._events = [], []
+        out.deadline = self.next_deadline()
+        return out
+
+    def _evaluate(self, now: float) -> None:
+        if self.modes.tick(now):
+            self._event(now, "mode", "center mode granted automatically")
+        for rs in self.routes.values():
+            if rs.release_at is not None:
+                if now >= rs.release_at:
+                    self._event(now, "route", f"route {rs.route.name} released (timed release)")
+                    rs.release_all()
+            if rs.status is RouteStatus.SET:
+                self._detect_entry(rs, now)
+            if rs.status in (RouteStatus.ENTERED, RouteStatus.CANCELLING) and rs.seen:
+                self._sequential_release(rs, now)
+            if rs.overlap_ceded and rs.holds_anything:
+                self._retake_overlap(rs, now)
+            if rs.status in (RouteStatus.SETTING, RouteStatus.SET):
+                self._drive_points(rs, now)
+        self._update_signals(now)
+
+    def _retake_overlap(self, rs: RouteState, now: float) -> None:
+        """The onward route let our overlap go (cancelled or released): lock it again if free."""
+        elements = rs.overlap_elements
+        for other in self.routes.values():
+            if other is not rs and (elements & (other.held_tcs | other.held_points)):
+                return
+        rs.take_back_overlap()
+        self._event(now, "route", f"route {rs.route.name}: overlap locked again")
+
+    def _overlap_locked(self, rs: RouteState) -> bool:
+        """Our overlap is held by us, or by the onward route from our exit signal."""
+        for element in rs.overlap_elements:
+            if element in rs.held_tcs or element in rs.held_points:
+                continue
+            holder = self._holder_of(element, point=element in self.points)
+            if holder is None or holder.route.entry != rs.route.exit:
+                return False
+        return True
+
+    def _detect_entry(self, rs: RouteState, now: float) -> None:
+        r = rs.route
+        first = r.release_sections[0]
+        if not any(self.occupied(tc) for tc in first):
+            self._noticed.discard(r.name)
+            return
+        if self._proceed_before.get(r.entry, False):
+            rs.status = RouteStatus.ENTERED
+            rs.seen[0] = True
+            self._event(now, "train", f"train entered route {r.name}: signal {r.entry} to stop")
+        elif r.name not in self._noticed:
+            self._noticed.add(r.name)
+            self._event(now, "fault", f"route {r.name}: {first[0]} occupied, signal at stop")
+
+    def _sequential_release(self, rs: RouteState, now: float) -> None:
+        sections = rs.route.release_sections
+        last = len(sections) - 1
+        for i in range(rs.next_section, len(sections)):
+            if any(self.occupied(tc) for tc in sections[i]):
+                rs.seen[i] = True
+        while rs.next_section <= last:
+            k = rs.next_section
+            clear = not any(self.occupied(tc) for tc in sections[k])
+            if rs.seen[k] and clear and (k == last or rs.seen[k + 1]):
+                rs.release_section(k, self._points_in)
+                rs.next_section += 1
+                self._event(
+                    now, "route", f"route {rs.route.name}: {'+'.join(sections[k])} released"
+                )
+            else:
+                break
+        if rs.overlap_held:
+            if rs.next_section > last:
+                rs.release_overlap()
+            elif rs.seen[last]:
+                if rs.overlap_at is None:
+                    rs.overlap_at = now + rs.route.overlap_release_s
+                elif now >= rs.overlap_at:
+                    rs.release_overlap()
+                    self._event(now, "route", f"route {rs.route.name}: overlap released")
+        if rs.next_section > last and not rs.overlap_held and rs.status is RouteStatus.ENTERED:
+            rs.release_all()
+            self._event(now, "route", f"route {rs.route.name} fully released")
+
+    def _drive_points(self, rs: RouteState, now: float) -> None:
+        in_place = True
+        for s in rs.route.all_points:
+            if self.detection(s.point) == s.position:
+                continue
+            in_place = False
+            ps = self.points[s.point]
+            if ps.demanded != s.position and not any(
+                self.occupied(tc) for tc in ps.point.track_circuits
+            ):
+                ps.demanded = s.position
+                self._event(now, "point", f"point {s.point} commanded {s.position}")
+        if in_place and rs.status is RouteStatus.SETTING:
+            rs.status = RouteStatus.SET
+            self._event(now, "route", f"route {rs.route.name} set: points detected")
+
+    def proceed_conditions(self, route: Route) -> list[str]:
+        """Why the route's signal may not show proceed now (empty: it may)."""
+        rs = self.routes[route.name]
+        why: list[str] = []
+        if rs.status is not RouteStatus.SET:
+            why.append(f"route {rs.status.value}")
+        for link in LINKS:
+            if not self.link_up[link]:
+                why.append(f"{link} link down")
+        for s in route.all_points:
+            if self.detection(s.point) != s.position:
+                why.append(f"point {s.point} not detected {s.position}")
+        why += [f"{tc} occupied" for tc in route.all_track_circuits if self.occupied(tc)]
+        if not self._overlap_locked(rs):
+            why.append("overlap not locked")
+        iv = self.view.interval_of_exit(route)
+        if iv is not None and self.direction[iv.name] != route.direction:
+            why.append(f"interval {iv.name} direction")
+        if self.signals[route.entry].stop_held:
+            why.append("held at stop")
+        return why
+
+    def _update_signals(self, now: float) -> None:
+        ready: dict[str, Route] = {}
+        for rs in self.routes.values():
+            if rs.status is RouteStatus.SET and not self.proceed_conditions(rs.route):
+                ready[rs.route.entry] = rs.route
+        done: dict[str, str] = {}
+
+        def aspect_of(signal: str, depth: int = 0) -> str:
+            if signal in done:
+                return done[signal]
+            route = ready.get(signal)
+            if route is None or depth > len(self.signals):
+                done[signal] = "R"
+                return "R"
+            exit_shows = aspect_of(route.exit, depth + 1) if route.exit in self.signals else None
+            sig = self.signals[signal].signal
+            done[signal] = fit(sig, downgrade(route.aspect, exit_shows))
+            return done[signal]
+
+        for name, sig in self.signals.items():
+            aspect = aspect_of(name)
+            if aspect != sig.commanded:
+                sig.commanded = aspect
+                self._event(now, "signal", f"signal {name} {aspect}")
+            if aspect != "R":
+                self.routes[ready[name].name].cleared_once = True
+            self._proceed_before[name] = aspect != "R"
+
+    # ------------------------------------------------------------------ output states
+
+    def _ctc_state(self) -> dict[str, int]:
+        st = self.st
+        out = {
+            n.loc(st): int(self.modes.mode is Mode.LOCAL),
+            n.ctc(st): int(self.modes.mode is Mode.CENTER),
+            n.cmr(st): int(self.modes.requested),
+        }
+        locked = {p for rs in self.routes.values() for p in rs.held_points}
+        for name in self.points:
+            det = self.detection(name)
+            out[n.sni(st, name)] = int(det == "normal")
+            out[n.srn(st, name)] = int(det == "to_normal")
+            out[n.sri(st, name)] = int(det == "reverse")
+            out[n.snr(st, name)] = int(det == "to_reverse")
+            out[n.sli(st, name)] = int(name in locked)
+            out[n.sfi(st, name)] = int(det == "none")
+        for name, sig in self.signals.items():
+            shown = sig.shown() if self.link_up["io"] else "R"
+            for a in sig.signal.aspects:
+                out[n.asp(st, name, a)] = int(shown == a)
+            out[n.ssi(st, name)] = int(sig.stop_held)
+            out[n.lfi(st, name)] = int(sig.lamp_failed)
+        for tc in self.tc_names:
+            out[tc] = int(self.occupied(tc))
+        for rname, rs in self.routes.items():
+            out[n.rsi(st, rname)] = int(rs.status is not RouteStatus.IDLE)
+            out[n.ali(st, rname)] = int(rs.release_at is not None)
+        self._directions(out)
+        return out
+
+    def _directions(self, out: dict[str, int]) -> None:
+        for iv, d in self.direction.items():
+            out[n.tdu(iv)] = int(d == "up")
+            out[n.tdd(iv)] = int(d == "down")
+
+    def _atc_state(self) -> dict[str, int]:
+        st = self.st
+        out = {n.rli(st, r): int(rs.whole) for r, rs in self.routes.items()}
+        for name in self.points:
+            det = self.detection(name)
+            out[n.sni(st, name)] = int(det == "normal")
+            out[n.sri(st, name)] = int(det == "reverse")
+        for name, sig in self.signals.items():
+            out[n.sgp(st, name)] = int(sig.proceed and self.link_up["io"])
+        self._directions(out)
+        return out
+
+    def _io_state(self) -> dict[str, int]:
+        st = self.st
+        out: dict[str, int] = {}
+        for name, ps in self.points.items():
+            out[n.pnc(st, name)] = int(ps.demanded == "normal")
+            out[n.prc(st, name)] = int(ps.demanded == "reverse")
+        for name, sig in self.signals.items():
+            for a in sig.signal.aspects:
+                out[n.sgc(st, name, a)] = int(sig.commanded == a)
+        return out
+
+    def _event(self, now: float, kind: str, text: str) -> None:
+        ev = Event(now, kind, text)
+        self._events.append(ev)
+        self.log.append(ev)
+        if len(self.log) > self._log_limit:
+            del self.log[: len(self.log) - self._log_limit]

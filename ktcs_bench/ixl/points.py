@@ -1,0 +1,43 @@
+"""The IXL's view of one point: what it demands of the trackside and what detection came back.
+
+The demand is a level (PNC/PRC: "normal wanted" / "reverse wanted"), as a point control relay
+holds its position; the point machine moves whenever its position differs. Detection arrives as
+the four Table 3 bits SNI/SRN/SRI/SNR; none set means detection is lost (point failed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from ktcs_bench.station.model import Point, PointPosition
+
+Detection = Literal["normal", "reverse", "to_normal", "to_reverse", "none"]
+BITS = ("SNI", "SRN", "SRI", "SNR")
+
+
+def detection_from_bits(bits: dict[str, int]) -> Detection:
+    """Decode SNI/SRN/SRI/SNR; contradictory bits (normal and reverse at once) count as lost."""
+    normal, reverse = bits.get("SNI", 0) == 1, bits.get("SRI", 0) == 1
+    if normal and reverse:
+        return "none"
+    if normal:
+        return "normal"
+    if reverse:
+        return "reverse"
+    if bits.get("SNR", 0) == 1:
+        return "to_reverse"
+    if bits.get("SRN", 0) == 1:
+        return "to_normal"
+    return "none"
+
+
+@dataclass
+class PointState:
+    point: Point
+    demanded: PointPosition = "normal"
+    bits: dict[str, int] = field(default_factory=dict)  # last reported by the trackside
+
+    @property
+    def reported(self) -> Detection:
+        return detection_from_bits(self.bits)

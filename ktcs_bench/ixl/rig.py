@@ -1,0 +1,86 @@
+"""A station on the bench without links: one Interlocking wired straight to its Trackside.
+
+For deterministic virtual-time runs and tests: code changes pass between the two objects at once
+(as over a perfect Type I link), track occupancy is fed as the ATC would report it, and `advance`
+walks virtual time through every deadline. No I/O, no clock.
+"""
+
+from __future__ import annotations
+
+from ktcs_bench.charts import names as n
+from ktcs_bench.field.trackside import Trackside
+from ktcs_bench.ixl.interlocking import ControlResult, Event, Interlocking, IxlOutput
+from ktcs_bench.ixl.modes import Mode
+from ktcs_bench.station.model import StationView
+
+
+class StationRig:
+    def __init__(self, view: StationView, *, mode: Mode = Mode.CENTER, now: float = 0.0) -> None:
+        self.view = view
+        self.now = now
+        self.ixl = Interlocking(view, mode=mode)
+        self.io = Trackside(view)
+        self.occupancy = {t.name: False for t in view.track_circuits}
+        self.ctc = self.ixl.full_state("ctc")  # the CTC's picture, kept by indication changes
+        self.atc = self.ixl.full_state("atc")  # what the ATC is told
+        self.events: list[Event] = []
+        self.io.link_state(True, now)
+        self._take(self.ixl.link_state("io", True, now))
+        self._take(self.ixl.link_state("atc", True, now))
+        self._take(self.ixl.receive("io", self.io.full_state(), now))
+        self._report_occupancy()
+
+    def control(self, name: str, value: int = 1) -> ControlResult:
+        out = self.ixl.control(name, value, self.now)
+        result = out.results[0]
+        self._take(out)
+        return result
+
+    def occupy(self, tc: str, occupied: bool = True) -> None:
+        self.occupancy[tc] = occupied
+        self.io.set_occupancy({tc: occupied}, self.now)
+        self._report_occupancy()
+
+    def set_link(self, link: str, up: bool) -> None:
+        self._take(self.ixl.link_state(link, up, self.now))
+        if link == "io":
+            self._field(self.io.link_state(up, self.now).changes)
+        if up:
+            full = self.io.full_state() if link == "io" else None
+            if full is not None:
+                self._take(self.ixl.receive("io", full, self.now))
+            else:
+                self._report_occupancy(full=True)
+
+    def advance(self, seconds: float) -> None:
+        """Move virtual time on, honouring every deadline of the IXL and the trackside."""
+        end = self.now + seconds
+        while True:
+            due = [d for d in (self.ixl.next_deadline(), self.io.next_deadline()) if d is not None]
+            nxt = min(due, default=None)
+            if nxt is None or nxt > end:
+                break
+            self.now = max(self.now, nxt)
+            self._field(self.io.tick(self.now).changes)
+            self._take(self.ixl.tick(self.now))
+        self.now = end
+        self._field(self.io.tick(self.now).changes)
+        self._take(self.ixl.tick(self.now))
+
+    def _report_occupancy(self, full: bool = False) -> None:
+        codes = {tc: int(v) for tc, v in self.occupancy.items()}
+        for iv in self.view.intervals:
+            half = self.view.owned_half(iv)
+            codes[n.izc(iv.name)] = int(any(self.occupancy[t] for t in half))
+        self._take(self.ixl.receive("atc", codes, self.now))
+
+    def _field(self, changes: list[tuple[str, int]]) -> None:
+        if changes:
+            self._take(self.ixl.receive("io", dict(changes), self.now))
+
+    def _take(self, out: IxlOutput) -> None:
+        self.events += out.events
+        self.ctc.update(out.ctc)
+        self.atc.update(out.atc)
+        if out.io:
+            self._field(self.io.receive(dict(out.io), self.now).changes)
