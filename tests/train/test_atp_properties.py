@@ -41,8 +41,13 @@ def test_never_past_eoa_never_above_ebd(
     params = TrainParams(max_speed=kmh(top), brake_build_up=build_up, max_traction=kmh(4.0))
     line = LineData(LINE, [i * 100.0 for i in range(41)], gradient, restrictions)
     cfg = TrainConfig(
-        "T", params, start=params.length + 1.0, driver_speed=kmh(top + 30.0),
-        inattentive_until_eb=True, eb_release_delay=None, service_brake_enabled=False,
+        "T",
+        params,
+        start=params.length + 1.0,
+        driver_speed=kmh(top + 30.0),
+        inattentive_until_eb=True,
+        eb_release_delay=None,
+        service_brake_enabled=False,
     )
     train = TrainEndpoint(cfg, line)
     inputs = CycleInputs(authority_end=eoa)

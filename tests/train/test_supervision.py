@@ -8,7 +8,7 @@ import pytest
 from ktcs_bench.train.curves import CurveTimes, Grid, Target, TargetKind, ebd_distance, ebd_on_grid
 from ktcs_bench.train.deceleration import GradientProfile, SafeDeceleration, StepFunction
 from ktcs_bench.train.dynamics import Command, TrainDynamics, TrainParams, TrainState
-from ktcs_bench.train.mrsp import Restriction, build_mrsp, MODE_LIMITS
+from ktcs_bench.train.mrsp import MODE_LIMITS, Restriction, build_mrsp
 from ktcs_bench.train.position import PositionEstimator
 from ktcs_bench.train.resources import Resource, ResourceManager
 from ktcs_bench.train.supervision import Status, SupervisionLimits, Supervisor
@@ -53,7 +53,11 @@ def test_status_order_along_the_approach() -> None:
         if not seen or seen[-1] != st:
             seen.append(st)
     assert seen == [
-        Status.NORMAL, Status.INDICATION, Status.OVERSPEED, Status.WARNING, Status.INTERVENTION
+        Status.NORMAL,
+        Status.INDICATION,
+        Status.OVERSPEED,
+        Status.WARNING,
+        Status.INTERVENTION,
     ]
 
 
@@ -99,8 +103,10 @@ def test_mode_limit_caps_the_mrsp() -> None:
 
 
 def test_brake_builds_up_over_the_build_up_time() -> None:
-    dyn = TrainDynamics(TrainParams(brake_build_up=2.0, resistance_a=0, resistance_b=0,
-                                    resistance_c=0), TrainState(speed=20.0))
+    dyn = TrainDynamics(
+        TrainParams(brake_build_up=2.0, resistance_a=0, resistance_b=0, resistance_c=0),
+        TrainState(speed=20.0),
+    )
     dyn.step(0.5, Command(emergency=True))
     assert dyn.state.brake_effort == pytest.approx(dyn.params.emergency_decel / 4.0)
     for _ in range(10):
@@ -136,10 +142,13 @@ def test_position_is_last_tag_plus_offset_with_growing_interval() -> None:
 
 
 def test_resource_manager_commands_point_and_extends_on_detection() -> None:
-    rm = ResourceManager([
-        Resource("R1", 0, 500), Resource("R2", 500, 1000, point="P1", required="reverse"),
-        Resource("R3", 1000, 1500),
-    ])
+    rm = ResourceManager(
+        [
+            Resource("R1", 0, 500),
+            Resource("R2", 500, 1000, point="P1", required="reverse"),
+            Resource("R3", 1000, 1500),
+        ]
+    )
     g = rm.request("T1", 100.0, 1500.0, 0.0)
     assert g.authority_end == 500.0 and [c.point for c in g.commands] == ["P1"]
     assert rm.request("T1", 100.0, 1500.0, 1.0).commands == ()  # not commanded twice
