@@ -9,6 +9,7 @@ track circuit or point without being declared conflicting.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -397,7 +398,8 @@ def load_line(path: str | Path | None = None) -> Line:
         here = f"stations[{i}]"
         m = doc.mapping(item, here)
         number = doc.integer(m, "number", here)
-        station_files.append((number, path.parent / doc.string(m, "file", here), here))
+        file = Path(os.path.normpath(path.parent / doc.string(m, "file", here)))
+        station_files.append((number, file, here))
     numbers = [n for n, _, _ in station_files]
     for i, n in enumerate(numbers):
         if numbers.index(n) != i:
