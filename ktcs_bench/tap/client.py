@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
 from collections.abc import Iterator
@@ -24,6 +25,9 @@ class TapClient:
         self._file = self._sock.makefile("rwb")
 
     def close(self) -> None:
+        """Also ends a `subscribe()` blocked in another thread (the socket is shut down first)."""
+        with contextlib.suppress(OSError):
+            self._sock.shutdown(socket.SHUT_RDWR)
         self._file.close()
         self._sock.close()
 

@@ -1,0 +1,266 @@
+"""`ktcs-bench monitor`: live decoded frames of a link (through its tap), an endpoint, or a capture."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Iterator
+from typing import Any, TextIO
+
+import serial
+
+from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
+from ktcs_bench.capture.arq import ArqTracker
+from ktcs_bench.charts.model import CodeChart, load_chart
+from ktcs_bench.cli._common import print_json_line, use_colour
+from ktcs_bench.codec.frame import Frame, Record
+from ktcs_bench.codec.profile import FrameProfile, get_profile
+from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
+from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.tap import TapClient
+from ktcs_bench.tap.recorder import Recorder
+
+HELP = "watch a link live: decoded frames, CRC verdicts and ARQ events (via its tap)"
+DESCRIPTION = """\
+Show every frame of a link as it passes: time, direction, the raw bytes in the console style of
+seed 004 Fig. 7, the decoded fields, the CRC verdict ("Packet = [F1]-[E7], Cal = [F1]-[E7]") and
+the ARQ events inferred from the frames (ACK/NAK, retransmission = the same SEQ seen twice, SEQ
+gaps, bad frames a receiver must NAK).
+
+SOURCE is one of
+  a tap           its name (tap run --name), HOST:PORT or PORT of its control port, tap://...
+  an endpoint     tcp://HOST:PORT (connect and show what it sends), or a serial device path / any
+                  pyserial URL (a passive RS485 sniffer port, rfc2217://, socket://)
+  a capture file  a hex log or .pcapng (offline, same display)
+"""
+EPILOG = """\
+examples:
+  ktcs-bench monitor st18-ixl-atc
+  ktcs-bench monitor 127.0.0.1:40111 --json --write st18.pcapng
+  ktcs-bench monitor tcp://127.0.0.1:5020 --profile ktcs-type2
+  ktcs-bench monitor /dev/ttyUSB0 --baud 9600
+  ktcs-bench monitor captures/st18.hex --chart code_charts/st18_atc_to_ixl.yaml
+
+exit status: 0 done (Ctrl-C, the source ended, or --count frames seen); 1 --timeout passed before
+--count frames; 2 bad arguments; 3 the tap or endpoint cannot be reached.
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "monitor", help=HELP, description=DESCRIPTION, epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )  # fmt: skip
+    p.add_argument("source", metavar="TAP|ENDPOINT|FILE")
+    p.add_argument(
+        "--profile",
+        help="frame profile (default: the tap's; ktcs-type2 for tcp://, ktcs-type1 otherwise)",
+    )
+    p.add_argument("--chart", help="code chart YAML: show code names")
+    p.add_argument(
+        "--json", action="store_true", help="JSON lines: SPEC §7 keys + time, direction, arq"
+    )
+    p.add_argument("--write", action="append", default=[], metavar="CAPTURE",
+                   help="also record to CAPTURE.hex or CAPTURE.pcapng (repeatable)")  # fmt: skip
+    p.add_argument("--history", action="store_true", help="first show what the tap recorded before")
+    p.add_argument("--count", type=int, help="stop after this many frames")
+    p.add_argument("--timeout", type=float, help="stop after this many seconds")
+    p.add_argument("--baud", type=int, default=9600, help="serial endpoint baud rate (9600)")
+    colour = p.add_mutually_exclusive_group()
+    colour.add_argument("--color", dest="colour", action="store_const", const=True, default=None)
+    colour.add_argument("--no-color", dest="colour", action="store_const", const=False)
+    p.set_defaults(handler=run)
+
+
+def format_time(t: float | None) -> str:
+    if t is None:
+        return "-"
+    if t < 1e9:  # relative (a capture without a start time)
+        return f"{t:.6f}"
+    return time.strftime("%H:%M:%S", time.localtime(t)) + f".{int(t * 1e6) % 1_000_000:06d}"
+
+
+class FramePrinter:
+    """Decodes capture records frame by frame and prints them (text or JSON), with ARQ events."""
+
+    def __init__(
+        self,
+        profile: FrameProfile,
+        *,
+        chart: CodeChart | None = None,
+        colour: bool = False,
+        as_json: bool = False,
+        stream: TextIO = sys.stdout,
+    ) -> None:
+        self.profile = profile
+        self.chart = chart
+        self.colour = colour
+        self.as_json = as_json
+        self.stream = stream
+        self.arq = ArqTracker(profile)
+        self._offsets: dict[str, int] = defaultdict(int)
+        self.frames = 0
+        self.bad = 0
+
+    def decode(self, record: CaptureRecord) -> list[Record]:
+        dec = StreamDecoder(self.profile, offset=self._offsets[record.direction])
+        self._offsets[record.direction] += len(record.data)
+        return dec.feed(record.data) + dec.close()
+
+    def show(self, record: CaptureRecord, note: str = "") -> list[Record]:
+        decoded = self.decode(record)
+        for rec in decoded:
+            events: list[str] = []
+            if isinstance(rec, Frame):
+                self.frames += 1
+                self.bad += rec.error is not None
+                events = self.arq.observe(record.direction, rec, record.time)
+            if self.as_json:
+                obj: dict[str, Any] = {"time": record.time, "direction": record.direction}
+                obj.update(to_json(rec, self.profile))
+                obj["arq"] = events
+                print_json_line(obj, self.stream)
+                continue
+            label = f"{format_time(record.time)} {record.direction}{note}  "
+            lines = [to_text(rec, self.profile, self.chart, self.colour, label)]
+            for ev in events:
+                text = f"  ARQ: {ev}"
+                lines.append(f"{YELLOW}{text}{RESET}" if self.colour else text)
+            self.stream.write("\n".join(lines) + "\n\n")
+        self.stream.flush()
+        return decoded
+
+    def event(self, event: dict[str, Any]) -> None:
+        """A tap event (fault command, connection) -- shown in text mode only."""
+        if self.as_json:
+            return
+        detail = " ".join(f"{k}={v}" for k, v in event.items() if k not in ("time", "event"))
+        text = f"-- {format_time(event.get('time'))} {event.get('event')}: {detail}"
+        self.stream.write((f"{DIM}{text}{RESET}" if self.colour else text) + "\n")
+        self.stream.flush()
+
+
+def _is_serial(source: str) -> bool:
+    scheme = source.split("://", 1)[0] if "://" in source else ""
+    if scheme:
+        return scheme not in ("tcp", "tap", "listen")
+    return source.startswith("/dev/") or (os.path.exists(source) and not os.path.isfile(source))
+
+
+def _tap_records(
+    source: str, history: bool, deadline: float | None, header: dict[str, Any]
+) -> Iterator[CaptureRecord | dict[str, Any]]:
+    with TapClient(source) as client:
+        left = None if deadline is None else max(0.05, deadline - time.monotonic())
+        events = client.subscribe(history=history, timeout=left)
+        header.update(next(events))
+        yield header
+        for ev in events:
+            if "hex" in ev:
+                yield CaptureRecord(
+                    ev.get("time"), str(ev.get("direction")), bytes.fromhex(ev["hex"])
+                )
+            else:
+                yield ev
+
+
+def _stream_records(
+    source: str, profile: FrameProfile, baud: int, deadline: float | None
+) -> Iterator[CaptureRecord]:
+    """Frames of what an endpoint sends (direction `rx`), framed by a Recorder."""
+    recorder = Recorder(profile)
+    sock: socket.socket | None = None
+    port: serial.Serial | None = None
+    try:
+        if source.startswith("tcp://"):
+            host, _, p = source[6:].rpartition(":")
+            try:
+                sock = socket.create_connection((host or "127.0.0.1", int(p)), timeout=5)
+            except (OSError, ValueError) as exc:
+                raise PeerError(f"cannot connect to {source}: {exc}") from None
+            sock.settimeout(0.05)
+        else:
+            try:
+                port = serial.serial_for_url(source, baudrate=baud, timeout=0.05)
+            except (serial.SerialException, ValueError) as exc:
+                raise PeerError(f"cannot open {source}: {exc}") from None
+        while deadline is None or time.monotonic() < deadline:
+            data = b""
+            try:
+                if sock is not None:
+                    data = sock.recv(65536)
+                    if not data:
+                        break
+                elif port is not None:
+                    data = port.read(max(1, port.in_waiting))  # returns at the first byte
+            except TimeoutError:
+                data = b""
+            except (OSError, serial.SerialException) as exc:
+                raise PeerError(f"{source}: {exc}") from None
+            now = time.time()
+            if data:
+                yield from recorder.feed("rx", data, now)
+            yield from recorder.poll(now)
+        yield from recorder.flush()
+    finally:
+        if sock is not None:
+            sock.close()
+        if port is not None:
+            port.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    chart = load_chart(args.chart) if args.chart else None
+    colour = use_colour(sys.stdout, args.colour)
+    deadline = None if args.timeout is None else time.monotonic() + args.timeout
+    source: str = args.source
+    items: Iterator[CaptureRecord | dict[str, Any]]
+    profile: FrameProfile | None = get_profile(args.profile) if args.profile else None
+    if os.path.isfile(source):
+        capture = read_capture(source)
+        if profile is None:
+            from ktcs_bench.cli.decode import choose_profile
+
+            data = b"".join(r.data for r in capture.records)
+            profile = get_profile(capture.profile) if capture.profile else None
+            if profile is None and data:
+                profile = choose_profile(data, "auto")[0]
+        items = iter(capture.records)
+    elif _is_serial(source) or source.startswith("tcp://"):
+        if profile is None:
+            profile = get_profile("ktcs-type2" if source.startswith("tcp://") else "ktcs-type1")
+        items = _stream_records(source, profile, args.baud, deadline)
+    else:
+        header: dict[str, Any] = {}
+        items = _tap_records(source, args.history, deadline, header)
+        next(items)
+        if profile is None:
+            profile = get_profile(str(header.get("profile") or "ktcs-type1"))
+        if not args.json:
+            print(f"monitoring tap {header.get('tap') or source} ({header.get('kind')}, "
+                  f"profile {profile.name}, ends {' & '.join(header.get('names', []))})", flush=True)  # fmt: skip
+    if profile is None:
+        raise UsageError(f"{source}: no frames to monitor")
+    printer = FramePrinter(profile, chart=chart, colour=colour, as_json=args.json)
+    writers = [open_writer(p, link=profile.protocol, profile=profile.name) for p in args.write]
+    try:
+        for item in items:
+            if isinstance(item, dict):
+                printer.event(item)
+                continue
+            for w in writers:
+                w.write(item)
+            printer.show(item)
+            if args.count is not None and printer.frames >= args.count:
+                return 0
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+    finally:
+        for w in writers:
+            w.close()
+    return 1 if args.count is not None and printer.frames < args.count else 0
