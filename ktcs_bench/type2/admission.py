@@ -17,8 +17,9 @@ from ktcs_bench.errors import UsageError
 
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
 
-# Bad frames tolerated per connection inside the window: one frame refused retry_count + 1 = 4
-# times is normal ARQ work; a dozen in ten seconds is a broken or hostile peer.
+# Bad records tolerated per connection inside the window. One damaged frame can decode as an error
+# frame plus a garbage remnant (2 records), and is refused up to retry_count + 1 = 4 times: 8 is
+# still ordinary ARQ work; a dozen in ten seconds is a broken or hostile peer.
 DEFAULT_BAD_FRAME_LIMIT = 12
 DEFAULT_BAD_FRAME_WINDOW = 10.0
 
