@@ -550,6 +550,7 @@ class IxlClient:
             except (OSError, ssl_module.SSLError) as exc:
                 log.info("Type II station %s: connect to %s:%s failed: %s",
                          self.station, self.host, self.port, exc)  # fmt: skip
+                self._notify()
             else:
                 session = IxlSession(self.station, loop.time(), self.config)
                 link = _Link(session, reader, writer, self._on_events)
