@@ -21,6 +21,7 @@ _TOKEN = re.compile(
     r"<([0-9a-fA-F]{2})>|\[([0-9a-fA-F]{2})\]|0[xX]([0-9a-fA-F]{1,2})(?![0-9a-fA-F])|([0-9a-fA-F]+)"
 )
 _SEPARATORS = re.compile(r"^[\s,;]*$")
+_HEXWORD = re.compile(r"[0-9a-fA-F]+")
 
 
 @dataclass(slots=True)
@@ -60,6 +61,10 @@ class HexText:
 
 def hex_bytes(text: str) -> bytes | None:
     """The bytes of one piece of hex text, or None when it is not purely hex."""
+    try:  # fast path: "02 04 00" and "020400" (what the bench's own hex logs hold)
+        return bytes.fromhex(text)
+    except ValueError:
+        pass
     out = bytearray()
     pos = 0
     for m in _TOKEN.finditer(text):
@@ -84,31 +89,25 @@ def parse_hex_text(text: str) -> HexText:
     offset = 0
     current: Chunk | None = None
     for lineno, line in enumerate(text.splitlines(), start=1):
-        body = line.split("#", 1)[0]
-        if not body.strip():
+        body = line.split("#", 1)[0] if "#" in line else line
+        if not body or body.isspace():
             continue
         direction: str | None = None
         time: float | None = None
         starts_record = False
-        m = _PREFIX.match(body)
-        if m:
+        m2 = _HEXLOG.match(body)  # the bench's own hex log first: it is what bulk files hold
+        if m2 and not _HEXWORD.fullmatch(m2.group(2)):
+            time, direction, body = float(m2.group(1)), m2.group(2), m2.group(3)
+            starts_record = True
+        elif m := _PREFIX.match(body):
             word = m.group(1).lower()
             direction = _DIRECTION.get(m.group(1), _DIRECTION.get(word, word))
             body = body[m.end() :]
             starts_record = True
-        else:
-            m2 = _HEXLOG.match(body)
-            if m2 and hex_bytes(m2.group(2)) is None:
-                time, direction, body = float(m2.group(1)), m2.group(2), m2.group(3)
-                starts_record = True
-            else:
-                m3 = _HEXDUMP_C.match(body)
-                if m3 and m3.group(2):
-                    body = m3.group(1)
-                else:
-                    m4 = _XXD.match(body)
-                    if m4:
-                        body = m4.group(1).split("  ", 1)[0]
+        elif (m3 := _HEXDUMP_C.match(body)) and m3.group(2):
+            body = m3.group(1)
+        elif m4 := _XXD.match(body):
+            body = m4.group(1).split("  ", 1)[0]
         data = hex_bytes(body)
         if data is None:
             result.skipped_lines.append(lineno)

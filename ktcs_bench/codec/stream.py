@@ -220,7 +220,10 @@ class StreamDecoder:
             q += 1
 
     def _process(self, final: bool) -> list[Record]:
+        """Decode what the buffer holds. The loop body is the fast path -- a complete frame whose
+        checks pass, at the read position; everything else goes to `_resolve`."""
         out: list[Record] = []
+        append = out.append
         buf = self._buf
         n = len(buf)
         i = self._held
@@ -233,71 +236,44 @@ class StreamDecoder:
         mv = memoryview(buf)
         try:
             while i < n:
-                j = i if buf[i] == stx else find(stx, i)
-                if j < 0:
+                if buf[i] != stx:
+                    j = find(stx, i)
                     if g < 0:
                         g = i
-                    i = n
+                    if j < 0:
+                        i = n
+                        break
+                    i = j
+                if n - i < hs:
+                    pending = True
                     break
-                if j > i and g < 0:
-                    g = i
-                if n - j < hs:
-                    i, pending = j, True
-                    break
-                h = unpack(buf, j + 1)
-                length = h[i_len]
-                data_len = length - fixed
-                packet: int | None
-                calc: int | None
-                if data_len < 0 or length > max_len:
-                    error: str | None = "length"
-                    total = hs
-                    packet = calc = None
-                else:
-                    total = hs + data_len + trailer
-                    if n - j < total:
-                        q = self._probe(buf, j, n)
-                        if q is None:
-                            i, pending = j, True
-                            break
-                        if g < 0:
-                            g = j
-                        i = q
-                        continue
-                    at = j + hs + data_len
-                    c_end = at if crc_to is None else j + crc_to
-                    calc = crc_xor ^ crc_fn(mv[j + crc_from : c_end], crc_init, crc_table)
+                h = unpack(buf, i + 1)
+                data_len = h[i_len] - fixed
+                at = i + hs + data_len
+                end = at + trailer
+                if 0 <= data_len and h[i_len] <= max_len and end <= n:
+                    calc = crc_xor ^ crc_fn(
+                        mv[i + crc_from : at if crc_to is None else i + crc_to], crc_init, crc_table
+                    )
                     tail = tail_unpack(buf, at)
-                    packet = tail[0]
-                    if packet == calc and tail[1:] == tail_ok:
-                        error = None
-                    else:  # slow path: which check failed
-                        packet, calc, error = self._check(buf, j, total, data_len)
-                if error is not None:
-                    q = self._probe(buf, j, j + total) if error != "length" else None
-                    if q is not None or base + j < self._suspect_until:
-                        if g < 0:
-                            g = j
-                        i = j + 1 if q is None else q
+                    if tail[0] == calc and tail[1:] == tail_ok:
+                        if g >= 0:
+                            append(Garbage(base + g, mv[g:i].tobytes()))
+                            g = -1
+                        append(
+                            Frame(base + i, mv[i:end].tobytes(), h[i_seq], h[i_op],
+                                  None if i_sub is None else h[i_sub], hs, hs + data_len,
+                                  calc, calc, None)
+                        )  # fmt: skip
+                        i = end
                         continue
-                    nxt = find(stx, j + 1, j + total)
-                    end = j + total if nxt < 0 else nxt
-                    self._suspect_until = base + j + total
-                else:
-                    end = j + total
-                if g >= 0:
-                    out.append(Garbage(base + g, mv[g:j].tobytes()))
-                    g = -1
-                out.append(
-                    Frame(base + j, mv[j:end].tobytes(), h[i_seq], h[i_op],
-                          None if i_sub is None else h[i_sub], hs,
-                          hs + data_len if data_len > 0 else hs, packet, calc, error)
-                )  # fmt: skip
-                i = end
+                i, g, pending = self._resolve(buf, mv, i, g, h, out)
+                if pending:
+                    break
             # i is where unconsumed input starts (a pending candidate, or n). Garbage before it is
             # held back, so that how the input was chunked never changes how garbage is reported.
             if g >= 0 and (i - g >= GARBAGE_HOLD or final):
-                out.append(Garbage(base + g, mv[g:i].tobytes()))
+                append(Garbage(base + g, mv[g:i].tobytes()))
                 g = -1
         finally:
             mv.release()
@@ -306,3 +282,41 @@ class StreamDecoder:
         self._consume(keep_from)
         self._held = i - keep_from
         return out
+
+    def _resolve(
+        self, buf: bytearray, mv: memoryview, j: int, g: int, h: tuple[int, ...], out: list[Record]
+    ) -> tuple[int, int, bool]:
+        """The slow path for the candidate at j: incomplete, out of range, or failing a check.
+        Returns (next read position, garbage-run start, pending)."""
+        base, hs, n = self._base, self._hsize, len(buf)
+        length = h[self._i_len]
+        data_len = length - self._fixed
+        packet: int | None = None
+        calc: int | None = None
+        if data_len < 0 or length > self._max_len:
+            error: str | None = "length"
+            total = hs
+        else:
+            total = hs + data_len + self._trailer
+            if n - j < total:
+                q = self._probe(buf, j, n)
+                if q is None:
+                    return j, g, True
+                return q, (j if g < 0 else g), False
+            packet, calc, error = self._check(buf, j, total, data_len)
+        if error is None:  # cannot happen: the fast path takes good frames
+            raise AssertionError("slow path given a good frame")
+        q = self._probe(buf, j, j + total) if error != "length" else None
+        if q is not None or base + j < self._suspect_until:
+            return (j + 1 if q is None else q), (j if g < 0 else g), False
+        nxt = buf.find(self._stx, j + 1, j + total)
+        end = j + total if nxt < 0 else nxt
+        self._suspect_until = base + j + total
+        if g >= 0:
+            out.append(Garbage(base + g, mv[g:j].tobytes()))
+        out.append(
+            Frame(base + j, mv[j:end].tobytes(), h[self._i_seq], h[self._i_op],
+                  None if self._i_sub is None else h[self._i_sub], hs,
+                  hs + data_len if data_len > 0 else hs, packet, calc, error)
+        )  # fmt: skip
+        return end, -1, False
