@@ -455,8 +455,14 @@ class Interlocking:
                 return False
         return True
 
+    def _reports_live(self) -> bool:
+        """Occupancy comes from live reports, not from the fail-safe assumption of a dead link."""
+        return all(self.link_up[src] for src in self.tc_sources)
+
     def _detect_entry(self, rs: RouteState, now: float) -> None:
         r = rs.route
+        if not self._reports_live():
+            return
         first = r.release_sections[0]
         if not any(self.occupied(tc) for tc in first):
             self._noticed.discard(r.name)
@@ -470,6 +476,8 @@ class Interlocking:
             self._event(now, "fault", f"route {r.name}: {first[0]} occupied, signal at stop")
 
     def _sequential_release(self, rs: RouteState, now: float) -> None:
+        if not self._reports_live():
+            return  # a dead link shows everything occupied: no train movement can be read
         sections = rs.route.release_sections
         last = len(sections) - 1
         for i in range(rs.next_section, len(sections)):

@@ -25,15 +25,15 @@ class StationRig:
         self.atc = self.ixl.full_state("atc")  # what the ATC is told
         self.events: list[Event] = []
         self.io.link_state(True, now)
-        self._take(self.ixl.link_state("io", True, now))
-        self._take(self.ixl.link_state("atc", True, now))
-        self._take(self.ixl.receive("io", self.io.full_state(), now))
+        self.take(self.ixl.link_state("io", True, now))
+        self.take(self.ixl.link_state("atc", True, now))
+        self.take(self.ixl.receive("io", self.io.full_state(), now))
         self._report_occupancy()
 
     def control(self, name: str, value: int = 1) -> ControlResult:
         out = self.ixl.control(name, value, self.now)
         result = out.results[0]
-        self._take(out)
+        self.take(out)
         return result
 
     def occupy(self, tc: str, occupied: bool = True) -> None:
@@ -42,13 +42,13 @@ class StationRig:
         self._report_occupancy()
 
     def set_link(self, link: str, up: bool) -> None:
-        self._take(self.ixl.link_state(link, up, self.now))
+        self.take(self.ixl.link_state(link, up, self.now))
         if link == "io":
-            self._field(self.io.link_state(up, self.now).changes)
+            self.from_field(self.io.link_state(up, self.now).changes)
         if up:
             full = self.io.full_state() if link == "io" else None
             if full is not None:
-                self._take(self.ixl.receive("io", full, self.now))
+                self.take(self.ixl.receive("io", full, self.now))
             else:
                 self._report_occupancy(full=True)
 
@@ -61,26 +61,26 @@ class StationRig:
             if nxt is None or nxt > end:
                 break
             self.now = max(self.now, nxt)
-            self._field(self.io.tick(self.now).changes)
-            self._take(self.ixl.tick(self.now))
+            self.from_field(self.io.tick(self.now).changes)
+            self.take(self.ixl.tick(self.now))
         self.now = end
-        self._field(self.io.tick(self.now).changes)
-        self._take(self.ixl.tick(self.now))
+        self.from_field(self.io.tick(self.now).changes)
+        self.take(self.ixl.tick(self.now))
 
     def _report_occupancy(self, full: bool = False) -> None:
         codes = {tc: int(v) for tc, v in self.occupancy.items()}
         for iv in self.view.intervals:
             half = self.view.owned_half(iv)
             codes[n.izc(iv.name)] = int(any(self.occupancy[t] for t in half))
-        self._take(self.ixl.receive("atc", codes, self.now))
+        self.take(self.ixl.receive("atc", codes, self.now))
 
-    def _field(self, changes: list[tuple[str, int]]) -> None:
+    def from_field(self, changes: list[tuple[str, int]]) -> None:
         if changes:
-            self._take(self.ixl.receive("io", dict(changes), self.now))
+            self.take(self.ixl.receive("io", dict(changes), self.now))
 
-    def _take(self, out: IxlOutput) -> None:
+    def take(self, out: IxlOutput) -> None:
         self.events += out.events
         self.ctc.update(out.ctc)
         self.atc.update(out.atc)
         if out.io:
-            self._field(self.io.receive(dict(out.io), self.now).changes)
+            self.from_field(self.io.receive(dict(out.io), self.now).changes)

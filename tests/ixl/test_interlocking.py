@@ -1,0 +1,290 @@
+"""IXL behaviour on station 20 (three tracks, four points), wired straight to its trackside."""
+
+from __future__ import annotations
+
+import pytest
+
+from ktcs_bench.ixl import Interlocking, Mode, Reason, RouteStatus
+from ktcs_bench.ixl.rig import StationRig
+from ktcs_bench.station import Line, load_line
+
+
+@pytest.fixture(scope="module")
+def line() -> Line:
+    return load_line()
+
+
+@pytest.fixture()
+def rig(line: Line) -> StationRig:
+    return StationRig(line.view(20))
+
+
+def test_reason_numbers_are_the_wire_values() -> None:
+    assert [int(r) for r in Reason] == [0, 1, 2, 3, 4, 5, 6]
+    assert Reason.NOT_IN_CENTER_MODE == 1 and Reason.UNKNOWN_CODE == 6
+
+
+def test_route_set_throws_points_awaits_detection_then_clears(rig: StationRig) -> None:
+    result = rig.control("RSC200112")
+    assert result.accepted and result.reason is Reason.NONE and result.number == 21
+    assert rig.ixl.route_status("0112") is RouteStatus.SETTING
+    assert rig.ixl.aspect("01") == "R"
+    assert rig.ixl.full_state("io")["PRC2031"] == 1  # point 31 commanded reverse
+    assert rig.ctc["SNR2031"] == 1 and rig.ctc["SNI2031"] == 0  # moving normal -> reverse
+    assert rig.ctc["SLI2031"] == 1 and rig.ctc["RSI200112"] == 1
+    rig.advance(3.9)
+    assert rig.ixl.aspect("01") == "R"  # throw time 4 s not yet over
+    rig.advance(0.2)
+    assert rig.ixl.route_status("0112") is RouteStatus.SET
+    assert rig.ctc["SRI2031"] == 1 and rig.ctc["SRI2032"] == 1  # overlap point 32 too
+    assert rig.ixl.aspect("01") == "Y"  # diverging route, exit signal at stop
+    assert rig.ctc["ASP2001Y"] == 1 and rig.ctc["ASP2001R"] == 0  # proved by the lamps
+    assert rig.atc["RLI200112"] == 1 and rig.atc["SGP2001"] == 1
+
+
+def test_main_route_aspect_follows_the_exit_signal(rig: StationRig) -> None:
+    rig.control("RSC200111")
+    rig.advance(5)
+    assert rig.ixl.aspect("01") == "Y"
+    assert rig.control("RSC201191").accepted  # run-through: takes over the overlap
+    rig.advance(5)
+    assert rig.ixl.aspect("11") == "G" and rig.ixl.aspect("01") == "G"
+    assert "TC2057B" in rig.ixl.routes["1191"].held_tcs
+    assert "TC2057B" not in rig.ixl.routes["0111"].held_tcs
+    rig.control("RCC201191")
+    assert rig.ixl.route_status("1191") is RouteStatus.IDLE
+    assert "TC2057B" in rig.ixl.routes["0111"].held_tcs  # overlap locked again
+    assert rig.ixl.aspect("01") == "Y"
+
+
+@pytest.mark.parametrize(
+    ("setup", "control", "reason"),
+    [
+        ([], "RSC201391", Reason.NONE),
+        (["RSC200111"], "RSC200221", Reason.ROUTE_CONFLICTS),  # opposing into track 1
+        (["RSC200111"], "RSC200113", Reason.ROUTE_CONFLICTS),  # same entry signal
+        (["RSC200112"], "SNC2031", Reason.POINT_LOCKED),
+        ([], "SNC2099", Reason.UNKNOWN_CODE),
+        ([], "ASP2001R", Reason.UNKNOWN_CODE),  # an indication is not a control
+    ],
+)
+def test_rejection_reasons(rig: StationRig, setup: list[str], control: str, reason: Reason) -> None:
+    for c in setup:
+        assert rig.control(c).accepted
+    result = rig.control(control)
+    assert result.reason is reason and result.accepted is (reason is Reason.NONE)
+
+
+def test_rejected_when_track_occupied(rig: StationRig) -> None:
+    rig.occupy("TC2056")
+    assert rig.control("RSC200112").reason is Reason.TRACK_OCCUPIED
+    assert rig.control("SRC2033").accepted  # point 33 is elsewhere
+    rig.occupy("TC2053A")
+    assert rig.control("SRC2031").reason is Reason.TRACK_OCCUPIED  # occupied point
+
+
+def test_rejected_when_point_failed(rig: StationRig) -> None:
+    rig.from_field(rig.io.fail_point("32", "detection", rig.now).changes)
+    assert rig.ctc["SFI2032"] == 1
+    assert rig.control("RSC200112").reason is Reason.POINT_FAILED
+
+
+def test_unknown_code_number(rig: StationRig) -> None:
+    out = rig.ixl.control(9999, 1, rig.now)
+    assert out.results[0].reason is Reason.UNKNOWN_CODE and out.results[0].name is None
+    chart = rig.ixl.charts["ctc_to_ixl"]
+    out = rig.ixl.control(chart.number_of("RSC200111"), 1, rig.now)
+    assert out.results[0].accepted and out.results[0].name == "RSC200111"
+
+
+def test_center_local_modes_and_cmr_handshake(line: Line) -> None:
+    rig = StationRig(line.view(18), mode=Mode.LOCAL)
+    assert (rig.ctc["LOC18"], rig.ctc["CTC18"], rig.ctc["CMR18"]) == (1, 0, 0)
+    assert rig.control("RSC180111").reason is Reason.NOT_IN_CENTER_MODE
+    assert rig.control("CMQ18").accepted
+    assert (rig.ctc["LOC18"], rig.ctc["CTC18"], rig.ctc["CMR18"]) == (1, 0, 1)
+    assert rig.control("RSC180111").reason is Reason.NOT_IN_CENTER_MODE  # not yet granted
+    rig.take(rig.ixl.local("grant", rig.now))
+    assert (rig.ctc["LOC18"], rig.ctc["CTC18"], rig.ctc["CMR18"]) == (0, 1, 0)
+    assert rig.control("RSC180111").accepted
+    local = rig.ixl.local_control("RCC180111", 1, rig.now)
+    assert local.results[0].reason is Reason.NOT_IN_CENTER_MODE  # the local panel is locked out
+    assert rig.control("LMQ18").accepted
+    assert (rig.ctc["LOC18"], rig.ctc["CTC18"]) == (1, 0)
+    rig.control("CMQ18")
+    rig.take(rig.ixl.local("refuse", rig.now))
+    assert (rig.ctc["LOC18"], rig.ctc["CTC18"], rig.ctc["CMR18"]) == (1, 0, 0)
+
+
+def test_automatic_grant_keeps_cmr_visible(line: Line) -> None:
+    ixl = Interlocking(line.view(22), auto_grant_s=1.0)
+    out = ixl.control("CMQ22", 1, 10.0)
+    assert ("CMR22", 1) in out.ctc and out.deadline == 11.0
+    out = ixl.tick(11.0)
+    assert set(out.ctc) >= {("CMR22", 0), ("CTC22", 1), ("LOC22", 0)}
+
+
+def _run_train_into_track_2(rig: StationRig) -> None:
+    rig.control("RSC200112")
+    rig.advance(5)
+    assert rig.ixl.aspect("01") == "Y"
+    rig.occupy("TC2047")
+
+
+def test_signal_to_stop_when_the_train_enters_then_sequential_release(rig: StationRig) -> None:
+    _run_train_into_track_2(rig)
+    rig.occupy("TC2053A")
+    assert rig.ixl.aspect("01") == "R"
+    assert rig.ixl.route_status("0112") is RouteStatus.ENTERED
+    assert rig.atc["RLI200112"] == 0 and rig.ctc["RSI200112"] == 1
+    rig.occupy("TC2047", False)
+    rig.occupy("TC2053A", False)  # section 1 clear, but section 2 not yet entered: no release
+    assert "TC2053A" in rig.ixl.routes["0112"].held_tcs
+    rig.occupy("TC2053A")
+    rig.occupy("TC2056")
+    rig.occupy("TC2053A", False)
+    rs = rig.ixl.routes["0112"]
+    assert "TC2053A" not in rs.held_tcs and "31" not in rs.held_points
+    assert rig.ctc["SLI2031"] == 0 and rig.ctc["SLI2032"] == 1  # overlap still locked
+    assert rig.control("SNC2031").accepted  # released point may move again
+    rig.advance(29)
+    assert "32" in rs.held_points
+    rig.advance(2)  # overlap timer: 30 s after the train reached the berth
+    assert "32" not in rs.held_points and "TC2057A" not in rs.held_tcs
+    assert rs.status is RouteStatus.ENTERED  # berth still held under the train
+    rig.occupy("TC2056", False)
+    assert rs.status is RouteStatus.IDLE and rig.ctc["RSI200112"] == 0
+
+
+def test_cancel_with_approach_locking_and_timed_release(rig: StationRig) -> None:
+    _run_train_into_track_2(rig)  # train in the approach section, signal clear
+    assert rig.control("RCC200112").accepted
+    assert rig.ixl.aspect("01") == "R"
+    assert rig.ixl.route_status("0112") is RouteStatus.CANCELLING
+    assert rig.ctc["ALI200112"] == 1 and rig.ctc["RSI200112"] == 1
+    assert rig.control("SNC2031").reason is Reason.POINT_LOCKED
+    assert rig.control("RSC200112").reason is Reason.ROUTE_CONFLICTS
+    assert rig.ixl.next_deadline() == pytest.approx(rig.now + 90)
+    rig.advance(89)
+    assert rig.ixl.route_status("0112") is RouteStatus.CANCELLING
+    rig.advance(1.5)
+    assert rig.ixl.route_status("0112") is RouteStatus.IDLE
+    assert rig.ctc["ALI200112"] == 0 and rig.ctc["SLI2031"] == 0
+
+
+def test_cancel_without_approaching_train_releases_at_once(rig: StationRig) -> None:
+    rig.control("RSC200112")
+    rig.advance(5)
+    assert rig.control("RCC200112").accepted
+    assert rig.ixl.route_status("0112") is RouteStatus.IDLE and rig.ixl.aspect("01") == "R"
+
+
+@pytest.mark.parametrize("fault", ["detection", "track", "atc_link", "io_link", "lamp_stop"])
+def test_faults_put_the_signal_to_stop_at_once(rig: StationRig, fault: str) -> None:
+    rig.control("RSC200113")
+    rig.advance(5)
+    assert rig.ixl.aspect("01") == "Y"
+    if fault == "detection":
+        rig.from_field(rig.io.fail_point("33", "detection", rig.now).changes)
+        assert rig.ctc["SFI2033"] == 1
+    elif fault == "track":
+        rig.io.fail_track_circuit("TC2057B", "failed_occupied", rig.now)
+        rig.occupy("TC2057B")  # as the ATC reports the failed (occupied) overlap
+    elif fault == "atc_link":
+        rig.set_link("atc", False)
+        assert rig.ctc["TC2054"] == 1  # taken as occupied while the link is in error
+    elif fault == "io_link":
+        rig.set_link("io", False)
+        assert rig.ctc["SFI2031"] == 1
+    else:
+        rig.control("SSC2001")
+        assert rig.ctc["SSI2001"] == 1
+    assert rig.ixl.aspect("01") == "R"
+    assert rig.atc["SGP2001"] == 0 and rig.ixl.full_state("io")["SGC2001R"] == 1
+    assert rig.ixl.route_status("0113") is RouteStatus.SET  # still locked, not entered
+    # and the signal clears again once the fault is gone
+    if fault == "detection":
+        rig.from_field(rig.io.clear_faults(rig.now).changes)
+    elif fault == "track":
+        rig.occupy("TC2057B", False)
+    elif fault in ("atc_link", "io_link"):
+        rig.set_link(fault[:-5], True)
+    else:
+        rig.control("SSC2001", 0)
+    assert rig.ixl.aspect("01") == "Y"
+
+
+def test_lamp_failure_is_reported_and_proved_aspect_indicated(rig: StationRig) -> None:
+    rig.control("RSC200112")
+    rig.advance(5)
+    rig.from_field(rig.io.fail_lamp("01", "Y", rig.now).changes)
+    assert rig.ctc["LFI2001"] == 1
+    assert rig.ctc["ASP2001R"] == 1 and rig.ctc["ASP2001Y"] == 0  # head fell back to stop
+    assert rig.atc["SGP2001"] == 0  # the ATC is not told proceed on an unproved lamp
+
+
+def test_point_control_only_when_free_and_unoccupied(rig: StationRig) -> None:
+    assert rig.control("SRC2034").accepted
+    assert rig.ctc["SNR2034"] == 1
+    rig.advance(4)
+    assert rig.ctc["SRI2034"] == 1
+    rig.control("RSC200113")  # needs 34 reverse in its overlap: no move needed
+    rig.advance(5)
+    assert rig.control("SNC2034").reason is Reason.POINT_LOCKED
+    assert rig.ixl.full_state("io")["PRC2034"] == 1
+
+
+def test_departure_reverses_traffic_direction_only_when_interval_clear(rig: StationRig) -> None:
+    assert rig.ctc["TDU1820"] == 1  # default up
+    rig.occupy("TC2045")
+    assert rig.control("RSC202292").reason is Reason.TRACK_OCCUPIED  # down into 1820: occupied
+    rig.occupy("TC2045", False)
+    assert rig.control("RSC202292").accepted
+    assert rig.ctc["TDD1820"] == 1 and rig.ctc["TDU1820"] == 0
+    rig.advance(5)
+    assert rig.ixl.aspect("22") == "G"
+
+
+def test_train_approaching_from_the_interval_turns_the_direction(rig: StationRig) -> None:
+    rig.control("RSC202292")  # direction down in 1820
+    rig.control("RCC202292")
+    assert rig.ctc["TDD1820"] == 1
+    rig.occupy("TC2043")  # a train comes in from station 18's end
+    assert rig.ctc["TDU1820"] == 1
+
+
+def test_occupied_with_signal_at_stop_does_not_count_as_entry(rig: StationRig) -> None:
+    rig.control("RSC200112")
+    rig.occupy("TC2053A")  # before the points are detected: signal never cleared
+    rig.advance(5)
+    assert rig.ixl.route_status("0112") is RouteStatus.SET
+    assert rig.ixl.aspect("01") == "R"
+    rig.occupy("TC2053A", False)
+    assert rig.ixl.aspect("01") == "Y"  # a fault, not a train: the route stays set
+
+
+def test_links_start_down_and_everything_is_occupied(line: Line) -> None:
+    ixl = Interlocking(line.view(18))
+    state = ixl.full_state("ctc")
+    assert state["TC1855"] == 1 and state["SFI1831"] == 1 and state["LOC18"] == 1
+    assert all(v == 0 for k, v in ixl.full_state("atc").items() if k.startswith("SGP"))
+
+
+def test_event_log_records_commands(rig: StationRig) -> None:
+    rig.control("RSC200111")
+    texts = [e.text for e in rig.events]
+    assert "ctc: RSC200111=1 accepted" in texts and "route 0111 locked" in texts
+
+
+def test_link_flap_during_a_train_movement_releases_nothing_ahead(rig: StationRig) -> None:
+    rig.control("RSC200111")
+    rig.advance(5)
+    rig.occupy("TC2047")
+    rig.occupy("TC2053A")
+    assert rig.ixl.route_status("0111") is RouteStatus.ENTERED
+    rig.set_link("atc", False)  # everything looks occupied while the link is in error
+    rig.set_link("atc", True)
+    rs = rig.ixl.routes["0111"]
+    assert rs.seen == [True, False, False]
+    rig.occupy("TC2053A", False)  # the train has not reached section 2: nothing may release
+    assert {"TC2053A", "TC2053B", "TC2055"} <= rs.held_tcs
