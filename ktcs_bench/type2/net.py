@@ -421,7 +421,9 @@ class IxlClient:
     Reconnects after every loss with exponential back-off from `backoff_initial` doubling up to
     `backoff_max` (reset once a connection is accepted). On every accepted connection, and on
     REQUEST_ALL, it sends `app.full_state()`; CONTROL items go to `app.on_control`. Push changes
-    with `indicate()`: they are sent together at the next turn of the event loop.
+    with `indicate()`: they are sent together at the next turn of the event loop, or, with
+    `indication_delay` > 0, gathered for that long first (fewer, fuller messages -- the IXL's
+    indication cycle).
     """
 
     def __init__(
@@ -436,8 +438,11 @@ class IxlClient:
         server_hostname: str | None = None,
         backoff_initial: float = 0.1,
         backoff_max: float = 5.0,
+        indication_delay: float = 0.0,
         on_event: EventCallback | None = None,
     ) -> None:
+        if indication_delay < 0:
+            raise UsageError("indication_delay cannot be negative")
         if not 0 < backoff_initial <= backoff_max:
             raise UsageError("back-off needs 0 < backoff_initial <= backoff_max")
         self.station = station
@@ -449,6 +454,7 @@ class IxlClient:
         self.server_hostname = server_hostname
         self.backoff_initial = backoff_initial
         self.backoff_max = backoff_max
+        self.indication_delay = indication_delay
         self.on_event = on_event
         self.connections = 0  # accepted (identified) connections so far
         self.attempts = 0  # TCP connection attempts so far
@@ -506,7 +512,11 @@ class IxlClient:
         self._pending.extend(changes)
         if not self._flush_scheduled:
             self._flush_scheduled = True
-            asyncio.get_running_loop().call_soon(self._flush_pending)
+            loop = asyncio.get_running_loop()
+            if self.indication_delay:
+                loop.call_later(self.indication_delay, self._flush_pending)
+            else:
+                loop.call_soon(self._flush_pending)
 
     def _flush_pending(self) -> None:
         self._flush_scheduled = False
@@ -515,6 +525,15 @@ class IxlClient:
         if pending and session is not None and link is not None and session.identified:
             session.send_indications(pending, link.now())
             link.flush()
+
+    async def drain(self) -> None:
+        """Wait while the socket's send buffer is full (back-pressure for bulk producers)."""
+        link = self._link
+        if link is None or link.writer.is_closing():
+            return
+        if link.writer.transport.get_write_buffer_size() > READ_SIZE:
+            with contextlib.suppress(ConnectionError, OSError):
+                await link.writer.drain()
 
     async def wait_until(self, predicate: Callable[[], bool], timeout: float = 10.0) -> None:
         loop = asyncio.get_running_loop()
