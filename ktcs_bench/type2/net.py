@@ -355,7 +355,10 @@ class CtcServer:
             elif isinstance(e, ev.Closed):
                 log.info("Type II %s (station %s) closed: %s", cl.peer, cl.station, e.reason)
             if self.on_event is not None:
-                self.on_event(cl.station, e)
+                try:
+                    self.on_event(cl.station, e)
+                except Exception:  # a faulty observer must not take the link down
+                    log.exception("Type II on_event callback failed for %r", e)
         self._notify()
 
     def _ident(self, cl: _CtcLink, e: ev.IdentRequested, now: float) -> None:
@@ -591,6 +594,15 @@ class IxlClient:
             backoff = min(backoff * 2, self.backoff_max)
 
     def _on_events(self, events: list[ev.Event]) -> None:
+        try:
+            self._handle_events(events)
+        except Exception:  # the application failed: log it, drop this connection, reconnect
+            log.exception("Type II station %s: application error; closing the link", self.station)
+            if self._session is not None:
+                self._session.close("application error")
+        self._notify()
+
+    def _handle_events(self, events: list[ev.Event]) -> None:
         session, link = self._session, self._link
         assert session is not None and link is not None
         for e in events:
@@ -610,4 +622,3 @@ class IxlClient:
                             self.station, self.host, self.port)  # fmt: skip
             if self.on_event is not None:
                 self.on_event(self.station, e)
-        self._notify()

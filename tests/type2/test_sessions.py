@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from ktcs_bench.codec import FrameCodec, StreamDecoder, get_profile
 from ktcs_bench.errors import UsageError
@@ -329,3 +331,21 @@ def test_frames_before_ident_close_the_connection() -> None:
     ctc = CtcConnection(0.0)
     out = ctc.receive_data(CODEC.encode_message(0, "INDICATION", 0, items=[[1, 1]]), 0.1)
     assert ctc.closed and isinstance(out[-1], ev.Closed)
+
+
+@given(chunks=st.lists(st.binary(max_size=200), max_size=20), valid=st.booleans())
+def test_any_bytes_are_survived_by_both_sides(chunks: list[bytes], valid: bool) -> None:
+    """Arbitrary input never raises, and the sessions keep answering (or close cleanly)."""
+    w = Wire()
+    if valid:
+        w.open(full=[])
+    now = 0.0
+    for data in chunks:
+        now += 0.1
+        w.ctc.receive_data(data, now)
+        w.ixl.receive_data(data, now)
+        w.ctc.handle_timer(now)
+        w.ixl.handle_timer(now)
+    for s in (w.ctc, w.ixl):
+        s.data_to_send()
+        assert s.closed or s.next_deadline() is not None
