@@ -98,7 +98,10 @@ class CurveTimes:
     service_brake_command: bool = False
     """True if the ATP can command the service brake (then T_bs2 = T_bs, else 0)."""
     t_traction: float = 0.0
-    """Traction cut-off time after an EB command, s."""
+    """Time from the EBI being passed until traction is cut (cut-off time + ATP cycle), s."""
+    a_est_cap: float = math.inf
+    """Upper bound on the estimated acceleration in V_delta1/V_delta2 (none by default: the
+    train's real acceleration is used, which is safe for any traction)."""
     fixed: FixedValues = field(default_factory=FixedValues)
 
     @property
@@ -120,7 +123,7 @@ class CurveTimes:
         t_rem = self.t_be - t_tr if self.t_be > t_tr else 0.0
         if a_est <= 0.0 and v >= v_target:  # the common case, kept cheap for the ATP cycle
             return v, v * (t_tr + t_rem)
-        a = max(0.0, min(a_est, 0.4))
+        a = max(0.0, min(a_est, self.a_est_cap))
         dv1 = a * t_tr
         dv2 = a * t_rem
         v_bec = max(v + dv1, v_target) + dv2
@@ -365,18 +368,34 @@ def curves_on_grid(
     inf = np.full(x.shape, np.inf)
     ebd, ebi, sbi, warn, perm, ind = (inf.copy() for _ in range(6))
     t_be = times.t_traction + times.t_berem
+    leads = (
+        0.0,
+        times.t_bs2,
+        times.t_bs2 + fixed.t_warning,
+        times.t_bs2 + fixed.t_driver,
+        times.t_bs2 + fixed.t_driver + times.t_indication,
+    )
+    outs = (ebi, sbi, warn, perm, ind)
+    step = float(x[1] - x[0]) if len(x) > 1 else 1.0
     for t in targets:
         e = ebd_on_grid(grid, t, fixed, v_cap)
         np.minimum(ebd, e, out=ebd)
-        v = np.where(np.isfinite(e), np.maximum(e, t.speed), e)
-        lead_ebi = v * t_be
-        np.minimum(ebi, _shifted(x, v, lead_ebi), out=ebi)
-        lead_sbi = lead_ebi + v * times.t_bs2
-        np.minimum(sbi, _shifted(x, v, lead_sbi), out=sbi)
-        np.minimum(warn, _shifted(x, v, lead_sbi + v * fixed.t_warning), out=warn)
-        np.minimum(perm, _shifted(x, v, lead_sbi + v * fixed.t_driver), out=perm)
-        lead_ind = lead_sbi + v * (fixed.t_driver + times.t_indication)
-        np.minimum(ind, _shifted(x, v, lead_ind), out=ind)
+        k = int(np.searchsorted(x, t.location, side="right"))  # x[:k] before the target
+        if t.kind is TargetKind.STOP:
+            for o in outs:
+                o[k:] = 0.0
+        finite = np.flatnonzero(np.isfinite(e[:k]))
+        if finite.size == 0:
+            continue
+        i0 = int(finite[0])
+        # work only on the window the shifted curves can reach (leads are at most v_cap·T)
+        back = int(math.ceil(v_cap * (t_be + leads[-1]) / step)) + 2
+        w0 = max(i0 - back, 0)
+        xs, es = x[w0:k], e[w0:k]
+        v = np.where(np.isfinite(es), np.maximum(es, t.speed), es)
+        for o, lead in zip(outs, leads, strict=True):
+            seg = _shifted(xs, v, v * (t_be + lead))
+            np.minimum(o[w0:k], seg, out=o[w0:k])
     dv_ebi = _ramp_vec(mrsp, fixed, "ebi")
     dv_sbi = _ramp_vec(mrsp, fixed, "sbi")
     dv_w = _ramp_vec(mrsp, fixed, "warning")

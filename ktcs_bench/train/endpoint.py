@@ -147,6 +147,7 @@ class TrainEndpoint:
         self.times = CurveTimes(
             t_be=p.brake_build_up,
             t_bs=p.brake_build_up,
+            t_traction=CYCLE,  # the train may accelerate for one cycle before the EBI is seen
             service_brake_command=cfg.service_brake_command and cfg.service_brake_enabled,
         )
         self.supervisor = Supervisor(self.times, cfg.service_brake_enabled)

@@ -162,3 +162,24 @@ def test_resource_manager_stops_at_other_trains_and_releases_behind() -> None:
     assert rm.request("B", 0.0, 2000.0, 0.0).authority_end == 1000.0
     rm.request("A", 1600.0, 2000.0, 1.0)  # A's tail past R2 → R2 released
     assert rm.request("B", 0.0, 2000.0, 2.0).authority_end == 1500.0
+
+
+def test_grid_curves_agree_with_exact_curve_distances() -> None:
+    from ktcs_bench.train.curves import curve_distances, curves_on_grid
+
+    d = SafeDeceleration(StepFunction.constant(1.0))
+    g = Grid.uniform(0.0, 3000.0, 1.0, d)
+    t = Target(2000.0)
+    times = CurveTimes(2.0, 3.0, service_brake_command=True)
+    c = curves_on_grid(g, [t], np.full(g.x.shape, 30.0), times, 40.0)
+    cd = curve_distances(d, t, times, 20.0)
+    for name, dist in (
+        ("ebi", cd.ebi),
+        ("sbi", cd.sbi2),
+        ("warning", cd.warning),
+        ("permitted", cd.permitted),
+        ("indication", cd.indication),
+    ):
+        assert float(np.interp(2000.0 - dist, g.x, getattr(c, name))) == pytest.approx(
+            20.0, abs=0.05
+        )
