@@ -1,6 +1,29 @@
 """Adapters that bind sans-I/O links to wires and clocks (SPEC §2, §3).
 
 Owns: the `Transport` shape (base.py), pty pairs and pyserial URLs with line-rate pacing
-(serial.py), the asyncio wall-clock driver (aio.py) and the virtual-clock driver (virtual.py).
+(serialport.py), the asyncio wall-clock driver (aio.py) and the virtual-clock driver (virtual.py).
 Must not contain protocol rules: those live in `ktcs_bench.type1`.
 """
+
+from ktcs_bench.transport.aio import LinkRunner
+from ktcs_bench.transport.base import Transport, TransportBase, TransportClosed
+from ktcs_bench.transport.serialport import (
+    PacedWriter,
+    PtyTransport,
+    SerialTransport,
+    open_transport,
+)
+from ktcs_bench.transport.virtual import VirtualBench, VirtualWire
+
+__all__ = [
+    "LinkRunner",
+    "PacedWriter",
+    "PtyTransport",
+    "SerialTransport",
+    "Transport",
+    "TransportBase",
+    "TransportClosed",
+    "VirtualBench",
+    "VirtualWire",
+    "open_transport",
+]

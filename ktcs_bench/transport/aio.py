@@ -1,0 +1,150 @@
+"""The asyncio wall-clock driver: runs a `Type1Link` over a `Transport`, honouring its deadlines.
+
+Owns: `LinkRunner`. It feeds the link what the transport reads (through `loop.add_reader` when the
+transport has an fd, else a small reader thread), calls `handle_timer` at `next_deadline()` with
+`loop.call_at`, and hands `data_to_send()` to the transport after every call. The clock is the
+loop's (monotonic) clock. Events go to `on_event(now, event)` if given, else to the `events` queue.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import threading
+from collections.abc import Callable
+
+from ktcs_bench.transport.base import Transport, TransportClosed
+from ktcs_bench.type1 import Event, Message, Type1Link
+
+EventSink = Callable[[float, Event], None]
+POLL = 0.05  # s, reader-thread poll period for transports without an fd
+
+
+class LinkRunner:
+    """Drive `link` over `transport` inside a running asyncio loop: `await runner.run()`."""
+
+    def __init__(
+        self, link: Type1Link, transport: Transport, on_event: EventSink | None = None
+    ) -> None:
+        self.link = link
+        self.transport = transport
+        self.on_event = on_event
+        self.events: asyncio.Queue[tuple[float, Event]] = asyncio.Queue()
+        self.error: BaseException | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._timer: asyncio.TimerHandle | None = None
+        self._done: asyncio.Future[None] | None = None
+        self._thread: threading.Thread | None = None
+        self._stop_thread = threading.Event()
+
+    # -- application side ----------------------------------------------------------------------
+    def send(self, message: Message) -> None:
+        """Queue an application message (call from the loop's thread)."""
+        loop = self._require_loop()
+        now = loop.time()
+        self.link.send(message, now)
+        self._after([], now)
+
+    def stop(self) -> None:
+        if self._done is not None and not self._done.done():
+            self._done.set_result(None)
+
+    async def next_event(self, *kinds: type, timeout: float | None = None) -> Event:
+        """The next event from the queue (of the given classes, skipping others)."""
+        async with asyncio.timeout(timeout):
+            while True:
+                _, event = await self.events.get()
+                if not kinds or isinstance(event, kinds):
+                    return event
+
+    # -- the loop ------------------------------------------------------------------------------
+    async def run(self) -> None:
+        """Run until `stop()`, cancellation, or the transport closing (then re-raised)."""
+        loop = self._loop = asyncio.get_running_loop()
+        self._done = loop.create_future()
+        fd = self.transport.fileno()
+        if fd is not None:
+            loop.add_reader(fd, self._readable)
+        else:
+            self._thread = threading.Thread(target=self._reader, name="link-reader", daemon=True)
+            self._thread.start()
+        try:
+            now = loop.time()
+            self._after(self.link.handle_timer(now), now)
+            await self._done
+        finally:
+            if fd is not None:
+                loop.remove_reader(fd)
+            if self._timer is not None:
+                self._timer.cancel()
+            if self._thread is not None:
+                self._stop_thread.set()
+                await asyncio.to_thread(self._thread.join, 2.0)
+        if self.error is not None:
+            raise self.error
+
+    # -- internals -----------------------------------------------------------------------------
+    def _require_loop(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None:
+            raise RuntimeError("LinkRunner.run() is not running")
+        return self._loop
+
+    def _readable(self) -> None:
+        try:
+            data = self.transport.recv(0)
+        except TransportClosed as exc:
+            self._fail(exc)
+            return
+        if data:
+            self._data(data)
+
+    def _data(self, data: bytes) -> None:
+        now = self._require_loop().time()
+        self._after(self.link.receive_data(data, now), now)
+
+    def _reader(self) -> None:
+        loop = self._require_loop()
+        while not self._stop_thread.is_set():
+            try:
+                data = self.transport.recv(POLL)
+            except TransportClosed as exc:
+                loop.call_soon_threadsafe(self._fail, exc)
+                return
+            if data:
+                loop.call_soon_threadsafe(self._data, data)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        now = self._require_loop().time()
+        self._after(self.link.handle_timer(now), now)
+
+    def _after(self, events: list[Event], now: float) -> None:
+        out = self.link.data_to_send(now)
+        if out:
+            try:
+                self.transport.send(out)
+            except TransportClosed as exc:
+                self._fail(exc)
+                return
+        for event in events:
+            if self.on_event is not None:
+                self.on_event(now, event)
+            else:
+                self.events.put_nowait((now, event))
+        self._rearm()
+
+    def _rearm(self) -> None:
+        deadline = self.link.next_deadline()
+        timer = self._timer
+        if timer is not None and deadline is not None and timer.when() == deadline:
+            return
+        if timer is not None:
+            timer.cancel()
+        self._timer = None
+        if deadline is not None:
+            self._timer = self._require_loop().call_at(deadline, self._on_timer)
+
+    def _fail(self, exc: BaseException) -> None:
+        self.error = exc
+        with contextlib.suppress(asyncio.InvalidStateError):
+            self.stop()
