@@ -35,7 +35,8 @@ class Segment:
     y1: float
     x2: float
     y2: float
-    point: str | None = None  # the point whose diverging leg this is (diagonals only)
+    point: str | None = None  # the point whose leg this is
+    leg: str | None = None  # "normal" (straight on past the point) or "reverse" (diverging)
 
 
 @dataclass
@@ -167,13 +168,12 @@ def build(line: Line) -> Layout:
         for tc in own:
             base = _base_lane(tc, lanes)
             x1, x2 = scale.x(tc.from_m), scale.x(tc.to_m)
-            segs.append(Segment(tc.name, st.number, x1, y(base), x2, y(base)))
             tracks = _tracks_of(tc, st)
-            if len(tracks) < 2:
-                continue
             pinfo = point_of_tc.get(tc.name)
+            pname = pinfo[1] if pinfo else None
             px = scale.x(pinfo[2]) if pinfo else (x1 + x2) / 2
-            for track in tracks:
+            diagonals: list[Segment] = []
+            for track in tracks if len(tracks) > 1 else ():
                 lane = lanes.get(track, 0)
                 if lane == base:
                     continue
@@ -184,12 +184,20 @@ def build(line: Line) -> Layout:
                         and track in _tracks_of(o, st) and _base_lane(o, lanes) == lane
                     ]  # fmt: skip
                     if nxt:
-                        segs.append(
-                            Segment(
-                                tc.name, st.number, px, y(base), scale.x(boundary), y(lane),
-                                point=pinfo[1] if pinfo else None,
-                            )
-                        )  # fmt: skip
+                        bx = scale.x(boundary)
+                        diagonals.append(
+                            Segment(tc.name, st.number, px, y(base), bx, y(lane), pname, "reverse")
+                        )
+            ends = {d.x2 for d in diagonals}
+            if pname is not None and len(ends) == 1:
+                # split the straight track at the point: common part, then the normal leg
+                b = ends.pop()
+                far = x1 if abs(b - x2) < abs(b - x1) else x2
+                segs.append(Segment(tc.name, st.number, far, y(base), px, y(base)))
+                segs.append(Segment(tc.name, st.number, px, y(base), b, y(base), pname, "normal"))
+            else:
+                segs.append(Segment(tc.name, st.number, x1, y(base), x2, y(base)))
+            segs.extend(diagonals)
     for tc in line.track_circuits:
         segs.append(Segment(tc.name, tc.station, scale.x(tc.from_m), y0, scale.x(tc.to_m), y0))
 
@@ -223,8 +231,8 @@ def build(line: Line) -> Layout:
         )
     # track circuits
     for s in segs:
-        diag = " diverging" if s.point is not None else ""
-        pt = f' data-point="{escape(s.point)}"' if s.point is not None else ""
+        diag = f" leg-{s.leg}" if s.leg is not None else ""
+        pt = f' data-point="{escape(s.point)}" data-leg="{s.leg}"' if s.point is not None else ""
         parts.append(
             f'<line class="tc{diag}" data-tc="{escape(s.tc)}" data-station="{s.station}"{pt} '
             f'x1="{_f(s.x1)}" y1="{_f(s.y1)}" x2="{_f(s.x2)}" y2="{_f(s.y2)}"/>'

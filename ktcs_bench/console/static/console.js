@@ -163,8 +163,10 @@ function applyState(stations) {
       el.setAttribute("class", cls.join(" "));
       el.dataset.position = s.position;
       el.querySelector(".pt-state").textContent = POINT_TEXT[s.position] || "";
-      document.querySelectorAll(`#diagram .diverging[data-station="${n}"][data-point="${p}"]`)
-        .forEach((d) => d.classList.toggle("active", s.position === "reverse"));
+      // the leg the point does not lie for is drawn dim, whatever its track circuit shows
+      const lying = s.position.endsWith("reverse") ? "reverse" : "normal";
+      document.querySelectorAll(`#diagram .tc[data-station="${n}"][data-point="${p}"]`)
+        .forEach((d) => d.classList.toggle("inactive", d.dataset.leg !== lying));
     }
     for (const [name, s] of Object.entries(st.signals)) {
       const el = document.getElementById(`sig-${n}-${name}`);
