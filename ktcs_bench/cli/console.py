@@ -8,11 +8,6 @@ import contextlib
 import signal
 from pathlib import Path
 
-from ktcs_bench.console.demo import RigIxl, with_throw_time
-from ktcs_bench.console.server import ConsoleServer, load_charts
-from ktcs_bench.station.loader import load_line
-from ktcs_bench.type2.net import CtcServer
-
 HELP = "run a CTC with its web operator console (route setting, link monitor, speed-distance)"
 EPILOG = """\
 examples:
@@ -50,6 +45,12 @@ def _run(args: argparse.Namespace) -> int:
 
 
 async def _serve(args: argparse.Namespace) -> None:
+    # imported here so that other subcommands do not pay for aiohttp
+    from ktcs_bench.console.demo import RigIxl, with_throw_time
+    from ktcs_bench.console.server import ConsoleServer, load_charts
+    from ktcs_bench.station.loader import load_line
+    from ktcs_bench.type2.net import CtcServer
+
     line = load_line(args.line)
     if args.throw_time is not None:
         line = with_throw_time(line, args.throw_time)

@@ -182,6 +182,13 @@ def test_speed_distance_panel_draws_the_trains_curves(page: Any, bench: Bench) -
     )
     assert all(e <= s + 1e-6 for e, s in zip(ys["ebi"], ys["sbi"], strict=True))
     assert all(s <= p + 1e-6 for s, p in zip(ys["sbi"], ys["permitted"], strict=True))
+    # a picture of every panel at work, for people
+    page.select_option("#tap-select", index=1)
+    expect(page.locator("#monitor-frames")).to_contain_text("Packet = [")
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    shot = ARTIFACTS / "panels.png"
+    page.screenshot(path=str(shot), full_page=True)
+    print(f"\nconsole screenshot: {shot}")
 
 
 def test_console_without_taps_or_trains_says_so(browser_context: Any, bench: Bench) -> None:
