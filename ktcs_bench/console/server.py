@@ -57,6 +57,8 @@ FRAMES_KEEP = 60  # decoded frames kept per tap
 TAP_RETRY_S = 2.0
 
 TapSpec = str | tuple[str, int]
+# Type II opcodes whose items are code numbers (protocols/type2.yaml)
+IDENT_OP, INDICATION_OP, CONTROL_OP, CONTROL_RESULT_OP = 0x01, 0x10, 0x20, 0x21
 
 
 def load_charts(
@@ -93,6 +95,7 @@ class _TapFeed:
     label: str
     entries: deque[dict[str, Any]] = field(default_factory=lambda: deque(maxlen=FRAMES_KEEP))
     status: str = "not connected"
+    station: int | None = None  # Type II: learnt from the IDENT frame, to name codes
     task: asyncio.Task[None] | None = None
 
 
@@ -391,7 +394,7 @@ class ConsoleServer:
                         raise PeerError("the tap closed its control port")
                     item = json.loads(line)
                     if "hex" in item:
-                        entries = self._render(item, profile)
+                        entries = self._render(feed, item, profile)
                     else:
                         detail = " ".join(
                             f"{k}={v}" for k, v in item.items() if k not in ("time", "event")
@@ -411,8 +414,24 @@ class ConsoleServer:
                     writer.close()
             await asyncio.sleep(TAP_RETRY_S)
 
-    @staticmethod
-    def _render(item: Mapping[str, Any], profile: FrameProfile) -> list[dict[str, Any]]:
+    def _chart_for(self, feed: _TapFeed, frame: Frame, profile: FrameProfile) -> CodeChart | None:
+        """Type II: the station's chart for the codes this frame carries (by opcode)."""
+        if profile.protocol != "type2" or frame.op is None or frame.error is not None:
+            return None
+        if frame.op == IDENT_OP and len(frame.data) >= 2:
+            feed.station = int.from_bytes(frame.data[:2], "little")
+        model = self.models.get(feed.station) if feed.station is not None else None
+        if model is None:
+            return None
+        if frame.op in (INDICATION_OP, CONTROL_RESULT_OP):
+            return model.indications
+        if frame.op == CONTROL_OP:
+            return model.controls
+        return None
+
+    def _render(
+        self, feed: _TapFeed, item: Mapping[str, Any], profile: FrameProfile
+    ) -> list[dict[str, Any]]:
         data = bytes.fromhex(str(item["hex"]))
         t = float(item.get("time") or time.time())
         direction = str(item.get("direction", ""))
@@ -420,9 +439,10 @@ class ConsoleServer:
         out = []
         for rec in dec.feed(data) + dec.close():
             ok = isinstance(rec, Frame) and rec.error is None
+            chart = self._chart_for(feed, rec, profile) if isinstance(rec, Frame) else None
             label = f"{_clock(t)} {direction}  "
             out.append({"time": _clock(t), "direction": direction, "ok": ok,
-                        "text": to_text(rec, profile, label=label)})  # fmt: skip
+                        "text": to_text(rec, profile, chart, label=label)})  # fmt: skip
         return out
 
     # ------------------------------------------------------------------ speed–distance

@@ -145,20 +145,27 @@ def test_occupancy_and_link_loss_are_shown(page: Any, bench: Bench) -> None:
     expect(tc(page, "TC2055")).not_to_have_class(re.compile(r"\bunknown\b"))
 
 
-def test_link_monitor_shows_the_taps_frames_in_the_fig7_console_style(page: Any) -> None:
+def test_link_monitor_shows_the_taps_frames_in_the_fig7_console_style(
+    page: Any, bench: Bench
+) -> None:
     page.select_option("#tap-select", index=1)
     expect(page.locator("#monitor-status")).to_contain_text("ktcs-type2")
     frames = page.locator("#monitor-frames pre")
     expect(frames.first).to_be_visible()
-    # the station 18 link's history holds the IDENT and the full-state INDICATIONs
-    expect(page.locator("#monitor-frames")).to_contain_text("IDENT")
+    # the CTC asks station 18 for its full state: REQUEST_ALL, then INDICATION parts whose codes
+    # are named from station 18's chart (the station was learnt from the link's IDENT frame)
+    bench.do(lambda: bench.ctc.request_all(18))
+    expect(page.locator("#monitor-frames")).to_contain_text("REQUEST_ALL")
     expect(page.locator("#monitor-frames")).to_contain_text("INDICATION")
+    expect(page.locator("#monitor-frames")).to_contain_text("LOC18")
     expect(page.locator("#monitor-frames")).to_contain_text("Packet = [")
     expect(page.locator("#monitor-frames")).to_contain_text(re.compile(r"\[02\]\[[0-9A-F]{2}\]"))
     # new traffic streams in: a control on station 18 appears as CONTROL + CONTROL_RESULT
     page.click('#tools button[data-tool="reverse"]')
     page.locator("#pt-18-32 .pt-dot").click()
     expect(page.locator("#monitor-frames")).to_contain_text("CONTROL_RESULT")
+    expect(page.locator("#monitor-frames")).to_contain_text("SRC1832")
+    expect(page.locator("#monitor-frames")).to_contain_text("SNR1832")
     page.click('#tools button[data-tool="normal"]')
     page.locator("#pt-18-32 .pt-dot").click()
     expect(page.locator("#pt-18-32")).to_have_attribute("data-position", "normal")
