@@ -1,0 +1,148 @@
+"""`ktcs-bench emulator KIND`: run one device alone, as its own process, so a real device can take
+another's place (SPEC §7)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import sys
+
+from ktcs_bench.emulator.endpoints import Endpoint, parse_endpoint, parse_links
+from ktcs_bench.errors import UsageError
+from ktcs_bench.lab.topology import ROLE, load_lab, resolve_lab_path
+
+KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
+
+DESCRIPTION = """\
+Run one emulated device as its own process. It prints one JSON line when it is ready (its control
+port, the pty paths it made, the address it listens on) and logs to stderr.
+
+ENDPOINT forms (--link PEER=ENDPOINT; PEER is a role: ctc, ixl, atc, io, rails, or a device name
+from the lab file):
+  /dev/ttyUSB0, loop://, socket://H:P, rfc2217://H:P   a serial device or any pyserial URL (Type I)
+  pty                                                  make a pty pair here, print the path
+  tcp://HOST:PORT                                      connect (Type II to the CTC, the rails)
+"""
+EPILOG = """\
+examples:
+  # an ATC for station 18 on a pty, waiting for a real IXL on the path it prints
+  ktcs-bench emulator atc --station 18 --link ixl=pty
+  # our IXL for station 20 against a real CTC and real trackside I/O on a USB RS485 adapter
+  ktcs-bench emulator ixl --station 20 --link ctc=tcp://10.0.0.1:5000 --link io=/dev/ttyUSB0
+  # the CTC alone, Type II on all interfaces, port 5000
+  ktcs-bench emulator ctc --listen 0.0.0.0:5000
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "emulator", help="run one emulated device (ctc, ixl, atc, trackside, trackcircuit, train)",
+        description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )  # fmt: skip
+    p.add_argument("kind", choices=KINDS)
+    p.add_argument("--lab", help="lab file or shipped lab name (default: the reference lab)")
+    p.add_argument("--station", type=int, help="station number (ixl, atc, trackside)")
+    p.add_argument("--name", help="device name (default: KIND + station)")
+    p.add_argument("--link", action="append", default=[], metavar="PEER=ENDPOINT")
+    p.add_argument("--listen", help="HOST:PORT to serve (ctc: Type II; trackcircuit: the rails)")
+    p.add_argument("--control", default="127.0.0.1:0", help="HOST:PORT of the JSON control port")
+    p.add_argument(
+        "--mode", choices=("center", "local"), help="ixl: start mode (default: the lab's)"
+    )
+    p.add_argument("--unpaced", action="store_true", help="Type I: no line-rate pacing")
+    p.add_argument("--train", help="train: the train id / scenario train to run")
+    p.add_argument("-v", "--verbose", action="store_true", help="log every event to stderr")
+    p.set_defaults(handler=run)
+
+
+def _hostport(text: str, what: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit():
+        raise UsageError(f"{what}: expected HOST:PORT, not {text!r}")
+    return host or "127.0.0.1", int(port)
+
+
+def _roles(links: dict[str, Endpoint], lab_devices: dict[str, str]) -> dict[str, Endpoint]:
+    """Peer names may be roles or lab device names; return {role: endpoint}."""
+    out = {}
+    for peer, ep in links.items():
+        role = (
+            peer
+            if peer in ("ctc", "ixl", "atc", "io", "rails")
+            else ROLE.get(lab_devices.get(peer, ""), "")
+        )
+        if not role:
+            raise UsageError(
+                f"--link {peer}=...: unknown peer (use ctc, ixl, atc, io, rails or a lab device)"
+            )
+        out[role] = ep
+    return out
+
+
+def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from ktcs_bench.ixl.modes import Mode
+    from ktcs_bench.type1 import LinkConfig
+
+    lab = load_lab(resolve_lab_path(args.lab))
+    line = lab.load_line()
+    links = _roles(parse_links(args.link), {d.name: d.kind for d in lab.devices.values()})
+    control = _hostport(args.control, "--control")
+    kind = args.kind
+    name = args.name or (f"{kind}{args.station}" if args.station else kind)
+    type1 = LinkConfig(
+        line_rate=None if args.unpaced else lab.line_rate,
+        longest_frame_data=lab.longest_frame_data,
+    )
+    if kind in ("ixl", "atc", "trackside"):
+        if args.station is None:
+            raise UsageError(f"emulator {kind} needs --station (one of {lab.stations})")
+        if args.station not in line.stations:
+            raise UsageError(
+                f"station {args.station} is not on the line (stations {sorted(line.stations)})"
+            )
+    if kind == "ixl":
+        from ktcs_bench.emulator.ixl import IxlDevice
+
+        mode = Mode(args.mode or lab.ixl_mode)
+        return IxlDevice(name, line, args.station, links, mode=mode, type1=type1,
+                         type1_profile=lab.type1_profile, control=control)  # fmt: skip
+    if kind == "atc":
+        from ktcs_bench.emulator.atc import AtcDevice
+
+        return AtcDevice(name, line, args.station, links, type1=type1,
+                         type1_profile=lab.type1_profile, control=control)  # fmt: skip
+    if kind == "trackside":
+        from ktcs_bench.emulator.trackside import TracksideDevice
+
+        return TracksideDevice(name, line, args.station, links, type1=type1,
+                               type1_profile=lab.type1_profile, control=control)  # fmt: skip
+    if kind == "trackcircuit":
+        from ktcs_bench.emulator.trackcircuit import TrackCircuitDevice
+
+        return TrackCircuitDevice(
+            name, line, _hostport(args.listen or "127.0.0.1:0", "--listen"), control
+        )
+    if kind == "ctc":
+        from ktcs_bench.emulator.ctc import CtcDevice
+
+        listen = _hostport(args.listen or f"127.0.0.1:{lab.type2_port}", "--listen")
+        return CtcDevice(name, line, lab.stations, listen, control=control)
+    if kind == "train":
+        from ktcs_bench.emulator.train import TrainDevice
+
+        return TrainDevice.from_args(name, lab, line, links, args.train, control)
+    raise UsageError(f"unknown kind {kind}")
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
+        format="%(asctime)s %(name)s %(levelname)s %(message)s",
+    )  # fmt: skip
+    device = build_device(args)
+    code: int = asyncio.run(device.run())
+    return code
+
+
+__all__ = ["parse_endpoint", "register"]

@@ -1,0 +1,161 @@
+"""`ktcs-bench lab up|down|restart|status|kill`: the whole lab as processes on ptys and TCP."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import signal
+import sys
+from typing import Any
+
+from ktcs_bench.cli._common import use_colour
+from ktcs_bench.emulator import jsonlines
+from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.lab.topology import load_lab, resolve_lab_path
+
+EPILOG = """\
+examples:
+  ktcs-bench lab up                      # the shipped reference lab (stations 18, 20, 22)
+  ktcs-bench lab up my-lab.yaml --for 60 # a lab of your own, stop after 60 s
+  ktcs-bench lab status --json           # from another shell: the live state as JSON
+  ktcs-bench lab restart ixl20           # bring a crashed device back (full resync follows)
+  ktcs-bench lab down
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "lab", help="start, watch and stop a whole lab (every device its own process)",
+        description="Run a lab from a topology file: every device is its own process, Type I "
+        "links are paced ptys through taps, Type II links TCP through taps.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )  # fmt: skip
+    lsub = p.add_subparsers(dest="lab_command", metavar="ACTION", required=True)
+    up = lsub.add_parser("up", help="start the lab and show its live status (Ctrl-C stops it)")
+    up.add_argument("lab", nargs="?", help="lab file or shipped lab name (default: reference)")
+    up.add_argument("--for", dest="duration", type=float, help="stop after this many seconds")
+    up.add_argument("--unpaced", action="store_true", help="Type I without line-rate pacing")
+    up.add_argument(
+        "--json", action="store_true", help="print the link map and status as JSON lines"
+    )
+    up.add_argument("--interval", type=float, default=1.0, help="status refresh period (s)")
+    for name, text in (("down", "stop a running lab"), ("status", "show a running lab's status"),
+                       ("map", "show a running lab's link map")):  # fmt: skip
+        q = lsub.add_parser(name, help=text)
+        q.add_argument("lab", nargs="?", help="lab name (default: reference)")
+        q.add_argument("--json", action="store_true")
+    for name, text in (("restart", "restart one device (a full resync follows)"),
+                       ("kill", "kill one device with SIGKILL, as a crash would")):  # fmt: skip
+        q = lsub.add_parser(name, help=text)
+        q.add_argument("device")
+        q.add_argument("--lab", help="lab name (default: reference)")
+    p.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.lab_command == "up":
+        return _up(args)
+    lab_name = getattr(args, "lab", None) or "reference"
+    lab_name = load_lab(resolve_lab_path(lab_name)).name if lab_name.endswith(".yaml") else lab_name
+    if args.lab_command == "down":
+        _request(lab_name, {"cmd": "down"})
+        print(f"lab {lab_name}: stopping")
+        return 0
+    if args.lab_command in ("restart", "kill"):
+        answer = _request(lab_name, {"cmd": args.lab_command, "device": args.device})
+        if not answer.get("ok"):
+            raise UsageError(str(answer.get("error")))
+        print(f"{args.device}: {'restarted' if args.lab_command == 'restart' else 'killed'}")
+        return 0
+    if args.lab_command == "map":
+        links = _request(lab_name, {"cmd": "map"})["links"]
+        if args.json:
+            print(json.dumps(links))
+        else:
+            from ktcs_bench.lab.view import link_map_text
+
+            print(link_map_text(links, use_colour(sys.stdout)))
+        return 0
+    status = _request(lab_name, {"cmd": "status"})["status"]
+    if args.json:
+        print(json.dumps(status))
+    else:
+        from ktcs_bench.lab.view import station_lines
+
+        print("\n".join(station_lines(status, use_colour(sys.stdout))))
+    return 0
+
+
+def _request(lab_name: str, obj: dict[str, Any]) -> dict[str, Any]:
+    from ktcs_bench.lab.runner import state_file
+
+    path = state_file(lab_name)
+    if not path.exists():
+        raise UsageError(f"lab {lab_name} is not running (no {path})")
+    host, _, port = json.loads(path.read_text())["control"].rpartition(":")
+    try:
+        return asyncio.run(jsonlines.request(host, int(port), obj, timeout=30))
+    except OSError as exc:
+        raise PeerError(f"lab {lab_name} does not answer on {host}:{port}: {exc}") from None
+
+
+def _up(args: argparse.Namespace) -> int:
+    import logging
+
+    from ktcs_bench.lab.runner import LabRunner
+    from ktcs_bench.lab.view import RED, RESET, link_map_text, station_lines
+
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
+    lab = load_lab(resolve_lab_path(args.lab))
+    colour = use_colour(sys.stdout)
+    runner = LabRunner(lab, unpaced=args.unpaced)
+
+    async def main() -> int:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, runner.stop_requested.set)
+        try:
+            if not args.json:
+                print(
+                    f"lab {lab.name}: starting {len(lab.devices)} devices, {len(lab.links)} links ...",
+                    flush=True,
+                )
+            await runner.up()
+            if args.json:
+                print(json.dumps({"lab": lab.name, "control": runner.control_address,
+                                  "links": runner.link_map()}), flush=True)  # fmt: skip
+            else:
+                print(link_map_text(runner.link_map(), colour))
+                print(f"lab {lab.name} is up (control {runner.control_address}); Ctrl-C or "
+                      f"`ktcs-bench lab down` stops it", flush=True)  # fmt: skip
+            end = None if args.duration is None else loop.time() + args.duration
+            last = ""
+            while not runner.stop_requested.is_set():
+                if end is not None and loop.time() >= end:
+                    break
+                for name in runner.check_children():
+                    msg = f"!! {name} crashed (exit {runner.crashed[name]}): `ktcs-bench lab restart {name}` brings it back"
+                    print(f"{RED}{msg}{RESET}" if colour else msg, flush=True)
+                status = await runner.status()
+                if args.json:
+                    print(json.dumps({"status": status}), flush=True)
+                else:
+                    text = "\n".join(station_lines(status, colour))
+                    if text != last:
+                        print(("\x1b[2J\x1b[H" + link_map_text(runner.link_map(), colour) + "\n\n"
+                               if colour else "") + text, flush=True)  # fmt: skip
+                        last = text
+                try:
+                    await asyncio.wait_for(runner.stop_requested.wait(), args.interval)
+                except TimeoutError:
+                    pass
+            return 0
+        finally:
+            await runner.down()
+            if not args.json:
+                print(
+                    f"lab {lab.name}: stopped; every device process ended and its ptys are closed"
+                )
+
+    return asyncio.run(main())

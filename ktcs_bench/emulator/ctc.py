@@ -1,0 +1,192 @@
+"""The CTC process: the Type II server holding every station's indication state, an operator
+control port (`ktcs-bench ctc` talks to it), and a log of every command and result with its time.
+
+Commands are by object, as an operator thinks: route set/cancel by entry and exit signal, point
+normal/reverse, signal stop/release, center/local mode; each becomes the CONTROL code of the
+station's CTC->IXL chart, and the CONTROL_RESULT comes back as accepted or the rejection reason.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+from ktcs_bench.charts import names as n
+from ktcs_bench.charts.generate import station_chart
+from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.emulator.device import Device
+from ktcs_bench.ixl.reasons import Reason
+from ktcs_bench.station.model import Line
+from ktcs_bench.type2.admission import AdmissionPolicy
+from ktcs_bench.type2.net import CtcServer
+
+log = logging.getLogger("ktcs_bench.ctc")
+CONTROL_TIMEOUT = 10.0
+
+
+def _signal(name: str) -> str:
+    """Operators write S1, S01 or 01; station data names signals "01"."""
+    s = name.strip().upper().lstrip("S")
+    return s.zfill(2) if s.isdigit() else s
+
+
+class CtcDevice(Device):
+    kind = "ctc"
+
+    def __init__(
+        self,
+        name: str,
+        line: Line,
+        stations: list[int],
+        listen: tuple[str, int],
+        *,
+        allowed_sources: list[str] | None = None,
+        control: tuple[str, int] = ("127.0.0.1", 0),
+        ssl: Any = None,
+    ) -> None:
+        super().__init__(name, control)
+        self.line = line
+        self.listen = listen
+        self.stations = stations
+        self.ind: dict[int, CodeChart] = {}
+        self.ctl: dict[int, CodeChart] = {}
+        for st in stations:
+            view = line.view(st)
+            self.ind[st] = station_chart(view, "ixl_to_ctc")
+            self.ctl[st] = station_chart(view, "ctc_to_ixl")
+        policy = AdmissionPolicy(
+            stations, allowed_sources=set(allowed_sources) if allowed_sources else None
+        )
+        self.server = CtcServer(policy, host=listen[0], port=listen[1], ssl=ssl)
+        self.command_log: list[dict[str, Any]] = []
+
+    # -- state as names ----------------------------------------------------------------------------
+    def named(self, st: int) -> dict[str, int]:
+        view = self.server.stations.get(st)
+        if view is None:
+            return {}
+        chart = self.ind[st]
+        return {chart.name_of(code) or str(code): v for code, v in view.state.items()}
+
+    def summary(self, st: int) -> dict[str, Any]:
+        """Mode, routes, points, signals, occupancy and link of one station, from its indications."""
+        state = self.named(st)
+        view = self.server.stations.get(st)
+        station = self.line.station(st)
+        on = [k for k, v in state.items() if v]
+        points = {}
+        for p in station.points:
+            pos = ("normal" if state.get(n.sni(st, p.name)) else
+                   "reverse" if state.get(n.sri(st, p.name)) else
+                   "moving" if state.get(n.snr(st, p.name)) or state.get(n.srn(st, p.name)) else
+                   "no detection")  # fmt: skip
+            if state.get(n.sli(st, p.name)):
+                pos += " locked"
+            points[p.name] = pos
+        signals = {}
+        for s in station.lamp_signals:
+            shown = [a for a in s.aspects if state.get(n.asp(st, s.name, a))]
+            signals[s.name] = shown[0] if shown else "?"
+        return {
+            "station": st,
+            "link": "up" if view is not None and view.connected else "down",
+            "synced": bool(view is not None and view.synced),
+            "mode": "center" if state.get(n.ctc(st)) else "local" if state.get(n.loc(st)) else "?",
+            "center_requested": bool(state.get(n.cmr(st))),
+            "routes": sorted(r.name for r in station.routes if state.get(n.rsi(st, r.name))),
+            "points": points,
+            "signals": signals,
+            "occupied": sorted(k for k in on if k.startswith("TC")),
+        }
+
+    # -- operator commands -----------------------------------------------------------------------
+    def control_name(self, obj: dict[str, Any]) -> tuple[int, str, int]:
+        """(station, CTC->IXL code name, value) for an operator command; KeyError/ValueError if bad."""
+        st = int(obj["station"])
+        if st not in self.ctl:
+            raise ValueError(
+                f"station {st} is not in this lab ({', '.join(map(str, self.stations))})"
+            )
+        station = self.line.station(st)
+        cmd = obj["cmd"]
+        if cmd == "route":
+            entry, exit_ = _signal(str(obj["entry"])), _signal(str(obj["exit"]))
+            found = [r for r in station.routes if r.entry == entry and r.exit == exit_]
+            if not found:
+                raise ValueError(f"station {st} has no route from signal {entry} to {exit_}")
+            route = found[0].name
+            return (
+                st,
+                (n.rsc(st, route) if obj.get("action", "set") == "set" else n.rcc(st, route)),
+                1,
+            )
+        if cmd == "point":
+            p = str(obj["point"])
+            station.point(p)
+            return st, (n.snc(st, p) if obj["position"] == "normal" else n.src(st, p)), 1
+        if cmd == "signal":
+            s = _signal(str(obj["signal"]))
+            station.signal(s)
+            return st, n.ssc(st, s), 1 if obj.get("action", "stop") == "stop" else 0
+        if cmd == "mode":
+            return st, (n.cmq(st) if obj["mode"] == "center" else n.lmq(st)), 1
+        if cmd == "control":
+            return st, str(obj["code"]), int(obj.get("value", 1))
+        raise ValueError(f"unknown command {cmd!r}")
+
+    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
+        cmd = obj.get("cmd")
+        if cmd == "show":
+            st = int(obj["station"])
+            return {"ok": True, "summary": self.summary(st), "state": self.named(st)}
+        if cmd == "log":
+            return {"ok": True, "log": self.command_log[-int(obj.get("last", 50)) :]}
+        if cmd in ("route", "point", "signal", "mode", "control"):
+            return await self.operate(obj)
+        return await super().command(obj)
+
+    async def operate(self, obj: dict[str, Any]) -> dict[str, Any]:
+        entry: dict[str, Any] = {"time": time.time(), "command": obj}
+        self.command_log.append(entry)
+        try:
+            st, code_name, value = self.control_name(obj)
+            code = self.ctl[st].number_of(code_name)
+        except (KeyError, ValueError) as exc:
+            entry["result"] = f"refused by the CTC: {exc}"
+            log.warning("command %s refused: %s", obj, exc)
+            return {"ok": False, "error": str(exc).strip("'\"")}
+        view = self.server.stations.get(st)
+        if view is None or not view.connected:
+            entry["result"] = "station link down"
+            return {"ok": False, "error": f"station {st} is not connected"}
+        t0 = time.monotonic()
+        try:
+            result = await self.server.control(st, code, value, CONTROL_TIMEOUT)
+        except (TimeoutError, ConnectionError) as exc:
+            entry["result"] = f"no result: {exc or 'timeout'}"
+            return {"ok": False, "error": f"no CONTROL_RESULT from station {st}"}
+        reason = Reason(result.reason) if result.reason in Reason._value2member_map_ else None
+        text = (
+            "accepted"
+            if result.accepted
+            else f"rejected: {reason.text if reason else result.reason}"
+        )
+        entry.update(result=text, code=code_name, seconds=round(time.monotonic() - t0, 4))
+        log.info("station %d %s=%d -> %s", st, code_name, value, text)
+        self.note("control", f"station {st} {code_name}={value}: {text}")
+        return {"ok": result.accepted, "code": code_name, "result": text,
+                "reason": int(result.reason)}  # fmt: skip
+
+    # -- life cycle ------------------------------------------------------------------------------
+    async def start(self) -> None:
+        await super().start()
+        await self.server.start()
+        self.ready_info["listen"] = f"{self.listen[0]}:{self.server.port}"
+
+    async def close(self) -> None:
+        await self.server.close()
+        await super().close()
+
+    def status(self) -> dict[str, Any]:
+        return {**super().status(), "stations": {st: self.summary(st) for st in self.stations}}

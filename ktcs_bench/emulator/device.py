@@ -1,0 +1,134 @@
+"""What every emulator process shares: the loop clock, one timer for the sans-I/O object's
+deadline, an event log, a JSON-lines control port, and the "ready" line a launcher reads.
+
+A device prints exactly one JSON line on stdout when it is up: {"ready": NAME, "kind": KIND,
+"control": "HOST:PORT", "ptys": {PEER: PATH}, ...}; everything else goes to stderr (logging).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import signal
+import sys
+import time
+from collections import deque
+from typing import Any
+
+from ktcs_bench.emulator import jsonlines
+
+log = logging.getLogger("ktcs_bench.emulator")
+
+
+class Device:
+    kind = "device"
+
+    def __init__(self, name: str, control: tuple[str, int] = ("127.0.0.1", 0)) -> None:
+        self.name = name
+        self.control_address = control
+        self.events: deque[dict[str, Any]] = deque(maxlen=2000)
+        self._timer: asyncio.TimerHandle | None = None
+        self._stop: asyncio.Event | None = None
+        self._server: asyncio.Server | None = None
+        self.ready_info: dict[str, Any] = {}
+
+    # -- clock and timers ----------------------------------------------------------------------
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop:
+        return asyncio.get_running_loop()
+
+    def now(self) -> float:
+        return asyncio.get_running_loop().time()
+
+    def arm(self, deadline: float | None) -> None:
+        """Call `tick()` at the sans-I/O object's next deadline (one timer, re-armed each time)."""
+        if self._timer is not None:
+            if deadline is not None and self._timer.when() == deadline:
+                return
+            self._timer.cancel()
+            self._timer = None
+        if deadline is not None:
+            self._timer = self.loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        self.tick()
+
+    def tick(self) -> None:
+        """Override: the object's timers are due."""
+
+    def note(self, kind: str, text: str) -> None:
+        self.events.append({"time": time.time(), "kind": kind, "text": text})
+        log.info("%s %s: %s", self.name, kind, text)
+
+    # -- control port ----------------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        return {"name": self.name, "kind": self.kind}
+
+    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
+        """Override to add commands; the base knows status, events and stop."""
+        cmd = obj.get("cmd")
+        if cmd == "status":
+            return {"ok": True, "status": self.status()}
+        if cmd == "events":
+            n = int(obj.get("last", 50))
+            return {"ok": True, "events": list(self.events)[-n:]}
+        if cmd == "stop":
+            self.stop()
+            return {"ok": True}
+        return {"ok": False, "error": f"unknown command {cmd!r}"}
+
+    async def _handle(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any]:
+        try:
+            return await self.command(obj)
+        except Exception as exc:  # a bad command must never take the device down
+            log.exception("%s: command %r failed", self.name, obj)
+            return {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+
+    # -- life cycle ------------------------------------------------------------------------------
+    async def start(self) -> None:
+        """Override: open links and servers (call super().start() first)."""
+        host, port = self.control_address
+        self._server = await jsonlines.serve(host, port, self._handle)
+        sock = self._server.sockets[0].getsockname()
+        self.ready_info["control"] = f"{sock[0]}:{sock[1]}"
+
+    async def tasks(self) -> list[asyncio.Task[None]]:
+        """Override: long-running tasks (links)."""
+        return []
+
+    async def close(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+        if self._server is not None:
+            self._server.close()
+
+    def stop(self) -> None:
+        if self._stop is not None:
+            self._stop.set()
+
+    async def run(self) -> int:
+        self._stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, self.stop)
+        await self.start()
+        running = await self.tasks()
+        ready = {"ready": self.name, "kind": self.kind, **self.ready_info}
+        sys.stdout.write(json.dumps(ready) + "\n")
+        sys.stdout.flush()
+        waiter = asyncio.ensure_future(self._stop.wait())
+        try:
+            done, _ = await asyncio.wait([waiter, *running], return_when=asyncio.FIRST_COMPLETED)
+            for task in done:
+                if task is not waiter and task.exception() is not None:
+                    log.error("%s: %s", self.name, task.exception())
+                    return 3
+            return 0
+        finally:
+            waiter.cancel()
+            for task in running:
+                task.cancel()
+            await asyncio.gather(*running, return_exceptions=True)
+            await self.close()

@@ -1,0 +1,130 @@
+"""The IXL process: one station's `Interlocking` bound to its Type I links (ATC, trackside I/O)
+and its Type II link to the CTC (as a client that reconnects with back-off)."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from ktcs_bench.emulator.codeport import CodePort
+from ktcs_bench.emulator.device import Device
+from ktcs_bench.emulator.endpoints import Endpoint
+from ktcs_bench.ixl.interlocking import Interlocking, IxlOutput
+from ktcs_bench.ixl.modes import Mode
+from ktcs_bench.station.model import Line
+from ktcs_bench.type1 import LinkConfig
+from ktcs_bench.type2.net import IxlClient
+
+
+class IxlDevice(Device):
+    kind = "ixl"
+
+    def __init__(
+        self,
+        name: str,
+        line: Line,
+        station: int,
+        links: dict[str, Endpoint],
+        *,
+        mode: Mode = Mode.CENTER,
+        type1: LinkConfig | None = None,
+        type1_profile: str = "ktcs-type1",
+        control: tuple[str, int] = ("127.0.0.1", 0),
+    ) -> None:
+        super().__init__(name, control)
+        self.station = station
+        self.ixl = Interlocking(line.view(station), mode=mode, tc_sources=("atc",))
+        charts = self.ixl.charts
+        self.ctc_chart = charts["ixl_to_ctc"]
+        self.ports: dict[str, CodePort] = {}
+        for role, tx, rx in (("atc", "ixl_to_atc", "atc_to_ixl"), ("io", "ixl_to_io", "io_to_ixl")):
+            if role in links:
+                self.ports[role] = CodePort(
+                    f"{name}-{role}", links[role], charts[tx], charts[rx],
+                    self.ixl.full_state(role), self._codes_from(role), self._link_of(role),
+                    type1_profile, type1,
+                )  # fmt: skip
+                if self.ports[role].path:
+                    self.ready_info.setdefault("ptys", {})[role] = self.ports[role].path
+        self.ctc_endpoint = links.get("ctc")
+        self.client: IxlClient | None = None
+
+    # -- the application the Type II client serves --------------------------------------------
+    def full_state(self) -> list[tuple[int, int]]:
+        state = self.ixl.full_state("ctc")
+        return [(c.number, state.get(c.name, 0)) for c in self.ctc_chart.codes]
+
+    def on_control(self, code: int, value: int) -> tuple[bool, int]:
+        out = self.ixl.control(code, value, self.now())
+        result = out.results[0] if out.results else None
+        self.apply(out)
+        if result is None:
+            return False, 6
+        return result.accepted, int(result.reason)
+
+    # -- plumbing --------------------------------------------------------------------------------
+    def _codes_from(self, role: str):  # type: ignore[no-untyped-def]
+        def handle(codes: dict[str, int]) -> None:
+            self.apply(self.ixl.receive(role, codes, self.now()))
+
+        return handle
+
+    def _link_of(self, role: str):  # type: ignore[no-untyped-def]
+        def handle(up: bool) -> None:
+            self.apply(self.ixl.link_state(role, up, self.now()))
+
+        return handle
+
+    def apply(self, out: IxlOutput) -> None:
+        for role, changes in (("atc", out.atc), ("io", out.io)):
+            if changes and role in self.ports:
+                self.ports[role].update(changes)
+        if out.ctc and self.client is not None:
+            self.client.indicate([(self.ctc_chart.number_of(n), v) for n, v in out.ctc])
+        for e in out.events:
+            self.note(e.kind, e.text)
+        self.arm(self.ixl.next_deadline())
+
+    def tick(self) -> None:
+        self.apply(self.ixl.tick(self.now()))
+
+    # -- life cycle ------------------------------------------------------------------------------
+    async def start(self) -> None:
+        await super().start()
+        ep = self.ctc_endpoint
+        if ep is not None:
+            self.client = IxlClient(self.station, ep.host, ep.port, self)
+            self.client.start()
+
+    async def tasks(self) -> list[asyncio.Task[None]]:
+        return [asyncio.ensure_future(p.run()) for p in self.ports.values()]
+
+    async def close(self) -> None:
+        for p in self.ports.values():
+            p.stop()
+        if self.client is not None:
+            await self.client.close()
+        await super().close()
+
+    def status(self) -> dict[str, Any]:
+        ixl = self.ixl
+        return {
+            **super().status(),
+            "station": self.station,
+            "mode": ixl.modes.mode.value,
+            "links": {r: p.up for r, p in self.ports.items()}
+            | {"ctc": bool(self.client and self.client.identified)},
+            "routes": {n: str(ixl.route_status(n)) for n in ixl.routes},
+            "points": {n: ixl.detection(n) for n in ixl.points},
+            "signals": {n: ixl.aspect(n) for n in ixl.signals},
+            "occupied": [t for t in ixl.tc_names if ixl.occupied(t)],
+            "ctc_state": dict(self.full_state()),
+        }
+
+    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
+        if obj.get("cmd") == "control":  # the local panel
+            out = self.ixl.local_control(obj["code"], int(obj.get("value", 1)), self.now())
+            self.apply(out)
+            r = out.results[0] if out.results else None
+            return {"ok": bool(r and r.accepted), "reason": int(r.reason) if r else 6}
+        return await super().command(obj)

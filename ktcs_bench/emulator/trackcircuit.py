@@ -1,0 +1,136 @@
+"""The track-circuit emulator process: owns the line (`atc.TrackCircuitModel`) and serves the
+rails -- positions in from trains, occupancy out to ATCs and trackside relays, each train the code
+under its antenna -- with injectable track-circuit failures."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ktcs_bench.atc.codes import AtcCode
+from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
+from ktcs_bench.emulator import jsonlines
+from ktcs_bench.emulator.device import Device
+from ktcs_bench.station.model import Line
+
+
+class TrackCircuitDevice(Device):
+    kind = "trackcircuit"
+
+    def __init__(
+        self,
+        name: str,
+        line: Line,
+        listen: tuple[str, int],
+        control: tuple[str, int] = ("127.0.0.1", 0),
+    ) -> None:
+        super().__init__(name, control)
+        self.model = TrackCircuitModel(line)
+        self.listen = listen
+        self.peers: set[jsonlines.Peer] = set()
+        self.trains: dict[str, jsonlines.Peer] = {}
+        self._server2: Any = None
+
+    def _occ(self, changes: dict[str, bool] | None = None) -> dict[str, int]:
+        src = self.model.occupancy() if changes is None else changes
+        return {k: int(v) for k, v in src.items()}
+
+    def _broadcast(self, changes: dict[str, bool]) -> None:
+        if changes:
+            msg = {"occupancy": self._occ(changes)}
+            for p in self.peers:
+                if p.info.get("role") in ("atc", "trackside", "observer"):
+                    p.send(msg)
+            self.note("occupancy", ", ".join(f"{k}={int(v)}" for k, v in sorted(changes.items())))
+        self._codes_to_trains()
+
+    def _codes_to_trains(self) -> None:
+        for train, peer in self.trains.items():
+            if train not in self.model.trains:
+                continue
+            code = self.model.code_for(train)
+            wire = None if code is None else [code.code, code.target_speed_kmh,
+                                              code.gradient_permille, code.target_distance_m]  # fmt: skip
+            if peer.info.get("last_code", "none") != wire:
+                peer.info["last_code"] = wire
+                peer.send({"code": wire, "tc": self.model.under_antenna(train)})
+
+    async def _rails(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any] | None:
+        if "hello" in obj and isinstance(obj["hello"], dict):
+            peer.info.update(obj["hello"])
+            self.peers.add(peer)
+            if peer.info.get("role") == "train" and peer.info.get("train"):
+                self.trains[str(peer.info["train"])] = peer
+            return {"occupancy": self._occ(), "full": True}
+        if "codes" in obj and isinstance(obj["codes"], dict):
+            codes = {}
+            for tc, v in obj["codes"].items():
+                try:
+                    codes[tc] = AtcCode(int(v[0]), float(v[1]), float(v[2]), float(v[3]))
+                except (TypeError, ValueError, IndexError):
+                    return {"error": f"bad code for {tc}"}
+            self.model.set_codes(codes)
+            self._codes_to_trains()
+            return None
+        if "position" in obj and isinstance(obj["position"], dict):
+            train = str(peer.info.get("train", peer.address))
+            pos = obj["position"]
+            try:
+                self.model.trains[train] = TrainPosition(
+                    train, float(pos["head"]), float(pos["tail"]), str(pos.get("track", "1"))
+                )
+            except (KeyError, TypeError, ValueError):
+                return {"error": "position needs head and tail in metres"}
+            self._broadcast(self.model.update(list(self.model.trains.values())))
+            return None
+        return await self.command(obj)
+
+    def _closed(self, peer: jsonlines.Peer) -> None:
+        self.peers.discard(peer)
+        train = peer.info.get("train")
+        if train is not None and self.trains.get(str(train)) is peer:
+            del self.trains[str(train)]
+            self.model.trains.pop(str(train), None)
+            self._broadcast(self.model.update(list(self.model.trains.values())))
+
+    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
+        """{"cmd": "fail", "tc", "kind"}, {"cmd": "clear", "tc"?}, {"cmd": "place", "train",
+        "head", "tail", "track"?} (a train with no process of its own), {"cmd": "remove", "train"}."""
+        cmd = obj.get("cmd")
+        try:
+            if cmd == "fail":
+                self._broadcast(self.model.fail(obj["tc"], obj["kind"]))
+            elif cmd == "clear":
+                self._broadcast(self.model.clear_fault(obj.get("tc")))
+            elif cmd == "place":
+                t = TrainPosition(str(obj["train"]), float(obj["head"]), float(obj["tail"]),
+                                  str(obj.get("track", "1")))  # fmt: skip
+                self.model.trains[t.train] = t
+                self._broadcast(self.model.update(list(self.model.trains.values())))
+            elif cmd == "remove":
+                self.model.trains.pop(str(obj["train"]), None)
+                self._broadcast(self.model.update(list(self.model.trains.values())))
+            else:
+                return await super().command(obj)
+        except (KeyError, ValueError) as exc:
+            return {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
+        return {"ok": True}
+
+    async def start(self) -> None:
+        await super().start()
+        host, port = self.listen
+        self._server2 = await jsonlines.serve(host, port, self._rails, self._closed)
+        sock = self._server2.sockets[0].getsockname()
+        self.ready_info["listen"] = f"{sock[0]}:{sock[1]}"
+
+    async def close(self) -> None:
+        if self._server2 is not None:
+            self._server2.close()
+        await super().close()
+
+    def status(self) -> dict[str, Any]:
+        return {
+            **super().status(),
+            "occupied": sorted(k for k, v in self.model.occupancy().items() if v),
+            "faults": dict(self.model.faults),
+            "trains": {k: [t.head_m, t.tail_m, t.track] for k, t in self.model.trains.items()},
+        }

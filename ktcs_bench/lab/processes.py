@@ -1,0 +1,127 @@
+"""Child processes of a lab: start a device with its command line, read its ready line, watch it,
+stop it (SIGTERM, then SIGKILL after a grace period), restart it with the same arguments."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from ktcs_bench.errors import PeerError
+
+READY_TIMEOUT = 30.0
+STOP_GRACE = 5.0
+
+
+@dataclass
+class Child:
+    name: str
+    argv: list[str]
+    log_path: Path
+    proc: subprocess.Popen[bytes] | None = None
+    ready: dict[str, Any] = field(default_factory=dict)
+    starts: int = 0
+    exit_code: int | None = None
+    _log: IO[bytes] | None = None
+
+    def start(self, env: dict[str, str] | None = None) -> dict[str, Any]:
+        """Start and wait for the ready line; PeerError if it dies or stays silent."""
+        self._log = open(self.log_path, "ab")  # noqa: SIM115 -- lives as long as the child
+        self.proc = subprocess.Popen(
+            self.argv, stdout=subprocess.PIPE, stderr=self._log, stdin=subprocess.DEVNULL,
+            env=env, start_new_session=True,
+        )  # fmt: skip
+        self.starts += 1
+        self.exit_code = None
+        line = _readline(self.proc, READY_TIMEOUT)
+        if line is None:
+            code = self.proc.poll()
+            self.stop()
+            tail = _tail(self.log_path)
+            raise PeerError(f"{self.name} did not start (exit {code}); its log ends:\n{tail}")
+        self.ready = json.loads(line)
+        # keep draining stdout so the child never blocks on a full pipe
+        threading.Thread(target=_drain, args=(self.proc,), daemon=True).start()
+        return self.ready
+
+    @property
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def poll(self) -> int | None:
+        """The exit code if it has exited since the last poll (a crash to report), else None."""
+        if self.proc is None or self.exit_code is not None:
+            return None
+        code = self.proc.poll()
+        if code is not None:
+            self.exit_code = code
+        return code
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            try:
+                self.proc.wait(STOP_GRACE)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait()
+        if self.proc is not None and self.proc.stdout is not None:
+            self.proc.stdout.close()
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+
+    def kill(self) -> None:
+        """SIGKILL, as a crash would (tests and `lab kill`)."""
+        if self.proc is not None and self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+
+
+def _readline(proc: subprocess.Popen[bytes], timeout: float) -> str | None:
+    assert proc.stdout is not None
+    result: list[bytes] = []
+    t = threading.Thread(target=lambda: result.append(proc.stdout.readline()), daemon=True)  # type: ignore[union-attr]
+    t.start()
+    t.join(timeout)
+    if not result or not result[0]:
+        return None
+    return result[0].decode(errors="replace")
+
+
+def _drain(proc: subprocess.Popen[bytes]) -> None:
+    try:
+        while proc.stdout is not None and proc.stdout.read(65536):
+            pass
+    except (OSError, ValueError):
+        pass
+
+
+def _tail(path: Path, lines: int = 15) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+    except OSError:
+        return ""
+
+
+def emulator_argv(*args: str) -> list[str]:
+    return [sys.executable, "-m", "ktcs_bench.cli.main", "emulator", *args]
+
+
+def wait_for(predicate: Any, timeout: float, step: float = 0.05) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(step)
+    return bool(predicate())

@@ -1,0 +1,308 @@
+"""`lab up`: start a lab's devices as processes, put taps in its links, watch them, report status.
+
+Order of start: the track-circuit emulator (the rails), the CTC (the Type II server), the taps
+(a pty pair per Type I end; a TCP proxy per Type II link), then each station's ATC and trackside
+I/O, then its IXL. Every device is `ktcs-bench emulator KIND ...` -- the same command a user runs
+to put one device on another machine -- so the lab assumes nothing the devices do not.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ktcs_bench.capture import open_writer
+from ktcs_bench.emulator import jsonlines
+from ktcs_bench.errors import UsageError
+from ktcs_bench.lab.processes import Child, emulator_argv
+from ktcs_bench.lab.topology import Lab, LinkSpec
+from ktcs_bench.tap import PtyTap, TcpTap
+from ktcs_bench.tap.link import Tap
+from ktcs_bench.tap.registry import announce, run_dir, withdraw
+
+log = logging.getLogger("ktcs_bench.lab")
+
+
+def lab_dir(name: str) -> Path:
+    return run_dir() / "labs" / name
+
+
+def state_file(name: str) -> Path:
+    return lab_dir(name) / "lab.json"
+
+
+@dataclass
+class LabRunner:
+    lab: Lab
+    unpaced: bool = False
+    capture: bool = True
+    children: dict[str, Child] = field(default_factory=dict)
+    taps: dict[str, Tap] = field(default_factory=dict)
+    endpoints: dict[str, dict[str, str]] = field(default_factory=dict)  # device -> role -> endpoint
+    control_address: str = ""
+    crashed: dict[str, int] = field(default_factory=dict)
+    notices: list[str] = field(default_factory=list)
+    stop_requested: asyncio.Event = field(default_factory=asyncio.Event)
+
+    @property
+    def dir(self) -> Path:
+        return lab_dir(self.lab.name)
+
+    # -- start -------------------------------------------------------------------------------
+    def _argv(self, name: str) -> list[str]:
+        d = self.lab.devices[name]
+        argv = emulator_argv(d.kind, "--lab", str(self.lab.file), "--name", name,
+                             "--control", f"{d.host}:0")  # fmt: skip
+        if d.station is not None:
+            argv += ["--station", str(d.station)]
+        if self.unpaced:
+            argv.append("--unpaced")
+        for role, ep in self.endpoints.get(name, {}).items():
+            argv += ["--link", f"{role}={ep}"]
+        if d.kind == "trackcircuit":
+            argv += ["--listen", f"{d.host}:{d.options.get('port', 0)}"]
+        if d.kind == "ctc":
+            argv += ["--listen", f"{d.host}:{self.lab.type2_port}"]
+        if d.kind == "train" and "train" in d.options:
+            argv += ["--train", str(d.options["train"])]
+        return argv
+
+    async def _start(self, name: str) -> dict[str, Any]:
+        child = self.children.get(name) or Child(name, [], self.dir / "logs" / f"{name}.log")
+        child.argv = self._argv(name)
+        self.children[name] = child
+        ready = await asyncio.to_thread(child.start)
+        self.crashed.pop(name, None)
+        return ready
+
+    def _tap_for(self, link: LinkSpec, ctc_address: tuple[str, int] | None) -> Tap:
+        names = (link.a, link.b)
+        writers = []
+        if self.capture:
+            kind = "type1" if link.type == "type1" else "type2"
+            writers.append(open_writer(str(self.dir / "captures" / f"{link.name}.hex"), link=kind))
+        if link.type == "type1":
+            tap: Tap = PtyTap(names=names, profile=self.lab.type1_profile, name=link.name,
+                              writers=writers)  # fmt: skip
+        else:
+            assert ctc_address is not None
+            host = self.lab.devices[link.a].host
+            tap = TcpTap((host, 0), ctc_address, names=names, profile=self.lab.type2_profile,
+                         name=link.name, writers=writers)  # fmt: skip
+        tap.start()
+        announce(link.name, {"name": link.name, **tap.info()})
+        return tap
+
+    async def up(self) -> None:
+        if state_file(self.lab.name).exists():
+            other = json.loads(state_file(self.lab.name).read_text())
+            if _pid_alive(int(other.get("pid", 0))):
+                raise UsageError(
+                    f"lab {self.lab.name} is already up (pid {other['pid']}); `ktcs-bench lab down` first"
+                )
+        (self.dir / "logs").mkdir(parents=True, exist_ok=True)
+        (self.dir / "captures").mkdir(parents=True, exist_ok=True)
+        lab = self.lab
+        rails = None
+        for tc in lab.of_kind("trackcircuit"):
+            rails = (await self._start(tc.name))["listen"]
+        ctc_address = None
+        for ctc in lab.of_kind("ctc"):
+            host, _, port = (await self._start(ctc.name))["listen"].rpartition(":")
+            ctc_address = (host, int(port))
+        for link in lab.links:
+            a, b = link.a, link.b
+            ea, eb = self.endpoints.setdefault(a, {}), self.endpoints.setdefault(b, {})
+            role_b, role_a = lab.peer_role(link, a), lab.peer_role(link, b)
+            if link.type == "type2":
+                if ctc_address is None:
+                    raise UsageError(f"link {link.name}: the lab has no CTC")
+                if link.tap:
+                    tap = self.taps[link.name] = self._tap_for(link, ctc_address)
+                    assert isinstance(tap, TcpTap) and tap.listen_address is not None
+                    ea[role_b] = f"tcp://{tap.listen_address[0]}:{tap.listen_address[1]}"
+                else:
+                    ea[role_b] = f"tcp://{ctc_address[0]}:{ctc_address[1]}"
+            elif link.tap:
+                tap = self.taps[link.name] = self._tap_for(link, None)
+                assert isinstance(tap, PtyTap)
+                ea[role_b], eb[role_a] = tap.paths[a], tap.paths[b]
+            else:
+                ea[role_b] = "pty"  # the IXL makes the pty; the peer gets its path below
+        if rails is not None:
+            for d in lab.devices.values():
+                if d.kind in ("atc", "trackside", "train"):
+                    self.endpoints.setdefault(d.name, {})["rails"] = f"tcp://{rails}"
+        order = [d.name for d in lab.devices.values() if d.kind in ("atc", "trackside")]
+        untapped = {lk.b: lk for lk in lab.links if lk.type == "type1" and not lk.tap}
+        for name in [n for n in order if n not in untapped]:
+            await self._start(name)
+        for ixl in lab.of_kind("ixl"):
+            ready = await self._start(ixl.name)
+            for peer, lk in untapped.items():
+                if lk.a == ixl.name:
+                    role = lab.peer_role(lk, ixl.name)
+                    self.endpoints.setdefault(peer, {})["ixl"] = ready["ptys"][role]
+                    await self._start(peer)
+        for d in lab.of_kind("train"):
+            await self._start(d.name)
+        await self._serve_control()
+        self._write_state()
+
+    # -- control port and state file ---------------------------------------------------------------
+    async def _serve_control(self) -> None:
+        self._control = await jsonlines.serve("127.0.0.1", 0, self._handle)
+        host, port = self._control.sockets[0].getsockname()[:2]
+        self.control_address = f"{host}:{port}"
+
+    def _write_state(self) -> None:
+        state = {
+            "lab": self.lab.name,
+            "file": str(self.lab.file),
+            "pid": os.getpid(),
+            "control": self.control_address,
+            "devices": {
+                n: {"pid": c.proc.pid if c.proc else None, **c.ready}
+                for n, c in self.children.items()
+            },
+            "links": self.link_map(),
+        }
+        path = state_file(self.lab.name)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(state, indent=1))
+        tmp.replace(path)
+
+    async def _handle(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any]:
+        cmd = obj.get("cmd")
+        try:
+            if cmd == "status":
+                return {"ok": True, "status": await self.status()}
+            if cmd == "map":
+                return {"ok": True, "links": self.link_map()}
+            if cmd == "restart":
+                await self.restart(str(obj["device"]))
+                return {"ok": True}
+            if cmd == "kill":
+                self._child(str(obj["device"])).kill()
+                return {"ok": True}
+            if cmd == "down":
+                self.stop_requested.set()
+                return {"ok": True}
+        except (KeyError, UsageError) as exc:
+            return {"ok": False, "error": str(exc)}
+        return {"ok": False, "error": f"unknown command {cmd!r} (status, map, restart, kill, down)"}
+
+    def _child(self, name: str) -> Child:
+        if name not in self.children:
+            raise UsageError(
+                f"no device {name!r} in lab {self.lab.name} ({', '.join(self.children)})"
+            )
+        return self.children[name]
+
+    async def restart(self, name: str) -> None:
+        child = self._child(name)
+        await asyncio.to_thread(child.stop)
+        await self._start(name)
+        self.notices.append(f"{name} restarted")
+        self._write_state()
+
+    # -- watching ----------------------------------------------------------------------------------
+    def check_children(self) -> list[str]:
+        """Newly crashed devices (reported once each)."""
+        out = []
+        for name, child in self.children.items():
+            code = child.poll()
+            if code is not None and name not in self.crashed:
+                self.crashed[name] = code
+                out.append(name)
+        return out
+
+    async def device_status(self, name: str) -> dict[str, Any] | None:
+        child = self.children[name]
+        if not child.alive or "control" not in child.ready:
+            return None
+        host, _, port = child.ready["control"].rpartition(":")
+        try:
+            answer = await jsonlines.request(host, int(port), {"cmd": "status"}, timeout=2.0)
+        except (OSError, TimeoutError, ValueError):
+            return None
+        status = answer.get("status")
+        return status if isinstance(status, dict) else None
+
+    async def status(self) -> dict[str, Any]:
+        names = list(self.children)
+        results = await asyncio.gather(*(self.device_status(n) for n in names))
+        devices = dict(zip(names, results, strict=True))
+        ctc = next((s for n, s in devices.items() if self.lab.devices[n].kind == "ctc" and s), None)
+        return {
+            "lab": self.lab.name,
+            "stations": (ctc or {}).get("stations", {}),
+            "devices": {
+                n: {"alive": self.children[n].alive, "crashed": self.crashed.get(n), "status": s}
+                for n, s in devices.items()
+            },
+            "taps": {n: t.status() for n, t in self.taps.items()},
+        }
+
+    def link_map(self) -> list[dict[str, Any]]:
+        out = []
+        for link in self.lab.links:
+            tap = self.taps.get(link.name)
+            entry: dict[str, Any] = {"link": link.name, "type": link.type, "a": link.a, "b": link.b}
+            if isinstance(tap, PtyTap):
+                entry.update(a_end=tap.paths[link.a], b_end=tap.paths[link.b])
+            elif isinstance(tap, TcpTap) and tap.listen_address:
+                entry.update(a_end=f"tcp://{tap.listen_address[0]}:{tap.listen_address[1]}",
+                             b_end=f"tcp://{tap.target[0]}:{tap.target[1]}")  # fmt: skip
+            else:
+                entry.update(
+                    a_end=self.endpoints.get(link.a, {}).get(self.lab.peer_role(link, link.a), "")
+                )
+            if tap is not None and tap.control_address:
+                entry["tap"] = f"{tap.control_address[0]}:{tap.control_address[1]}"
+            if self.capture:
+                entry["capture"] = str(self.dir / "captures" / f"{link.name}.hex")
+            out.append(entry)
+        for name, child in self.children.items():
+            if "listen" in child.ready:
+                out.append({"link": f"{name} listens", "type": self.lab.devices[name].kind,
+                            "a_end": child.ready["listen"]})  # fmt: skip
+        return out
+
+    # -- stop --------------------------------------------------------------------------------------
+    async def down(self) -> None:
+        ixls = [n for n, c in self.children.items() if self.lab.devices[n].kind == "ixl"]
+        others = [n for n in self.children if n not in ixls]
+        await asyncio.gather(*(asyncio.to_thread(self.children[n].stop) for n in ixls))
+        await asyncio.gather(*(asyncio.to_thread(self.children[n].stop) for n in others))
+        for name, tap in self.taps.items():
+            tap.stop()  # closes its pty pairs: the ptys are gone
+            withdraw(name)
+        if getattr(self, "_control", None) is not None:
+            self._control.close()
+        try:
+            state_file(self.lab.name).unlink()
+        except FileNotFoundError:
+            pass
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def clean_run_dir(name: str) -> None:
+    shutil.rmtree(lab_dir(name), ignore_errors=True)

@@ -1,0 +1,190 @@
+"""The lab file: devices (kind, station, host), Type I / Type II links and whether a tap sits in
+each, the line they run on and the link settings. Every problem is a ConfigError naming the file,
+the key path and what is wrong."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ktcs_bench.datafiles import data_dir, load_yaml
+from ktcs_bench.errors import ConfigError
+from ktcs_bench.station.loader import load_line
+from ktcs_bench.station.model import Line
+
+KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
+STATION_KINDS = ("ixl", "atc", "trackside")
+ROLE = {"atc": "atc", "trackside": "io", "ctc": "ctc", "ixl": "ixl"}
+
+
+@dataclass(frozen=True)
+class DeviceSpec:
+    name: str
+    kind: str
+    station: int | None = None
+    host: str = "127.0.0.1"
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LinkSpec:
+    name: str
+    type: str  # type1 | type2
+    a: str  # the IXL
+    b: str  # its peer
+    tap: bool = True
+
+
+@dataclass(frozen=True)
+class Lab:
+    name: str
+    file: Path
+    line_file: Path
+    devices: dict[str, DeviceSpec]
+    links: tuple[LinkSpec, ...]
+    type1_profile: str = "ktcs-type1"
+    line_rate: float | None = 9600.0
+    longest_frame_data: int | None = 132
+    type2_profile: str = "ktcs-type2"
+    type2_port: int = 0
+    console_port: int | None = None
+    ixl_mode: str = "center"
+
+    def of_kind(self, kind: str) -> list[DeviceSpec]:
+        return [d for d in self.devices.values() if d.kind == kind]
+
+    @property
+    def stations(self) -> list[int]:
+        return sorted(d.station for d in self.of_kind("ixl") if d.station is not None)
+
+    def links_of(self, device: str) -> list[LinkSpec]:
+        return [lk for lk in self.links if device in (lk.a, lk.b)]
+
+    def peer_role(self, link: LinkSpec, device: str) -> str:
+        """The role the other end plays for `device` (ctc, atc, io, ixl)."""
+        other = link.b if link.a == device else link.a
+        return ROLE[self.devices[other].kind]
+
+    def load_line(self) -> Line:
+        return load_line(self.line_file)
+
+
+def default_lab_path() -> Path:
+    return data_dir("emulators") / "labs" / "reference.yaml"
+
+
+def resolve_lab_path(name: str | None) -> Path:
+    """A lab by path, or by name from the shipped `emulators/labs/`."""
+    if name is None:
+        return default_lab_path()
+    p = Path(name)
+    if p.is_file():
+        return p
+    shipped = data_dir("emulators") / "labs" / f"{name}.yaml"
+    if shipped.is_file():
+        return shipped
+    raise ConfigError(name, "", "no such lab file (and no shipped lab of that name)")
+
+
+def load_lab(path: str | Path | None = None) -> Lab:
+    file = Path(path) if path is not None else default_lab_path()
+    raw = load_yaml(file)
+
+    def fail(place: str, problem: str) -> ConfigError:
+        return ConfigError(file, place, problem)
+
+    if not isinstance(raw, dict):
+        raise fail("", "a lab file is a mapping (lab, line, devices, links)")
+    for key in ("lab", "line", "devices", "links"):
+        if key not in raw:
+            raise fail(key, "missing key")
+    line_file = (file.parent / str(raw["line"])).resolve()
+    if not line_file.is_file():
+        raise fail("line", f"no such line file: {line_file}")
+    devices: dict[str, DeviceSpec] = {}
+    if not isinstance(raw["devices"], dict) or not raw["devices"]:
+        raise fail("devices", "must be a mapping NAME -> {kind, station, host}")
+    for dname, spec in raw["devices"].items():
+        name = str(dname)
+        place = f"devices.{name}"
+        if not isinstance(spec, dict):
+            raise fail(place, "must be a mapping with at least 'kind'")
+        kind = spec.get("kind")
+        if kind not in KINDS:
+            raise fail(f"{place}.kind", f"must be one of {', '.join(KINDS)}, not {kind!r}")
+        station = spec.get("station")
+        if kind in STATION_KINDS and not isinstance(station, int):
+            raise fail(f"{place}.station", f"a {kind} needs its station number")
+        host = spec.get("host", "127.0.0.1")
+        if not isinstance(host, str):
+            raise fail(f"{place}.host", "must be an address")
+        options = {k: v for k, v in spec.items() if k not in ("kind", "station", "host")}
+        devices[name] = DeviceSpec(name, kind, station, host, options)
+    for kind in ("ctc", "trackcircuit"):
+        count = sum(1 for d in devices.values() if d.kind == kind)
+        if count > 1:
+            raise fail("devices", f"at most one {kind} device, found {count}")
+    links: list[LinkSpec] = []
+    if not isinstance(raw["links"], list):
+        raise fail("links", "must be a list of {name, type, a, b, tap}")
+    seen: dict[tuple[str, str], str] = {}
+    for i, lk in enumerate(raw["links"]):
+        place = f"links[{i}]"
+        if not isinstance(lk, dict):
+            raise fail(place, "must be a mapping {name, type, a, b, tap}")
+        for key in ("name", "type", "a", "b"):
+            if key not in lk:
+                raise fail(f"{place}.{key}", "missing key")
+        a, b, typ = str(lk["a"]), str(lk["b"]), lk["type"]
+        for end in ("a", "b"):
+            if str(lk[end]) not in devices:
+                raise fail(f"{place}.{end}", f"unknown device {lk[end]!r}")
+        if devices[a].kind != "ixl":
+            raise fail(f"{place}.a", "end a of every link is an IXL")
+        peer = devices[b].kind
+        allowed = {"type1": ("atc", "trackside"), "type2": ("ctc",)}.get(typ)
+        if allowed is None:
+            raise fail(f"{place}.type", f"must be type1 or type2, not {typ!r}")
+        if peer not in allowed:
+            raise fail(
+                f"{place}.b",
+                f"a {typ} link from an IXL goes to {' or '.join(allowed)}, not a {peer}",
+            )
+        if peer != "ctc" and devices[b].station != devices[a].station:
+            raise fail(
+                f"{place}.b",
+                f"{b} belongs to station {devices[b].station}, {a} to {devices[a].station}",
+            )
+        role_key = (a, ROLE[peer])
+        if role_key in seen:
+            raise fail(place, f"{a} already has a {ROLE[peer]} link ({seen[role_key]})")
+        seen[role_key] = str(lk["name"])
+        links.append(LinkSpec(str(lk["name"]), typ, a, b, bool(lk.get("tap", True))))
+    t1 = raw.get("type1") or {}
+    t2 = raw.get("type2") or {}
+    console = raw.get("console") or {}
+    mode = raw.get("ixl_mode", "center")
+    if mode not in ("center", "local"):
+        raise fail("ixl_mode", f"must be center or local, not {mode!r}")
+    lab = Lab(
+        name=str(raw["lab"]),
+        file=file.resolve(),
+        line_file=line_file,
+        devices=devices,
+        links=tuple(links),
+        type1_profile=str(t1.get("profile", "ktcs-type1")),
+        line_rate=t1.get("line_rate", 9600.0),
+        longest_frame_data=t1.get("longest_frame_data", 132),
+        type2_profile=str(t2.get("profile", "ktcs-type2")),
+        type2_port=int(t2.get("port", 0)),
+        console_port=console.get("port"),
+        ixl_mode=mode,
+    )
+    line = lab.load_line()
+    for d in devices.values():
+        if d.station is not None and d.station not in line.stations:
+            raise fail(
+                f"devices.{d.name}.station", f"station {d.station} is not on the line {line.name}"
+            )
+    return lab
