@@ -52,6 +52,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("--unpaced", action="store_true", help="Type I: no line-rate pacing")
     p.add_argument("--train", help="train: the train id / scenario train to run")
+    p.add_argument("--console", metavar="HOST:PORT", help="ctc: serve the web console here")
+    p.add_argument("--tap", action="append", default=[], help="ctc: a tap the console may monitor")
+    p.add_argument(
+        "--fault", action="append", default=[], metavar="VARIANT",
+        help="break one protocol rule on purpose, for the conformance suite to catch "
+        "(see `ktcs-bench conformance --list-faults`)",
+    )  # fmt: skip
     p.add_argument("-v", "--verbose", action="store_true", help="log every event to stderr")
     p.set_defaults(handler=run)
 
@@ -127,7 +134,9 @@ def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         from ktcs_bench.emulator.ctc import CtcDevice
 
         listen = _hostport(args.listen or f"127.0.0.1:{lab.type2_port}", "--listen")
-        return CtcDevice(name, line, lab.stations, listen, control=control)
+        console = _hostport(args.console, "--console") if args.console else None
+        return CtcDevice(name, line, lab.stations, listen, control=control, console=console,
+                         taps=args.tap)  # fmt: skip
     if kind == "train":
         from ktcs_bench.emulator.train import TrainDevice
 

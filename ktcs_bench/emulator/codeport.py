@@ -14,6 +14,7 @@ import logging
 from collections.abc import Callable, Mapping
 
 from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.endpoints import Endpoint
 from ktcs_bench.errors import KtcsError
 from ktcs_bench.transport.aio import LinkRunner
@@ -47,12 +48,13 @@ class CodePort:
         profile: str = "ktcs-type1",
         config: LinkConfig | None = None,
         on_event: Callable[[str, Event], None] | None = None,
+        faults: frozenset[str] = frozenset(),
     ) -> None:
         self.name = name
         self.tx_chart, self.rx_chart = tx_chart, rx_chart
         self.state = {c.name: int(state.get(c.name, 0)) for c in tx_chart.codes}
         self.on_codes, self.on_link, self.on_event = on_codes, on_link, on_event
-        self.profile, self.config = profile, config
+        self.profile, self.config, self.faults = profile, config, faults
         self.endpoint = endpoint
         if endpoint.kind not in ("pty", "serial"):
             raise ValueError(f"a Type I link needs a serial endpoint or pty, not {endpoint}")
@@ -68,7 +70,9 @@ class CodePort:
         self._stopping = False
 
     def _new_link(self) -> Type1Link:
-        return Type1Link(self.profile, self.config, self.name, state_provider=self._statuses)
+        return variants.type1_link(
+            self.faults, self.profile, self.config, self.name, self._statuses
+        )
 
     async def run(self) -> None:
         """Run the link; a serial endpoint that fails (the peer's pty went away, a USB adapter

@@ -44,6 +44,8 @@ class CtcDevice(Device):
         allowed_sources: list[str] | None = None,
         control: tuple[str, int] = ("127.0.0.1", 0),
         ssl: Any = None,
+        console: tuple[str, int] | None = None,
+        taps: list[str] | None = None,
     ) -> None:
         super().__init__(name, control)
         self.line = line
@@ -60,6 +62,9 @@ class CtcDevice(Device):
         )
         self.server = CtcServer(policy, host=listen[0], port=listen[1], ssl=ssl)
         self.command_log: list[dict[str, Any]] = []
+        self.console_address = console
+        self.taps = taps or []
+        self.console: Any = None
 
     # -- state as names ----------------------------------------------------------------------------
     def named(self, st: int) -> dict[str, int]:
@@ -183,8 +188,19 @@ class CtcDevice(Device):
         await super().start()
         await self.server.start()
         self.ready_info["listen"] = f"{self.listen[0]}:{self.server.port}"
+        if self.console_address is not None:  # the web console (seed 004 Fig. 8), same process
+            from ktcs_bench.console.server import ConsoleServer
+
+            host, port = self.console_address
+            self.console = ConsoleServer(
+                self.server, self.line, taps=self.taps, host=host, port=port
+            )
+            await self.console.start()
+            self.ready_info["console"] = self.console.url
 
     async def close(self) -> None:
+        if self.console is not None:
+            await self.console.close()
         await self.server.close()
         await super().close()
 

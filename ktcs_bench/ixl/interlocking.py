@@ -508,17 +508,21 @@ class Interlocking:
             self._event(now, "route", f"route {rs.route.name} fully released")
 
     def _drive_points(self, rs: RouteState, now: float) -> None:
+        """Demand every point of the route in its position; SET once all are detected there.
+
+        The demand is corrected even where detection already agrees: a point still demanded the
+        other way (an earlier individual control) would otherwise start moving under the route.
+        """
         in_place = True
         for s in rs.route.all_points:
-            if self.detection(s.point) == s.position:
-                continue
-            in_place = False
             ps = self.points[s.point]
-            if ps.demanded != s.position and not any(
-                self.occupied(tc) for tc in ps.point.track_circuits
-            ):
-                ps.demanded = s.position
-                self._event(now, "point", f"point {s.point} commanded {s.position}")
+            if ps.demanded != s.position:
+                in_place = False
+                if not any(self.occupied(tc) for tc in ps.point.track_circuits):
+                    ps.demanded = s.position
+                    self._event(now, "point", f"point {s.point} commanded {s.position}")
+            if self.detection(s.point) != s.position:
+                in_place = False
         if in_place and rs.status is RouteStatus.SETTING:
             rs.status = RouteStatus.SET
             self._event(now, "route", f"route {rs.route.name} set: points detected")
@@ -535,6 +539,8 @@ class Interlocking:
         for s in route.all_points:
             if self.detection(s.point) != s.position:
                 why.append(f"point {s.point} not detected {s.position}")
+            if self.points[s.point].demanded != s.position:
+                why.append(f"point {s.point} not demanded {s.position}")
         why += [f"{tc} occupied" for tc in route.all_track_circuits if self.occupied(tc)]
         if not self._overlap_locked(rs):
             why.append("overlap not locked")

@@ -42,6 +42,7 @@ class LabRunner:
     lab: Lab
     unpaced: bool = False
     capture: bool = True
+    console: bool = True
     children: dict[str, Child] = field(default_factory=dict)
     taps: dict[str, Tap] = field(default_factory=dict)
     endpoints: dict[str, dict[str, str]] = field(default_factory=dict)  # device -> role -> endpoint
@@ -69,6 +70,9 @@ class LabRunner:
             argv += ["--listen", f"{d.host}:{d.options.get('port', 0)}"]
         if d.kind == "ctc":
             argv += ["--listen", f"{d.host}:{self.lab.type2_port}"]
+            if self.lab.console_port is not None and self.console:
+                argv += ["--console", f"{d.host}:{self.lab.console_port}"]
+                argv += [arg for lk in self.lab.links if lk.tap for arg in ("--tap", lk.name)]
         if d.kind == "train" and "train" in d.options:
             argv += ["--train", str(d.options["train"])]
         return argv
