@@ -1,0 +1,194 @@
+"""`ktcs-bench ctc`: the CTC operator console in a terminal -- route set/cancel, points, signals,
+center/local requests, station views -- talking to a running CTC's control port."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import shlex
+import sys
+import time
+from typing import Any
+
+from ktcs_bench.cli._common import use_colour
+from ktcs_bench.emulator import jsonlines
+from ktcs_bench.errors import PeerError, UsageError
+
+HELP_TEXT = """\
+commands:
+  route set ST ENTRY EXIT        e.g. route set 20 S1 S11   (signals as S1, S01 or 01)
+  route cancel ST ENTRY EXIT
+  point normal|reverse ST POINT  e.g. point reverse 20 31
+  signal stop|release ST SIGNAL
+  mode center|local ST           center: request center mode (CMR handshake)
+  control ST CODE [VALUE]        any CTC->IXL chart code by name
+  show ST                        mode, routes, points, signals, occupancy, link
+  status                         every station
+  log                            the CTC's command log
+  help, quit
+"""
+EPILOG = """\
+examples:
+  ktcs-bench ctc                                  # interactive, against the running reference lab
+  ktcs-bench ctc route set 18 01 11               # one command
+  ktcs-bench ctc --script morning.txt --json      # scripted controls, JSON results
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "ctc", help="the CTC operator console (route set, points, modes, station views)",
+        description="Operate a running CTC: every command goes to the IXL as a CONTROL and its "
+        "CONTROL_RESULT (accepted, or rejected with the reason) comes back. " + HELP_TEXT,
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )  # fmt: skip
+    p.add_argument("command", nargs="*", help="one command (else: interactive, or --script)")
+    p.add_argument("--lab", default="reference", help="the running lab whose CTC to use")
+    p.add_argument("--address", help="HOST:PORT of a CTC control port (instead of --lab)")
+    p.add_argument("--script", help="a file of commands, one a line (# comments)")
+    p.add_argument("--json", action="store_true", help="results as JSON lines")
+    p.set_defaults(handler=run)
+
+
+def parse(words: list[str]) -> dict[str, Any]:
+    """Operator words -> a control-port command. UsageError with a hint when malformed."""
+    if not words:
+        raise UsageError("empty command")
+    w = [x.lower() for x in words]
+    try:
+        if w[0] == "route" and w[1] in ("set", "cancel") and len(w) == 5:
+            return {"cmd": "route", "action": w[1], "station": int(w[2]), "entry": words[3],
+                    "exit": words[4]}  # fmt: skip
+        if w[0] == "point" and w[1] in ("normal", "reverse") and len(w) == 4:
+            return {"cmd": "point", "position": w[1], "station": int(w[2]), "point": words[3]}
+        if w[0] == "signal" and w[1] in ("stop", "release") and len(w) == 4:
+            return {"cmd": "signal", "action": w[1], "station": int(w[2]), "signal": words[3]}
+        if w[0] == "mode" and w[1] in ("center", "local") and len(w) == 3:
+            return {"cmd": "mode", "mode": w[1], "station": int(w[2])}
+        if w[0] == "control" and len(w) in (3, 4):
+            value = int(w[3], 0) if len(w) == 4 else 1
+            return {
+                "cmd": "control",
+                "station": int(w[1]),
+                "code": words[2].upper(),
+                "value": value,
+            }
+        if w[0] == "show" and len(w) == 2:
+            return {"cmd": "show", "station": int(w[1])}
+        if w[0] in ("status", "log") and len(w) == 1:
+            return {"cmd": w[0]}
+    except (IndexError, ValueError):
+        pass
+    raise UsageError(f"cannot read {' '.join(words)!r}; type `help`")
+
+
+def _address(args: argparse.Namespace) -> tuple[str, int]:
+    if args.address:
+        host, _, port = args.address.rpartition(":")
+        return host or "127.0.0.1", int(port)
+    from ktcs_bench.lab.runner import state_file
+
+    path = state_file(args.lab)
+    if not path.exists():
+        raise UsageError(
+            f"lab {args.lab} is not running; start it (`ktcs-bench lab up`) or give --address"
+        )
+    state = json.loads(path.read_text())
+    ctc = next((d for d in state["devices"].values() if d.get("kind") == "ctc"), None)
+    if ctc is None:
+        raise UsageError(f"lab {args.lab} has no CTC")
+    host, _, port = ctc["control"].rpartition(":")
+    return host, int(port)
+
+
+def show_text(answer: dict[str, Any]) -> str:
+    s = answer["summary"]
+    lines = [f"station {s['station']}: {s['mode']} mode, link {s['link']}"
+             + (" (center requested)" if s.get("center_requested") else "")]  # fmt: skip
+    lines.append("  routes   " + (", ".join(s["routes"]) or "-"))
+    lines.append("  points   " + " ".join(f"{k}:{v}" for k, v in s["points"].items()))
+    lines.append("  signals  " + " ".join(f"{k}:{v}" for k, v in s["signals"].items()))
+    lines.append("  occupied " + (" ".join(s["occupied"]) or "-"))
+    return "\n".join(lines)
+
+
+async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -> int:
+    host, port = _address(args)
+    colour = use_colour(sys.stdout)
+    failed = False
+
+    async def one(words: list[str]) -> None:
+        nonlocal failed
+        if words and words[0].lower() == "help":
+            print(HELP_TEXT)
+            return
+        obj = parse(words)
+        try:
+            answer = await jsonlines.request(host, port, obj, timeout=30)
+        except OSError as exc:
+            raise PeerError(f"the CTC at {host}:{port} does not answer: {exc}") from None
+        stamp = time.strftime("%H:%M:%S")
+        if args.json:
+            print(
+                json.dumps({"time": time.time(), "command": " ".join(words), **answer}), flush=True
+            )
+        elif obj["cmd"] == "show" and answer.get("ok"):
+            print(show_text(answer))
+        elif obj["cmd"] == "status" and answer.get("ok"):
+            for st in answer["status"].get("stations", {}).values():
+                print(show_text({"summary": st}))
+        elif obj["cmd"] == "log":
+            for e in answer.get("log", []):
+                print(
+                    f"{time.strftime('%H:%M:%S', time.localtime(e['time']))} {e['command']} -> {e.get('result')}"
+                )
+        else:
+            text = (
+                answer.get("result")
+                or answer.get("error")
+                or ("ok" if answer.get("ok") else "failed")
+            )
+            ok = bool(answer.get("ok"))
+            mark = ("\x1b[32m" if ok else "\x1b[31m") if colour else ""
+            reset = "\x1b[0m" if colour else ""
+            print(
+                f"{stamp} {' '.join(words)} -> {mark}{text}{reset}",
+                flush=True,
+            )
+        if obj["cmd"] not in ("show", "status", "log") and not answer.get("ok"):
+            failed = True
+
+    if commands is not None:
+        for words in commands:
+            await one(words)
+        return 1 if failed else 0
+    print(f"CTC at {host}:{port}. Type `help` for commands, `quit` to leave.")
+    while True:
+        try:
+            line = await asyncio.to_thread(input, "ctc> ")
+        except EOFError:
+            return 0
+        words = shlex.split(line)
+        if not words:
+            continue
+        if words[0].lower() in ("quit", "exit"):
+            return 0
+        try:
+            await one(words)
+        except UsageError as exc:
+            print(f"error: {exc}")
+
+
+def run(args: argparse.Namespace) -> int:
+    commands: list[list[str]] | None = None
+    if args.script:
+        try:
+            text = open(args.script, encoding="utf-8").read()
+        except OSError as exc:
+            raise UsageError(f"cannot read {args.script}: {exc.strerror}") from None
+        commands = [shlex.split(ln.split("#", 1)[0]) for ln in text.splitlines()]
+        commands = [c for c in commands if c]
+    elif args.command:
+        commands = [args.command]
+    return asyncio.run(_session(args, commands))
