@@ -1,0 +1,285 @@
+"""SPEC §6.2 invariants under random command and fault sequences (hypothesis state machine).
+
+The machine drives one Interlocking directly, playing an adversarial field: track circuits go
+occupied and clear at random, detection is reported in any state (arrived, moving, lost, even the
+wrong position), links drop, time jumps, and trains run through cleared routes. After every step
+the invariants are checked against what the test itself fed in, not the IXL's own view:
+1. no track circuit or point is held by two routes; declared-conflicting routes are never both
+   locked as a whole; a route holds only its own elements;
+2. a point's demand changes only while it is free of routes (or held by the route being set,
+   towards that route's position) and its track circuits are clear;
+3. a signal shows proceed only with its route set, every point detected as required, every track
+   circuit of route and overlap clear, the overlap locked, both links up, and no stop hold;
+4. is 3 checked after every single input: a failing condition puts the signal to stop at once.
+"""
+
+from __future__ import annotations
+
+from hypothesis import settings
+from hypothesis import strategies as st
+from hypothesis.stateful import (
+    RuleBasedStateMachine,
+    initialize,
+    invariant,
+    rule,
+    run_state_machine_as_test,
+)
+
+from ktcs_bench.charts import names as n
+from ktcs_bench.ixl import Interlocking, Mode, RouteStatus
+from ktcs_bench.ixl.interlocking import IxlOutput
+from ktcs_bench.station import load_line
+
+LINE = load_line()
+STEPS = {"count": 0}
+DETECTIONS = ("normal", "reverse", "to_normal", "to_reverse", "none")
+BITS = {
+    "normal": {"SNI": 1, "SRN": 0, "SRI": 0, "SNR": 0},
+    "reverse": {"SNI": 0, "SRN": 0, "SRI": 1, "SNR": 0},
+    "to_normal": {"SNI": 0, "SRN": 1, "SRI": 0, "SNR": 0},
+    "to_reverse": {"SNI": 0, "SRN": 0, "SRI": 0, "SNR": 1},
+    "none": {"SNI": 0, "SRN": 0, "SRI": 0, "SNR": 0},
+}
+
+
+class InterlockingMachine(RuleBasedStateMachine):
+    def __init__(self) -> None:
+        super().__init__()
+        self.now = 0.0
+        self.trains: list[tuple[tuple[str, ...], int]] = []
+
+    @initialize(station=st.sampled_from(sorted(LINE.stations)))
+    def start(self, station: int) -> None:
+        self.view = LINE.view(station)
+        self.st = station
+        self.ixl = Interlocking(self.view, mode=Mode.CENTER)
+        self.tcs = [t.name for t in self.view.track_circuits]
+        self.points = [p.name for p in self.view.station.points]
+        self.routes = [r.name for r in self.view.station.routes]
+        self.signals = [s.name for s in self.view.station.lamp_signals]
+        self.occ = dict.fromkeys(self.tcs, False)
+        self.det = dict.fromkeys(self.points, "normal")
+        self.links = {"atc": True, "io": True}
+        self.held_stop: set[str] = set()
+        self.demand = {p: "normal" for p in self.points}
+        self.apply(self.ixl.link_state("atc", True, self.now))
+        self.apply(self.ixl.link_state("io", True, self.now))
+        atc = {tc: 0 for tc in self.tcs} | {n.izc(iv.name): 0 for iv in self.view.intervals}
+        self.apply(self.ixl.receive("atc", atc, self.now))
+        self.feed_detection(self.points)
+
+    # ---------------------------------------------------------------- helpers
+
+    def apply(self, out: IxlOutput) -> None:
+        """Check invariant 2 on every point demand the IXL changed in this output."""
+        for name, value in out.io:
+            kind, obj = name[:3], name[3 + len(str(self.st)) :]
+            if kind not in ("PNC", "PRC") or value != 1:
+                continue
+            position = "normal" if kind == "PNC" else "reverse"
+            if position == self.demand[obj]:
+                continue
+            self.demand[obj] = position
+            point = self.view.station.point(obj)
+            assert not any(self.occupied(tc) for tc in point.track_circuits), (
+                f"point {obj} commanded while its track circuit is occupied"
+            )
+            for rs in self.ixl.routes.values():
+                if obj in rs.held_points:
+                    want = {s.point: s.position for s in rs.route.all_points}[obj]
+                    assert rs.status is RouteStatus.SETTING and want == position, (
+                        f"point {obj} commanded {position} while locked by route "
+                        f"{rs.route.name} ({rs.status.value})"
+                    )
+
+    def occupied(self, tc: str) -> bool:
+        return self.occ[tc] or not self.links["atc"]
+
+    def feed_detection(self, points: list[str]) -> None:
+        codes: dict[str, int] = {}
+        for p in points:
+            for bit, v in BITS[self.det[p]].items():
+                codes[f"{bit}{self.st}{p}"] = v
+        self.apply(self.ixl.receive("io", codes, self.now))
+
+    def feed_occupancy(self, tc: str, value: bool) -> None:
+        self.occ[tc] = value
+        codes = {tc: int(value)}
+        for iv in self.view.intervals:
+            if tc in iv.track_circuits:
+                codes[n.izc(iv.name)] = int(any(self.occ[t] for t in self.view.owned_half(iv)))
+        self.apply(self.ixl.receive("atc", codes, self.now))
+
+    # ---------------------------------------------------------------- rules: commands
+
+    @rule(data=st.data(), cancel=st.booleans())
+    def route_control(self, data: st.DataObject, cancel: bool) -> None:
+        route = data.draw(st.sampled_from(self.routes))
+        code = n.rcc(self.st, route) if cancel else n.rsc(self.st, route)
+        self.apply(self.ixl.control(code, 1, self.now))
+
+    @rule(data=st.data(), reverse=st.booleans())
+    def point_control(self, data: st.DataObject, reverse: bool) -> None:
+        point = data.draw(st.sampled_from(self.points))
+        code = n.src(self.st, point) if reverse else n.snc(self.st, point)
+        self.apply(self.ixl.control(code, 1, self.now))
+
+    @rule(data=st.data(), hold=st.booleans())
+    def signal_stop(self, data: st.DataObject, hold: bool) -> None:
+        signal = data.draw(st.sampled_from(self.signals))
+        out = self.ixl.control(n.ssc(self.st, signal), int(hold), self.now)
+        if out.results[0].accepted:
+            (self.held_stop.add if hold else self.held_stop.discard)(signal)
+        self.apply(out)
+
+    @rule(action=st.sampled_from(["CMQ", "LMQ", "grant", "take"]))
+    def mode(self, action: str) -> None:
+        if action in ("CMQ", "LMQ"):
+            self.apply(self.ixl.control(f"{action}{self.st}", 1, self.now))
+        else:
+            self.apply(self.ixl.local(action, self.now))
+
+    @rule(data=st.data())
+    def set_route_and_let_points_arrive(self, data: st.DataObject) -> None:
+        """The common case, so that many sequences get signals to proceed."""
+        route = data.draw(st.sampled_from(self.routes))
+        self.apply(self.ixl.control(n.rsc(self.st, route), 1, self.now))
+        self.points_arrive()
+
+    # ---------------------------------------------------------------- rules: the field
+
+    @rule(data=st.data())
+    def disturb_a_cleared_route(self, data: st.DataObject) -> None:
+        """Targeted fault: occupy a track circuit or upset a point of a route showing proceed."""
+        cleared = [r for r in self.view.station.routes if self.ixl.aspect(r.entry) != "R"]
+        if not cleared:
+            return
+        route = data.draw(st.sampled_from(cleared))
+        targets = list(route.all_track_circuits) + [s.point for s in route.all_points]
+        target = data.draw(st.sampled_from(targets))
+        if target in self.occ:
+            self.feed_occupancy(target, True)
+        else:
+            self.det[target] = data.draw(st.sampled_from(DETECTIONS))
+            self.feed_detection([target])
+
+    @rule()
+    def points_arrive(self) -> None:
+        """Every point machine reaches what the IXL demands (the field behaving well)."""
+        for p in self.points:
+            if self.det[p] != "none":
+                self.det[p] = self.demand[p]
+        self.feed_detection(self.points)
+
+    @rule(data=st.data(), detection=st.sampled_from(DETECTIONS))
+    def detection_report(self, data: st.DataObject, detection: str) -> None:
+        """Any report at all, including lost and wrong-position detection."""
+        point = data.draw(st.sampled_from(self.points))
+        self.det[point] = detection
+        self.feed_detection([point])
+
+    @rule(data=st.data(), value=st.sampled_from([True, False, False]))
+    def track_circuit(self, data: st.DataObject, value: bool) -> None:
+        self.feed_occupancy(data.draw(st.sampled_from(self.tcs)), value)
+
+    @rule(link=st.sampled_from(["atc", "io"]), up=st.booleans())
+    def link(self, link: str, up: bool) -> None:
+        self.links[link] = up
+        self.apply(self.ixl.link_state(link, up, self.now))
+        if up and link == "atc":
+            for tc in self.tcs:
+                self.feed_occupancy(tc, self.occ[tc])
+        if up and link == "io":
+            self.feed_detection(self.points)
+
+    @rule(seconds=st.sampled_from([0.5, 5.0, 31.0, 61.0, 100.0]))
+    def time_passes(self, seconds: float) -> None:
+        self.now += seconds
+        self.apply(self.ixl.tick(self.now))
+
+    @rule(data=st.data())
+    def train_enters(self, data: st.DataObject) -> None:
+        """A train runs onto a route whose signal shows proceed."""
+        cleared = [r for r in self.view.station.routes if self.ixl.aspect(r.entry) != "R"]
+        if not cleared:
+            return
+        route = data.draw(st.sampled_from(cleared))
+        self.trains.append((route.track_circuits, 0))
+        self.feed_occupancy(route.track_circuits[0], True)
+
+    @rule(data=st.data())
+    def train_moves(self, data: st.DataObject) -> None:
+        if not self.trains:
+            return
+        i = data.draw(st.integers(0, len(self.trains) - 1))
+        path, head = self.trains[i]
+        if head + 1 < len(path):
+            self.feed_occupancy(path[head + 1], True)
+            self.trains[i] = (path, head + 1)
+        else:
+            self.trains.pop(i)
+        self.feed_occupancy(path[head], False)
+
+    # ---------------------------------------------------------------- invariants
+
+    @invariant()
+    def no_element_locked_twice(self) -> None:
+        STEPS["count"] += 1
+        seen: dict[str, str] = {}
+        for rs in self.ixl.routes.values():
+            r = rs.route
+            assert rs.held_tcs <= set(r.all_track_circuits), r.name
+            assert rs.held_points <= {s.point for s in r.all_points}, r.name
+            for element in rs.held_tcs | rs.held_points:
+                assert element not in seen, f"{element} held by {seen[element]} and {r.name}"
+                seen[element] = r.name
+        whole = {name for name, rs in self.ixl.routes.items() if rs.whole}
+        for name in whole:
+            clash = whole & set(self.ixl.routes[name].route.conflicts)
+            assert not clash, f"conflicting routes {name} and {clash} locked together"
+
+    @invariant()
+    def proceed_only_when_safe(self) -> None:
+        io = self.ixl.full_state("io")
+        atc = self.ixl.full_state("atc")
+        for sig in self.view.station.lamp_signals:
+            aspect = self.ixl.aspect(sig.name)
+            lit = [a for a in sig.aspects if io[n.sgc(self.st, sig.name, a)] == 1]
+            assert lit == [aspect], f"signal {sig.name}: commanded {aspect}, outputs {lit}"
+            if aspect == "R":
+                assert atc[n.sgp(self.st, sig.name)] == 0
+                continue
+            assert self.links["atc"] and self.links["io"], f"{sig.name} proceed with a link down"
+            assert sig.name not in self.held_stop, f"{sig.name} proceed while held at stop"
+            set_routes = [
+                rs
+                for rs in self.ixl.routes.values()
+                if rs.route.entry == sig.name and rs.status is RouteStatus.SET
+            ]
+            assert len(set_routes) == 1, f"{sig.name} proceed without a set route"
+            rs = set_routes[0]
+            r = rs.route
+            assert set(r.track_circuits) <= rs.held_tcs, f"{r.name} not locked"
+            assert {s.point for s in r.points} <= rs.held_points, f"{r.name} points not locked"
+            for element in rs.overlap_elements - rs.held_tcs - rs.held_points:
+                holders = [
+                    o.route.name
+                    for o in self.ixl.routes.values()
+                    if element in o.held_tcs | o.held_points and o.route.entry == r.exit
+                ]
+                assert holders, f"{r.name}: overlap element {element} not locked"
+            for s in r.all_points:
+                assert self.det[s.point] == s.position, (
+                    f"{sig.name} proceed with point {s.point} {self.det[s.point]}"
+                )
+            for tc in r.all_track_circuits:
+                assert not self.occ[tc], f"{sig.name} proceed with {tc} occupied"
+
+
+def test_interlocking_invariants_hold_over_random_sequences() -> None:
+    STEPS["count"] = 0
+    run_state_machine_as_test(
+        InterlockingMachine,
+        settings=settings(max_examples=300, stateful_step_count=50, deadline=None),
+    )
+    assert STEPS["count"] >= 10_000, STEPS["count"]
