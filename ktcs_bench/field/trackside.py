@@ -56,6 +56,7 @@ class Trackside:
         """IXL->IO code changes (or a full state): point demands PNC/PRC, lamp commands SGC."""
         st = self.st
         touched: set[str] = set()
+        moved: set[str] = set()  # points acted on once the whole message is read
         for name, state in codes.items():
             kind, obj = name[:3], name[3 + len(str(st)) :]
             if kind in ("PNC", "PRC") and obj in self.points:
@@ -64,10 +65,7 @@ class Trackside:
                     int(state) if kind == "PRC" else self._level(obj, "PRC"),
                 )
                 self._demand[obj] = demand
-                if demand == (1, 0):
-                    self._throw(obj, "normal", now)
-                elif demand == (0, 1):
-                    self._throw(obj, "reverse", now)
+                moved.add(obj)
             elif kind == "SGC":
                 for sig in self.signals.values():
                     prefix = n.sgc(st, sig.signal.name, "")
@@ -80,6 +78,11 @@ class Trackside:
                     self._event(now, "fault", f"unknown command {name!r} ignored")
             else:
                 self._event(now, "fault", f"unknown command {name!r} ignored")
+        for p in sorted(moved):
+            if self._demand[p] == (1, 0):
+                self._throw(p, "normal", now)
+            elif self._demand[p] == (0, 1):
+                self._throw(p, "reverse", now)
         if self.link_up:
             for s in touched:
                 self.signals[s].command_bits(self._sgc[s])
