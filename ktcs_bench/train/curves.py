@@ -17,6 +17,7 @@ permitted and indication by `T_warning`, `T_driver` and `T_indication`. Ceiling 
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from enum import Enum
@@ -25,7 +26,7 @@ import numpy as np
 
 from ktcs_bench.errors import UsageError
 from ktcs_bench.train.deceleration import FloatArray, SafeDeceleration
-from ktcs_bench.train.units import kmh
+from ktcs_bench.train.units import G, kmh
 
 _EPS = 1e-9
 
@@ -232,26 +233,133 @@ def curve_distances(
 # --------------------------------------------------------------------------- grid, many targets
 
 
+_FAR = 1.0e6
+"""The gradient integral's table reaches this far beyond the grid and the profile (m)."""
+
+
 @dataclass
 class Grid:
-    """A location grid with the cumulative gradient acceleration precomputed (rebuild on change)."""
+    """A location grid with the cumulative gradient acceleration precomputed (rebuild on change).
+
+    The gradient is a step profile, so its integral is piecewise linear with a kink at each
+    gradient change: it is tabulated exactly at the breakpoints (`hp`, `hv`, reaching far beyond
+    the grid) and interpolated onto the grid in one numpy pass.
+    """
 
     x: FloatArray
     decel: SafeDeceleration
     h: FloatArray = field(init=False)
-    """h[i] = ∫_x0^x_i A_gradient dx (midpoint rule per cell)."""
+    """h[i] = ∫_x0^x_i A_gradient dx (exact)."""
+    a_min: float = field(init=False)
+    """Lowest safe deceleration on the grid: bounds how far back a curve can stay below a cap."""
+    hp: FloatArray = field(init=False, repr=False)
+    """Breakpoints of the gradient integral (increasing)."""
+    hv: FloatArray = field(init=False, repr=False)
+    """∫_x0^hp A_gradient dx."""
 
     def __post_init__(self) -> None:
-        mids = 0.5 * (self.x[1:] + self.x[:-1])
-        ag = self.decel.gradient_accel_grid(mids)
-        self.h = np.concatenate(([0.0], np.cumsum(ag * np.diff(self.x))))
-        self.a_min = min(self.decel.brake.values) + (float(ag.min()) if ag.size else 0.0)
-        """Lowest safe deceleration anywhere: bounds how far back a curve can stay below a cap."""
+        x = self.x
+        x0, x1 = float(x[0]), float(x[-1])
+        prof, rot = self.decel.gradient, self.decel.rotating
+        bps = list(prof.breakpoints())
+        pts = np.array([min([x0, *bps[:1]]) - _FAR, *bps, max([x1, *bps[-1:]]) + _FAR])
+        grads = np.array([prof.default, *prof.gradients])  # from each point on
+        if rot.nominal is not None:
+            m = np.full_like(grads, rot.nominal)
+        else:
+            m = np.where(grads > 0, rot.maximum, rot.minimum)
+        ags = grads * G / (1000.0 + 10.0 * m)
+        hv = np.concatenate(([0.0], np.cumsum(ags * np.diff(pts))))
+        i0 = int(pts.searchsorted(x0, side="right")) - 1
+        i1 = max(i0, int(pts.searchsorted(x1, side="left")) - 1)
+        hv -= hv[i0] + ags[i0] * (x0 - pts[i0])  # h(x0) = 0
+        self.hp, self.hv = pts, hv
+        self._pts, self._hv = pts.tolist(), hv.tolist()
+        # h on the grid: linear per gradient segment (slope A_gradient), one pass
+        counts = np.diff(
+            x.searchsorted(pts[i0 + 1 : i1 + 1], side="left"), prepend=0, append=len(x)
+        )
+        seg = slice(i0, i1 + 1)
+        self.h = np.repeat(ags[seg], counts) * x
+        self.h += np.repeat(hv[seg] - ags[seg] * pts[seg], counts)
+        self.a_min = min(self.decel.brake.values) + float(ags[seg].min())
+
+    def h_at(self, x: float) -> float:
+        """∫_x0^x A_gradient dx at any location (exact)."""
+        pts, hv = self._pts, self._hv
+        i = min(max(bisect.bisect_right(pts, x) - 1, 0), len(pts) - 2)
+        return hv[i] + (hv[i + 1] - hv[i]) * (x - pts[i]) / (pts[i + 1] - pts[i])
 
     @classmethod
     def uniform(cls, start: float, stop: float, step: float, decel: SafeDeceleration) -> Grid:
         n = int(math.ceil((stop - start) / step)) + 1
         return cls(start + step * np.arange(n, dtype=np.float64), decel)
+
+
+_EMPTY: FloatArray = np.empty(0)
+
+
+def ebd_segment(
+    grid: Grid, target: Target, fixed: FixedValues, v_cap: float, x_from: float = -math.inf
+) -> tuple[int, int, FloatArray]:
+    """The EBD towards one target where it can matter, as (lo, k, speeds on x[lo:k]).
+
+    x[:k] are the grid locations at or before the target; lo is where the curve (with the lowest
+    deceleration anywhere) would pass v_cap, or `x_from`. Speeds above v_cap are inf. In closed
+    form per brake-model speed band: v² is linear in distance plus the gradient integral, so each
+    band is one numpy pass over the window and a search for where it leaves the band.
+    """
+    x = grid.x
+    loc = target.location
+    k = int(x.searchsorted(loc, side="right"))  # x[:k] <= target
+    if k == 0:
+        return 0, 0, _EMPTY
+    foot = target.foot_speed(fixed)
+    v2s = foot * foot
+    if grid.a_min > 0.0 and math.isfinite(v_cap):
+        reach = (v_cap * v_cap - v2s) / (2.0 * grid.a_min)
+        x_from = max(x_from, loc - max(reach, 0.0) - 2.0)
+    lo = max(int(x.searchsorted(x_from, side="left")) - 1, 0)
+    if lo >= k:
+        return k, k, _EMPTY
+    vals = np.full(k - lo, np.inf)
+    brake = grid.decel.brake
+    steps = brake.steps
+    h = grid.h
+    xs, hs = loc, grid.h_at(loc)
+    hi = k  # x[lo:hi] still to fill
+    while hi > lo:
+        v_now = math.sqrt(v2s)
+        a = brake(v_now + _EPS)
+        # v² over the remaining slice with this band's brake deceleration
+        v2 = xs - x[lo:hi]
+        v2 *= 2.0 * a
+        v2 += v2s
+        hterm = hs - h[lo:hi]
+        hterm *= 2.0
+        v2 += hterm
+        nxt = next((s for s in steps if s > v_now + _EPS), math.inf)
+        limit = min(nxt, v_cap)
+        # v2 decreases with index; count the points (from the end) below limit²
+        j = int(v2[::-1].searchsorted(limit * limit, side="left"))
+        start = hi - j  # positions start .. hi-1 are within the band
+        v2b = float(v2[start - lo]) if start < hi else v2s
+        band = v2[start - lo :]
+        np.maximum(band, 0.0, out=band)
+        np.sqrt(band, out=vals[start - lo : hi - lo])
+        if start == lo or not math.isfinite(limit) or limit >= v_cap:
+            break
+        # crossing between x[start-1] (above) and x[start] (below): interpolate in v²
+        i0 = start - 1
+        v2a = float(v2[i0 - lo])
+        xb = float(x[start]) if start < hi else xs
+        hb = float(h[start]) if start < hi else hs
+        frac = (limit * limit - v2b) / (v2a - v2b) if v2a != v2b else 0.0
+        xs = xb + frac * (float(x[i0]) - xb)
+        hs = hb + frac * (float(h[i0]) - hb)
+        v2s = limit * limit
+        hi = start
+    return lo, k, vals
 
 
 def ebd_on_grid(
@@ -263,61 +371,148 @@ def ebd_on_grid(
     once the curve exceeds v_cap (the rest is set to inf): nothing above it is ever supervised.
     Locations before `x_from` are left at inf (not computed): the ATP only looks ahead.
     """
-    x = grid.x
-    out = np.full(x.shape, np.inf)
-    k = int(np.searchsorted(x, target.location, side="right"))  # x[:k] <= target
+    out = np.full(grid.x.shape, np.inf)
+    lo, k, vals = ebd_segment(grid, target, fixed, v_cap, x_from)
+    out[lo:k] = vals
     if target.kind is TargetKind.STOP:
         out[k:] = 0.0
-    if k == 0:
-        return out
-    brake = grid.decel.brake
-    h_t = float(np.interp(target.location, x, grid.h))
-    xs, hs = target.location, h_t
-    v2s = target.foot_speed(fixed) ** 2
-    hi = k  # x[lo:hi] still to fill
-    if grid.a_min > 0.0 and math.isfinite(v_cap):
-        reach = (v_cap * v_cap - target.foot_speed(fixed) ** 2) / (2.0 * grid.a_min)
-        x_from = max(x_from, target.location - max(reach, 0.0) - 2.0)
-    lo = max(int(np.searchsorted(x, x_from, side="left")) - 1, 0)
-    steps = list(brake.steps)
-    while hi > lo:
-        v_now = math.sqrt(v2s)
-        a = brake(v_now + _EPS)
-        # v² over the remaining slice with this band's brake deceleration
-        seg_x = x[lo:hi]
-        v2 = v2s + 2.0 * a * (xs - seg_x) + 2.0 * (hs - grid.h[lo:hi])
-        nxt = next((s for s in steps if s > v_now + _EPS), math.inf)
-        limit = min(nxt, v_cap)
-        # v2 decreases with index; find the first index (from the end) where v² >= limit²
-        rev = v2[::-1]
-        j = int(np.searchsorted(rev, limit * limit, side="left"))  # count below limit²
-        # positions hi-j .. hi-1 are within the band
-        start = hi - j
-        out[start:hi] = np.sqrt(np.maximum(v2[start - lo :], 0.0))
-        if start == lo or not math.isfinite(limit) or limit >= v_cap:
-            break
-        # crossing between x[start-1] (above) and x[start] (below): interpolate in v²
-        i0 = start - 1
-        v2a = float(v2[i0 - lo])
-        v2b = float(v2[start - lo]) if start < hi else v2s
-        xb = float(x[start]) if start < hi else xs
-        hb = float(grid.h[start]) if start < hi else hs
-        frac = (limit * limit - v2b) / (v2a - v2b) if v2a != v2b else 0.0
-        xs = xb + frac * (float(x[i0]) - xb)
-        hs = hb + frac * (float(grid.h[i0]) - hb)
-        v2s = limit * limit
-        hi = start
     return out
+
+
+def _ebd_envelope(
+    grid: Grid, targets: list[Target], fixed: FixedValues, v_cap: float
+) -> tuple[FloatArray, list[int]]:
+    """The minimum EBD over every target, and the grid indices where it jumps.
+
+    Braking curves of one train solve one equation, dv²/dx = −2·A_safe(v, x), so they never
+    cross: at each location the envelope is the curve of the lowest target still ahead, and
+    "lowest" is one order for the whole line. Within brake-model speed band b a curve is
+    v² = C_t,b − φ_b(x), φ_b(x) = 2·a_b·x + 2·∫A_gradient (piecewise linear, tabulated exactly),
+    so per target only a few numbers are needed: its constant in each band and the location
+    where it leaves each band (φ_b inverted on the gradient table), all targets at once. The
+    order of the targets is their constant in the top band; a sweep from the line end gives the
+    owner of each stretch, and the grid is filled with (C, a) per stretch and band and evaluated
+    in one numpy pass.
+
+    A jump is where a target's own curve ends in the envelope: the first index past a visible
+    SPEED target (the envelope rises to the next curve) and past the first STOP target (0 on).
+    """
+    x = grid.x
+    n = len(x)
+    out = np.full(n, np.inf)
+    if not targets:
+        return out, []
+    brake = grid.decel.brake
+    steps, values = brake.steps, brake.values
+    hp = grid.hp
+    phis = [2.0 * a * hp + 2.0 * grid.hv for a in values]
+    if grid.a_min <= 0.0 or any(bool((np.diff(phi) <= 0.0).any()) for phi in phis):
+        return _ebd_envelope_walk(grid, targets, fixed, v_cap)
+    locs = np.array([t.location for t in targets])
+    ks = x.searchsorted(locs, side="right")
+    stop_k = min(
+        (int(k) for t, k in zip(targets, ks, strict=True) if t.kind is TargetKind.STOP),
+        default=n,
+    )
+    foots = np.array([t.foot_speed(fixed) for t in targets])
+    on = (ks > 0) & (foots < v_cap)
+    if not on.any():
+        out[stop_k:] = 0.0
+        return out, [stop_k] if stop_k < n else []
+    speed = [t.kind is TargetKind.SPEED for t, o in zip(targets, on, strict=True) if o]
+    kk, foots, locs = ks[on] - 1, foots[on], locs[on]
+    band = np.clip(np.searchsorted(np.asarray(steps), foots + _EPS, side="right") - 1, 0, None)
+    # per band: every target's constant and the grid index range of its nodes in the band
+    const = np.full(kk.shape, np.inf)
+    x_lo = locs.copy()  # location where the curve enters the band from below
+    bands: list[tuple[float, FloatArray, list[int], list[int]]] = []
+    for b, a in enumerate(values):
+        v_lo = steps[b] if b > 0 else -math.inf
+        if v_lo >= v_cap:
+            break
+        v_hi = min(steps[b + 1] if b + 1 < len(steps) else math.inf, v_cap)
+        phi = phis[b]
+        up = band < b
+        here = band == b
+        if up.any():
+            const[up] = v_lo * v_lo + np.interp(x_lo[up], hp, phi)
+        const[here] = foots[here] ** 2 + np.interp(locs[here], hp, phi)
+        x_hi = (
+            np.interp(const - v_hi * v_hi, phi, hp)
+            if math.isfinite(v_hi)
+            else np.full(kk.shape, -np.inf)
+        )
+        active = band <= b
+        i_from = np.where(active, x.searchsorted(x_hi, side="right"), 0).tolist()
+        i_to = np.where(active, x.searchsorted(x_lo, side="right"), 0).tolist()
+        bands.append((2.0 * a, const.copy(), i_from, i_to))
+        x_lo = np.where(active, x_hi, x_lo)
+    key = bands[-1][1].tolist()  # constants in the top band: the order of the curves
+    # owner of each stretch of nodes: sweep from the line end over the targets' last nodes
+    order = sorted(range(len(key)), key=lambda i: -int(kk[i]))
+    kk_l = kk.tolist()
+    c_grid = np.full(n, np.inf)
+    a_grid = np.zeros(n)
+    visible = [False] * len(key)
+    best, best_key = -1, math.inf
+    pos = 0
+    while pos < len(order):
+        level = kk_l[order[pos]]
+        while pos < len(order) and kk_l[order[pos]] == level:
+            i = order[pos]
+            if key[i] < best_key:
+                best, best_key = i, key[i]
+            pos += 1
+        nxt = kk_l[order[pos]] if pos < len(order) else -1
+        visible[best] = visible[best] or best_key == key[best] and level == kk_l[best]
+        lo_i, hi_i = nxt + 1, level + 1  # nodes owned by `best`
+        for a2, cst, i_from, i_to in bands:
+            f, t = max(i_from[best], lo_i), min(i_to[best], hi_i)
+            if t > f:
+                c_grid[f:t] = cst[best]
+                a_grid[f:t] = a2
+    v2 = a_grid * x
+    v2 += grid.h
+    v2 += grid.h
+    np.subtract(c_grid, v2, out=v2)
+    np.maximum(v2, 0.0, out=v2)
+    np.sqrt(v2, out=out)
+    out[stop_k:] = 0.0
+    breaks = {kk_l[i] + 1 for i, vis in enumerate(visible) if vis and speed[i]}
+    breaks = {k for k in breaks if k < stop_k}
+    if stop_k < n:
+        breaks.add(stop_k)
+    return out, sorted(breaks)
+
+
+def _ebd_envelope_walk(
+    grid: Grid, targets: list[Target], fixed: FixedValues, v_cap: float
+) -> tuple[FloatArray, list[int]]:
+    """`_ebd_envelope` target by target (for gradients steeper than the brake)."""
+    n = len(grid.x)
+    out = np.full(n, np.inf)
+    stop_k = n
+    ends: list[tuple[int, float]] = []
+    for t in targets:
+        lo, k, vals = ebd_segment(grid, t, fixed, v_cap)
+        if k > lo:
+            seg = out[lo:k]
+            np.minimum(seg, vals, out=seg)
+            ends.append((k, float(vals[-1])))
+        if t.kind is TargetKind.STOP:
+            stop_k = min(stop_k, k)
+    out[stop_k:] = 0.0
+    breaks = {k for k, last in ends if k < stop_k and math.isfinite(last) and out[k - 1] == last}
+    if stop_k < n:
+        breaks.add(stop_k)
+    return out, sorted(breaks)
 
 
 def ebd_min_on_grid(
     grid: Grid, targets: list[Target], fixed: FixedValues, v_cap: float
 ) -> FloatArray:
     """The supervised EBD: the minimum over every target ahead (not only the next one)."""
-    out = np.full(grid.x.shape, np.inf)
-    for t in targets:
-        np.minimum(out, ebd_on_grid(grid, t, fixed, v_cap), out=out)
-    return out
+    return _ebd_envelope(grid, targets, fixed, v_cap)[0]
 
 
 @dataclass(frozen=True)
@@ -334,21 +529,58 @@ class CurveSet:
     indication: FloatArray
 
 
-def _shifted(x: FloatArray, v: FloatArray, lead: FloatArray) -> FloatArray:
-    """Speed curve whose value at location x_i - lead_i is v_i, resampled onto x (monotone)."""
-    finite = np.isfinite(v)
-    out = np.full(x.shape, np.inf)
-    if not finite.any():
+class _EnvelopeShift:
+    """Curves that lie a speed-dependent distance v·T before the EBD envelope, on the same grid.
+
+    A train at s with speed v is beyond such a curve when v > EBD(s + v·T); for one target that
+    curve is its EBD point (x, v) moved to s = x − v·T, which is monotone in x. The minimum over
+    targets of those shifted curves is the same shift applied to the envelope piece by piece:
+    the envelope splits into runs (one per visible target: cut where it jumps, where it is
+    infinite, or if it ever folds back), each run is resampled onto the grid with one `np.interp`
+    (held at its last speed up to its end location) and the runs' minimum is taken.
+    """
+
+    def __init__(self, x: FloatArray, ebd: FloatArray, breaks: list[int]) -> None:
+        self.x, self.ebd = x, ebd
+        fin = np.isfinite(ebd)
+        self.both = fin[1:] & fin[:-1]  # pairs of neighbours inside one run
+        for k in breaks:
+            if 0 < k < len(x):
+                self.both[k - 1] = False
+        edges = np.flatnonzero(fin[1:] != fin[:-1]) + 1
+        bounds = [0, *edges.tolist(), len(x)]
+        runs: list[tuple[int, int]] = []
+        first_finite = bool(fin[0]) if len(x) else False
+        for i, (a, b) in enumerate(zip(bounds, bounds[1:], strict=False)):
+            if (i % 2 == 0) == first_finite:
+                cuts = [k for k in breaks if a < k < b]
+                runs.extend(zip([a, *cuts], [*cuts, b], strict=True))
+        self.runs = runs
+
+    def __call__(self, lead_time: float) -> FloatArray:
+        x, ebd = self.x, self.ebd
+        out = np.full(x.shape, np.inf)
+        if not self.runs:
+            return out
+        with np.errstate(invalid="ignore"):
+            s = x - ebd * lead_time
+            folds = np.flatnonzero((s[1:] <= s[:-1]) & self.both) + 1
+        runs = self.runs
+        if folds.size:  # never for one target's curve; kept for odd envelopes
+            cut = sorted({*(a for a, _ in runs), *folds.tolist()})
+            runs = [
+                (c, min(nb, b))
+                for a, b in runs
+                for c, nb in zip(
+                    [c for c in cut if a <= c < b], [*(c for c in cut if a < c < b), b], strict=True
+                )
+            ]
+        firsts = x.searchsorted(s[[a for a, _ in runs]], side="left").tolist()
+        for (a, b), ja in zip(runs, firsts, strict=True):
+            vals = np.interp(x[ja:b], s[a:b], ebd[a:b])
+            seg = out[ja:b]
+            np.minimum(seg, vals, out=seg)
         return out
-    s = x[finite] - lead[finite]
-    vf = v[finite]
-    # keep the monotone part (s increasing); where the target switches, s may fold back
-    keep = np.concatenate(([True], np.diff(s) > 0))
-    s, vf = s[keep], vf[keep]
-    inside = (x >= s[0]) & (x <= s[-1])
-    out[inside] = np.interp(x[inside], s, vf)
-    out[x > s[-1]] = vf[-1]
-    return out
 
 
 def curves_on_grid(
@@ -360,13 +592,12 @@ def curves_on_grid(
 ) -> CurveSet:
     """EBD, EBI, SBI, warning, permitted and indication speeds over the grid (a_est = 0).
 
-    Each target's curves are shifted from its own EBD (so the shifts stay monotone), then the
-    minimum over targets is taken and each limit is capped by its ceiling V_MRSP + dV.
+    The EBD is the minimum over every target; the other curves are that envelope shifted by
+    v·(T_be + lead) (`_EnvelopeShift`), each capped by its ceiling V_MRSP + dV.
     """
     fixed = times.fixed
     x = grid.x
-    inf = np.full(x.shape, np.inf)
-    ebd, ebi, sbi, warn, perm, ind = (inf.copy() for _ in range(6))
+    ebd, breaks = _ebd_envelope(grid, targets, fixed, v_cap)
     t_be = times.t_traction + times.t_berem
     leads = (
         0.0,
@@ -375,39 +606,15 @@ def curves_on_grid(
         times.t_bs2 + fixed.t_driver,
         times.t_bs2 + fixed.t_driver + times.t_indication,
     )
-    outs = (ebi, sbi, warn, perm, ind)
-    step = float(x[1] - x[0]) if len(x) > 1 else 1.0
-    for t in targets:
-        e = ebd_on_grid(grid, t, fixed, v_cap)
-        np.minimum(ebd, e, out=ebd)
-        k = int(np.searchsorted(x, t.location, side="right"))  # x[:k] before the target
-        if t.kind is TargetKind.STOP:
-            for o in outs:
-                o[k:] = 0.0
-        finite = np.flatnonzero(np.isfinite(e[:k]))
-        if finite.size == 0:
-            continue
-        i0 = int(finite[0])
-        # work only on the window the shifted curves can reach (leads are at most v_cap·T)
-        back = int(math.ceil(v_cap * (t_be + leads[-1]) / step)) + 2
-        w0 = max(i0 - back, 0)
-        xs, es = x[w0:k], e[w0:k]
-        v = np.where(np.isfinite(es), np.maximum(es, t.speed), es)
-        for o, lead in zip(outs, leads, strict=True):
-            seg = _shifted(xs, v, v * (t_be + lead))
-            np.minimum(o[w0:k], seg, out=o[w0:k])
-    dv_ebi = _ramp_vec(mrsp, fixed, "ebi")
-    dv_sbi = _ramp_vec(mrsp, fixed, "sbi")
-    dv_w = _ramp_vec(mrsp, fixed, "warning")
+    shift = _EnvelopeShift(x, ebd, breaks)
+    ebi, sbi, warn, perm, ind = (shift(t_be + lead) for lead in leads)
+    np.minimum(ebi, mrsp + _ramp_vec(mrsp, fixed, "ebi"), out=ebi)
+    np.minimum(sbi, mrsp + _ramp_vec(mrsp, fixed, "sbi"), out=sbi)
+    np.minimum(warn, mrsp + _ramp_vec(mrsp, fixed, "warning"), out=warn)
+    np.minimum(perm, mrsp, out=perm)
+    np.minimum(ind, mrsp, out=ind)
     return CurveSet(
-        x=x,
-        mrsp=mrsp,
-        ebd=ebd,
-        ebi=np.minimum(ebi, mrsp + dv_ebi),
-        sbi=np.minimum(sbi, mrsp + dv_sbi),
-        warning=np.minimum(warn, mrsp + dv_w),
-        permitted=np.minimum(perm, mrsp),
-        indication=np.minimum(ind, mrsp),
+        x=x, mrsp=mrsp, ebd=ebd, ebi=ebi, sbi=sbi, warning=warn, permitted=perm, indication=ind
     )
 
 
