@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import ssl
 import sys
 
 from ktcs_bench.emulator.endpoints import Endpoint, parse_endpoint, parse_links
@@ -59,6 +60,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="break one protocol rule on purpose, for the conformance suite to catch "
         "(see `ktcs-bench conformance --list-faults`)",
     )  # fmt: skip
+    p.add_argument(
+        "--allow-source", action="append", default=[], metavar="CIDR",
+        help="ctc: admit Type II connections only from these addresses/networks (repeatable)",
+    )  # fmt: skip
+    p.add_argument("--tls-cert", help="Type II over TLS (profile type2-tls): our certificate (PEM)")
+    p.add_argument("--tls-key", help="Type II over TLS: our private key (PEM)")
+    p.add_argument(
+        "--tls-ca", help="Type II over TLS: CA (PEM) the peer's certificate must chain to "
+        "(ctc: client certificates are then required)",
+    )  # fmt: skip
+    p.add_argument("--tls-server-name", help="ixl: the name (or IP) in the CTC's certificate")
     p.add_argument("-v", "--verbose", action="store_true", help="log every event to stderr")
     p.set_defaults(handler=run)
 
@@ -87,6 +99,27 @@ def _roles(links: dict[str, Endpoint], lab_devices: dict[str, str]) -> dict[str,
     return out
 
 
+def tls_context(args: argparse.Namespace, server: bool) -> ssl.SSLContext | None:
+    """The type2-tls context from --tls-cert/--tls-key/--tls-ca (None when none is given)."""
+    cert, key, ca = args.tls_cert, args.tls_key, args.tls_ca
+    if not (cert or key or ca):
+        return None
+    if server and not (cert and key):
+        raise UsageError("a TLS server needs --tls-cert and --tls-key")
+    if bool(cert) != bool(key):
+        raise UsageError("--tls-cert and --tls-key go together")
+    purpose = ssl.Purpose.CLIENT_AUTH if server else ssl.Purpose.SERVER_AUTH
+    try:
+        ctx = ssl.create_default_context(purpose, cafile=ca)
+        if cert:
+            ctx.load_cert_chain(cert, key)
+    except (OSError, ssl.SSLError) as exc:
+        raise UsageError(f"TLS: {exc}") from None
+    if server and ca:
+        ctx.verify_mode = ssl.CERT_REQUIRED
+    return ctx
+
+
 def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from ktcs_bench.ixl.modes import Mode
     from ktcs_bench.type1 import LinkConfig
@@ -96,6 +129,9 @@ def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     links = _roles(parse_links(args.link), {d.name: d.kind for d in lab.devices.values()})
     control = _hostport(args.control, "--control")
     kind = args.kind
+    from ktcs_bench.emulator import variants
+
+    faults = variants.check(getattr(args, "fault", []) or [], kind)
     name = args.name or (f"{kind}{args.station}" if args.station else kind)
     type1 = LinkConfig(
         line_rate=None if args.unpaced else lab.line_rate,
@@ -113,17 +149,21 @@ def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
         mode = Mode(args.mode or lab.ixl_mode)
         return IxlDevice(name, line, args.station, links, mode=mode, type1=type1,
-                         type1_profile=lab.type1_profile, control=control)  # fmt: skip
+                         type1_profile=lab.type1_profile, control=control, faults=faults,
+                         ssl=tls_context(args, server=False),
+                         server_hostname=args.tls_server_name)  # fmt: skip
     if kind == "atc":
         from ktcs_bench.emulator.atc import AtcDevice
 
         return AtcDevice(name, line, args.station, links, type1=type1,
-                         type1_profile=lab.type1_profile, control=control)  # fmt: skip
+                         type1_profile=lab.type1_profile, control=control,
+                         faults=faults)  # fmt: skip
     if kind == "trackside":
         from ktcs_bench.emulator.trackside import TracksideDevice
 
         return TracksideDevice(name, line, args.station, links, type1=type1,
-                               type1_profile=lab.type1_profile, control=control)  # fmt: skip
+                               type1_profile=lab.type1_profile, control=control,
+                               faults=faults)  # fmt: skip
     if kind == "trackcircuit":
         from ktcs_bench.emulator.trackcircuit import TrackCircuitDevice
 
@@ -136,7 +176,8 @@ def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         listen = _hostport(args.listen or f"127.0.0.1:{lab.type2_port}", "--listen")
         console = _hostport(args.console, "--console") if args.console else None
         return CtcDevice(name, line, lab.stations, listen, control=control, console=console,
-                         taps=args.tap)  # fmt: skip
+                         taps=args.tap, faults=faults, allowed_sources=args.allow_source or None,
+                         ssl=tls_context(args, server=True))  # fmt: skip
     if kind == "train":
         from ktcs_bench.emulator.train import TrainDevice
 

@@ -30,6 +30,7 @@ class AtcDevice(Device):
         type1: LinkConfig | None = None,
         type1_profile: str = "ktcs-type1",
         control: tuple[str, int] = ("127.0.0.1", 0),
+        faults: frozenset[str] = frozenset(),
     ) -> None:
         super().__init__(name, control)
         view = line.view(station)
@@ -40,7 +41,7 @@ class AtcDevice(Device):
             self.port = CodePort(
                 f"{name}-ixl", links["ixl"], station_chart(view, "atc_to_ixl"),
                 station_chart(view, "ixl_to_atc"), self.atc.full_state(), self._from_ixl,
-                self._link, type1_profile, type1,
+                self._link, type1_profile, type1, faults=faults,
             )  # fmt: skip
             if self.port.path:
                 self.ready_info["ptys"] = {"ixl": self.port.path}

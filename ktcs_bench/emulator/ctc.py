@@ -15,10 +15,10 @@ from typing import Any
 from ktcs_bench.charts import names as n
 from ktcs_bench.charts.generate import station_chart
 from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.station.model import Line
-from ktcs_bench.type2.admission import AdmissionPolicy
 from ktcs_bench.type2.net import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")
@@ -46,6 +46,7 @@ class CtcDevice(Device):
         ssl: Any = None,
         console: tuple[str, int] | None = None,
         taps: list[str] | None = None,
+        faults: frozenset[str] = frozenset(),
     ) -> None:
         super().__init__(name, control)
         self.line = line
@@ -57,10 +58,10 @@ class CtcDevice(Device):
             view = line.view(st)
             self.ind[st] = station_chart(view, "ixl_to_ctc")
             self.ctl[st] = station_chart(view, "ctc_to_ixl")
-        policy = AdmissionPolicy(
-            stations, allowed_sources=set(allowed_sources) if allowed_sources else None
-        )
-        self.server = CtcServer(policy, host=listen[0], port=listen[1], ssl=ssl)
+        self.server: CtcServer = variants.ctc_server(
+            faults, stations, allowed_sources=list(allowed_sources) if allowed_sources else None,
+            host=listen[0], port=listen[1], ssl=ssl,
+        )  # fmt: skip
         self.command_log: list[dict[str, Any]] = []
         self.console_address = console
         self.taps = taps or []

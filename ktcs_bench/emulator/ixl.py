@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
+from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.emulator.endpoints import Endpoint
@@ -30,6 +31,9 @@ class IxlDevice(Device):
         type1: LinkConfig | None = None,
         type1_profile: str = "ktcs-type1",
         control: tuple[str, int] = ("127.0.0.1", 0),
+        faults: frozenset[str] = frozenset(),
+        ssl: Any = None,
+        server_hostname: str | None = None,
     ) -> None:
         super().__init__(name, control)
         self.station = station
@@ -42,12 +46,13 @@ class IxlDevice(Device):
                 self.ports[role] = CodePort(
                     f"{name}-{role}", links[role], charts[tx], charts[rx],
                     self.ixl.full_state(role), self._codes_from(role), self._link_of(role),
-                    type1_profile, type1,
+                    type1_profile, type1, faults=faults,
                 )  # fmt: skip
                 if self.ports[role].path:
                     self.ready_info.setdefault("ptys", {})[role] = self.ports[role].path
         self.ctc_endpoint = links.get("ctc")
         self.client: IxlClient | None = None
+        self.faults, self.ssl, self.server_hostname = faults, ssl, server_hostname
 
     # -- the application the Type II client serves --------------------------------------------
     def full_state(self) -> list[tuple[int, int]]:
@@ -93,7 +98,10 @@ class IxlDevice(Device):
         await super().start()
         ep = self.ctc_endpoint
         if ep is not None:
-            self.client = IxlClient(self.station, ep.host, ep.port, self)
+            self.client = variants.ixl_client(
+                self.faults, self.station, ep.host, ep.port, self, ssl=self.ssl,
+                server_hostname=self.server_hostname,
+            )  # fmt: skip
             self.client.start()
 
     async def tasks(self) -> list[asyncio.Task[None]]:

@@ -429,6 +429,8 @@ class IxlClient:
     indication cycle).
     """
 
+    session_class: type[IxlSession] = IxlSession  # hook: a test variant may subclass the session
+
     def __init__(
         self,
         station: int,
@@ -574,7 +576,7 @@ class IxlClient:
                          self.station, self.host, self.port, exc)  # fmt: skip
                 self._notify()
             else:
-                session = IxlSession(self.station, loop.time(), self.config)
+                session = self.session_class(self.station, loop.time(), self.config)
                 link = _Link(session, reader, writer, self._on_events)
                 self._session, self._link = session, link
                 accepted_before = self.connections

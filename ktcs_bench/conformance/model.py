@@ -1,0 +1,101 @@
+"""Cases, verdicts and what a case is given: the suite's vocabulary, no I/O of its own.
+
+A case is a named function of a `CaseContext`; it passes by returning, fails by `ctx.check`
+raising `CaseFailed`, is skipped with `NotApplicable`, and any other exception is an error (the
+suite, the line or the peer broke, not the rule). Its `Evidence` is kept whatever the verdict.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from ktcs_bench.conformance.timing import SuiteTiming
+from ktcs_bench.conformance.wire import Evidence, Type1Wire, Type2Wire
+
+
+class Verdict(enum.Enum):
+    PASS = "pass"
+    FAIL = "fail"
+    ERROR = "error"
+    SKIP = "skip"
+
+
+class CaseFailed(Exception):
+    """The device broke the rule the case checks."""
+
+
+class NotApplicable(Exception):
+    """The case does not apply to this role or target."""
+
+
+@dataclass
+class CaseContext:
+    role: str
+    timing: SuiteTiming
+    evidence: Evidence
+    station: int | None = None
+    codes: int | None = None  # codes in the device's transmit chart, when known
+    type1: Type1Wire | None = None
+    open_type2: Callable[[], Type2Wire] | None = None
+    opened: list[Type2Wire] = field(default_factory=list)
+
+    @property
+    def wire(self) -> Type1Wire:
+        assert self.type1 is not None
+        return self.type1
+
+    def connect(self) -> Type2Wire:
+        """A fresh Type II connection for this case (closed when the case ends)."""
+        assert self.open_type2 is not None
+        w = self.open_type2()
+        w.begin(self.evidence)
+        self.opened.append(w)
+        return w
+
+    def check(self, ok: bool, what: str) -> None:
+        """Record one check; a false one fails the case."""
+        self.evidence.note(("ok   " if ok else "FAIL ") + what)
+        if not ok:
+            raise CaseFailed(what)
+
+    def note(self, text: str) -> None:
+        self.evidence.note("     " + text)
+
+
+CaseFunction = Callable[[CaseContext], None]
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    protocol: str  # "type1" | "type2"
+    title: str
+    rule: str  # the SPEC section and rule it checks
+    run: CaseFunction
+    roles: tuple[str, ...] = ("ixl", "atc", "trackside", "ctc")
+
+
+@dataclass
+class CaseResult:
+    case: Case
+    verdict: Verdict
+    message: str
+    duration: float
+    evidence: Evidence
+
+    def as_dict(self, evidence: bool = True) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "name": self.case.name,
+            "title": self.case.title,
+            "rule": self.case.rule,
+            "verdict": self.verdict.value,
+            "message": self.message,
+            "duration": round(self.duration, 4),
+            "checks": list(self.evidence.checks),
+        }
+        if evidence:
+            out["frames"] = [r.as_dict() for r in self.evidence.records]
+        return out

@@ -1,0 +1,118 @@
+"""Reports of a suite run: JUnit XML (what a CI system reads), JSON, and a human summary with
+colour on a terminal. Pure functions of a `SuiteResult` (threat reports: `threats.py`)."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from typing import Any
+
+from ktcs_bench.conformance.model import CaseResult, Verdict
+from ktcs_bench.conformance.runner import SuiteResult
+
+_COLOUR = {Verdict.PASS: "\x1b[32m", Verdict.FAIL: "\x1b[31m", Verdict.ERROR: "\x1b[35m",
+           Verdict.SKIP: "\x1b[33m"}  # fmt: skip
+_RESET = "\x1b[0m"
+_BOLD = "\x1b[1m"
+
+
+def _frames_text(result: CaseResult) -> str:
+    lines = [f"{r.time:9.4f}  {r.direction:13s}  {r.summary:40s}  {r.hex}"
+             for r in result.evidence.records]  # fmt: skip
+    return "\n".join(["checks:", *result.evidence.checks, "frames:", *lines])
+
+
+def junit_xml(suite: SuiteResult) -> bytes:
+    """One <testsuite> named after the role; one <testcase> per case, evidence in system-out."""
+    name = f"ktcs-bench conformance {suite.role} {suite.protocol}"
+    root = ET.Element("testsuites", name="ktcs-bench conformance")
+    ts = ET.SubElement(
+        root, "testsuite", name=name, tests=str(len(suite.results)),
+        failures=str(suite.count(Verdict.FAIL)), errors=str(suite.count(Verdict.ERROR)),
+        skipped=str(suite.count(Verdict.SKIP)), time=f"{suite.duration:.3f}",
+    )  # fmt: skip
+    props = ET.SubElement(ts, "properties")
+    for key, value in {"role": suite.role, "target": suite.target, "profile": suite.profile,
+                       **{k: str(v) for k, v in suite.timing.describe().items()}}.items():  # fmt: skip
+        ET.SubElement(props, "property", name=key, value=str(value))
+    for r in suite.results:
+        tc = ET.SubElement(ts, "testcase", name=r.case.name,
+                           classname=f"conformance.{suite.protocol}.{suite.role}",
+                           time=f"{r.duration:.3f}")  # fmt: skip
+        if r.verdict is Verdict.FAIL:
+            ET.SubElement(
+                tc, "failure", message=r.message, type="ConformanceFailure"
+            ).text = f"{r.case.title} ({r.case.rule})\n{r.message}"
+        elif r.verdict is Verdict.ERROR:
+            ET.SubElement(tc, "error", message=r.message, type="SuiteError").text = r.message
+        elif r.verdict is Verdict.SKIP:
+            ET.SubElement(tc, "skipped", message=r.message)
+        ET.SubElement(tc, "system-out").text = _frames_text(r)
+    ET.indent(root)
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True)
+
+
+def as_json(suite: SuiteResult, evidence: bool = True) -> dict[str, Any]:
+    return {
+        "role": suite.role,
+        "target": suite.target,
+        "protocol": suite.protocol,
+        "profile": suite.profile,
+        "timing": suite.timing.describe(),
+        "duration": round(suite.duration, 3),
+        "summary": {v.value: suite.count(v) for v in Verdict},
+        "cases": [r.as_dict(evidence) for r in suite.results],
+    }
+
+
+def json_text(suite: SuiteResult, evidence: bool = True) -> str:
+    return json.dumps(as_json(suite, evidence), ensure_ascii=False, indent=2)
+
+
+def case_line(result: CaseResult, colour: bool) -> str:
+    v = result.verdict
+    mark = v.value.upper().ljust(5)
+    if colour:
+        mark = f"{_COLOUR[v]}{_BOLD}{mark}{_RESET}"
+    text = f"{mark} {result.case.name:28s} {result.duration:6.2f} s  {result.case.title}"
+    if result.message and v is not Verdict.PASS:
+        text += f"\n      -> {result.message}"
+    return text
+
+
+def header(suite: SuiteResult) -> str:
+    t = suite.timing
+    head = (f"ktcs-bench conformance: role {suite.role}, target {suite.target}, "
+            f"profile {suite.profile} ({suite.protocol})")  # fmt: skip
+    if suite.protocol == "type1":
+        timing = (f"ΔR {t.delta_r * 1000:.0f} ms, ACK timeout {t.ack_timeout * 1000:.0f} ms, "
+                  f"link-test period {t.link_test_period:g} s, T_MAX {t.t_max:g} s, "
+                  f"retry count {t.retry_count}, tolerance +{t.tolerance:g} s")  # fmt: skip
+    else:
+        timing = (f"heartbeat period {t.heartbeat_period:g} s, T_MAX {t.t2_t_max:g} s, "
+                  f"retry count {t.retry_count}, tolerance +{t.tolerance:g} s")  # fmt: skip
+    return f"{head}\n  {timing}"
+
+
+def case_block(result: CaseResult, colour: bool, verbose: bool = False) -> str:
+    """The case's line, and its checks when it did not pass (all of them with `verbose`)."""
+    lines = [case_line(result, colour)]
+    if verbose or result.verdict in (Verdict.FAIL, Verdict.ERROR):
+        checks = result.evidence.checks if verbose else result.evidence.checks[-6:]
+        lines.extend("      " + c for c in checks)
+    return "\n".join(lines)
+
+
+def footer(suite: SuiteResult, colour: bool) -> str:
+    counts = ", ".join(f"{suite.count(v)} {v.value}" for v in Verdict if suite.count(v))
+    verdict = "FAILED" if suite.failed else "PASSED"
+    if colour:
+        verdict = (
+            f"{_COLOUR[Verdict.FAIL if suite.failed else Verdict.PASS]}{_BOLD}{verdict}{_RESET}"
+        )
+    return f"{verdict}: {counts} in {suite.duration:.1f} s"
+
+
+def summary(suite: SuiteResult, colour: bool, verbose: bool = False) -> str:
+    blocks = [case_block(r, colour, verbose) for r in suite.results]
+    return "\n".join([header(suite), "", *blocks, "", footer(suite, colour)])

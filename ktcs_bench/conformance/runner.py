@@ -1,0 +1,199 @@
+"""Run the suite against one target: open the line or socket, run each selected case, collect
+results. Roles (the device under test) and what the suite plays:
+
+* `atc`, `trackside`: the device's Type I endpoint -- the suite is its IXL;
+* `ixl` on a serial endpoint: the suite is its ATC (or IO, `peer="io"`);
+* `ixl` with `listen://HOST:PORT`: the suite is the CTC, the IXL connects to it (Type II);
+* `ctc` with `tcp://HOST:PORT`: the suite is an IXL client of the CTC (Type II).
+"""
+
+from __future__ import annotations
+
+import socket
+import ssl
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from ktcs_bench.codec import FrameProfile
+from ktcs_bench.conformance.model import (
+    Case,
+    CaseContext,
+    CaseFailed,
+    CaseResult,
+    NotApplicable,
+    Verdict,
+)
+from ktcs_bench.conformance.timing import SuiteTiming
+from ktcs_bench.conformance.type1_cases import TYPE1_CASES
+from ktcs_bench.conformance.type2_cases import TYPE2_CASES
+from ktcs_bench.conformance.wire import Evidence, Type1Wire, Type2Wire
+from ktcs_bench.emulator.endpoints import Endpoint, parse_endpoint
+from ktcs_bench.errors import KtcsError, PeerError, UsageError
+from ktcs_bench.transport.serialport import open_transport
+
+ROLES = ("ixl", "atc", "ctc", "trackside")
+CASES: dict[str, Case] = {c.name: c for c in (*TYPE1_CASES, *TYPE2_CASES)}
+ACCEPT_TIMEOUT = 10.0  # an IXL retries with back-off of at most 5 s
+
+
+def protocol_of(role: str, target: Endpoint) -> str:
+    if role not in ROLES:
+        raise UsageError(f"unknown role {role!r} (one of {', '.join(ROLES)})")
+    if role == "ctc":
+        if target.kind != "tcp":
+            raise UsageError("--role ctc needs --target tcp://HOST:PORT (the CTC's Type II server)")
+        return "type2"
+    if role == "ixl" and target.kind in ("listen", "tcp"):
+        if target.kind != "listen":
+            raise UsageError("the IXL is a Type II client: use --target listen://HOST:PORT")
+        return "type2"
+    if target.kind not in ("serial",):
+        raise UsageError(f"--role {role}: the Type I target is a serial device or pyserial URL")
+    return "type1"
+
+
+def select(protocol: str, role: str, names: Sequence[str] = ()) -> list[Case]:
+    unknown = [n for n in names if n not in CASES]
+    if unknown:
+        raise UsageError(f"unknown case(s) {', '.join(unknown)} (see --list)")
+    chosen = [c for c in CASES.values() if c.protocol == protocol and role in c.roles]
+    if names:
+        chosen = [c for c in chosen if c.name in names]
+        if not chosen:
+            raise UsageError(f"none of {', '.join(names)} applies to --role {role} ({protocol})")
+    return chosen
+
+
+@dataclass
+class SuiteResult:
+    role: str
+    target: str
+    protocol: str
+    profile: str
+    timing: SuiteTiming
+    results: list[CaseResult] = field(default_factory=list)
+    duration: float = 0.0
+
+    @property
+    def failed(self) -> list[CaseResult]:
+        return [r for r in self.results if r.verdict in (Verdict.FAIL, Verdict.ERROR)]
+
+    def count(self, verdict: Verdict) -> int:
+        return sum(r.verdict is verdict for r in self.results)
+
+
+class _Type2Opener:
+    """Fresh connections to/from the device, one per case."""
+
+    def __init__(self, target: Endpoint, profile: FrameProfile, tls: ssl.SSLContext | None,
+                 server_hostname: str | None) -> None:  # fmt: skip
+        self.target, self.profile, self.tls = target, profile, tls
+        self.server_hostname = server_hostname
+        self.server: socket.socket | None = None
+        if target.kind == "listen":
+            self.server = socket.create_server((target.host, target.port), reuse_port=False)
+            self.server.settimeout(ACCEPT_TIMEOUT)
+
+    def __call__(self) -> Type2Wire:
+        if self.server is not None:
+            try:
+                sock, _ = self.server.accept()
+            except TimeoutError:
+                raise PeerError(
+                    f"no IXL connected to {self.target} within {ACCEPT_TIMEOUT:g} s"
+                ) from None
+            if self.tls is not None:
+                sock = self.tls.wrap_socket(sock, server_side=True)
+            return Type2Wire(sock, self.profile)
+        try:
+            sock = socket.create_connection((self.target.host, self.target.port), timeout=5.0)
+        except OSError as exc:
+            raise PeerError(f"cannot connect to {self.target}: {exc}") from exc
+        if self.tls is not None:
+            sock = self.tls.wrap_socket(
+                sock, server_hostname=self.server_hostname or self.target.host
+            )
+        return Type2Wire(sock, self.profile)
+
+    def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
+
+
+def run_suite(
+    role: str,
+    target: str,
+    profile: FrameProfile,
+    timing: SuiteTiming,
+    *,
+    cases: Sequence[str] = (),
+    station: int | None = None,
+    codes: int | None = None,
+    tls: ssl.SSLContext | None = None,
+    server_hostname: str | None = None,
+    on_result: Callable[[CaseResult], None] | None = None,
+) -> SuiteResult:
+    """Run the selected cases (all that apply when none are named) in order."""
+    endpoint = parse_endpoint(target)
+    protocol = protocol_of(role, endpoint)
+    if profile.protocol != protocol:
+        raise UsageError(
+            f"profile {profile.name} is {profile.protocol}; this target needs {protocol}"
+        )
+    chosen = select(protocol, role, cases)
+    suite = SuiteResult(role, target, protocol, profile.name, timing)
+    t0 = time.monotonic()
+    wire1: Type1Wire | None = None
+    opener: _Type2Opener | None = None
+    try:
+        if protocol == "type1":
+            try:
+                transport = open_transport(endpoint.address, f"conformance-{role}", None)
+            except KtcsError as exc:
+                raise PeerError(str(exc)) from exc
+            wire1 = Type1Wire(transport, profile)
+        else:
+            try:
+                opener = _Type2Opener(endpoint, profile, tls, server_hostname)
+            except OSError as exc:
+                raise UsageError(f"cannot listen on {target}: {exc}") from exc
+        for case in chosen:
+            result = _run_case(case, role, timing, station, codes, wire1, opener)
+            suite.results.append(result)
+            if on_result is not None:
+                on_result(result)
+    finally:
+        if wire1 is not None:
+            wire1.close()
+        if opener is not None:
+            opener.close()
+    suite.duration = time.monotonic() - t0
+    return suite
+
+
+def _run_case(case: Case, role: str, timing: SuiteTiming, station: int | None,
+              codes: int | None, wire1: Type1Wire | None,
+              opener: _Type2Opener | None) -> CaseResult:  # fmt: skip
+    evidence = Evidence()
+    if wire1 is not None:
+        wire1.begin(evidence)
+    ctx = CaseContext(role, timing, evidence, station, codes, wire1, opener)
+    t0 = time.monotonic()
+    try:
+        case.run(ctx)
+        verdict, message = Verdict.PASS, ""
+    except CaseFailed as exc:
+        verdict, message = Verdict.FAIL, str(exc)
+    except NotApplicable as exc:
+        verdict, message = Verdict.SKIP, str(exc)
+    except (PeerError, OSError, ssl.SSLError) as exc:
+        verdict, message = Verdict.ERROR, f"{type(exc).__name__}: {exc}"
+    except Exception as exc:  # a bug in a case must not stop the suite
+        verdict, message = Verdict.ERROR, f"{type(exc).__name__}: {exc}"
+        evidence.note(traceback.format_exc())
+    finally:
+        for w in ctx.opened:
+            w.close()
+    return CaseResult(case, verdict, message, time.monotonic() - t0, evidence)
