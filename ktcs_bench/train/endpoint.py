@@ -28,7 +28,7 @@ from ktcs_bench.train.curves import (
     Target,
     TargetKind,
     ebd_min_on_grid,
-    ebd_on_grid,
+    ebd_segment,
 )
 from ktcs_bench.train.deceleration import (
     GradientProfile,
@@ -160,7 +160,14 @@ class TrainEndpoint:
             self.grid, self.mrsp.targets(), self.times.fixed, self.v_cap
         )
         self._mrsp_grid = self.mrsp.on_grid(self.grid.x)
-        self.limits = SupervisionLimits(self.grid.x, self._static_ebd, self._mrsp_grid)
+        # the supervised EBD = static EBD with the moving stop target's curve laid over it in
+        # place: [0, lo) static, [lo, k) min(static, stop curve), [k, n) 0 (past the target)
+        n = len(self.grid.x)
+        self._ebd = self._static_ebd.copy()
+        self._stop: float | None = None
+        self._stop_lo, self._stop_k = n, n
+        self._code_speed: float | None = None
+        self.limits = SupervisionLimits(self.grid.x, self._ebd, self._mrsp_grid)
         self.ato_sm = AtoStateMachine()
         self.ato_ctl = AtoController(p.service_decel, p.max_traction)
         self.target_point = line.length
@@ -257,18 +264,33 @@ class TrainEndpoint:
         return target
 
     def _rebuild(self, target: float, inputs: CycleInputs) -> None:
-        """Curves of this cycle: cached MRSP targets + the moving stop target (+ kTCS code)."""
-        stop = Target(target, 0.0, TargetKind.STOP)
-        ebd = np.minimum(
-            self._static_ebd, ebd_on_grid(self.grid, stop, self.times.fixed, self.v_cap)
-        )
-        mrsp = self._mrsp_grid
+        """Curves of this cycle: cached MRSP targets + the moving stop target (+ kTCS code).
+
+        Only what moved is recomputed: the stop target's curve on its window (a few hundred
+        nodes), and the nodes it no longer covers are restored from the static EBD.
+        """
+        if target != self._stop:
+            self._stop = target
+            stop = Target(target, 0.0, TargetKind.STOP)
+            lo, k, vals = ebd_segment(self.grid, stop, self.times.fixed, self.v_cap)
+            ebd, static = self._ebd, self._static_ebd
+            old_lo, old_k = self._stop_lo, self._stop_k
+            if old_lo < lo:  # uncovered by the new window: static again
+                ebd[old_lo:lo] = static[old_lo:lo]
+            np.minimum(static[lo:k], vals, out=ebd[lo:k])
+            if k < old_k:
+                ebd[k:old_k] = 0.0
+            self._stop_lo, self._stop_k = min(lo, k), k
         if self.cfg.mode == "ktcs" and inputs.code is not None:
             code = inputs.code
             if code != self._last_code:
                 self._last_code = code
-            mrsp = np.minimum(mrsp, code.speed)
-        self.limits = SupervisionLimits(self.grid.x, ebd, mrsp)
+            if code.speed != self._code_speed:
+                self._code_speed = code.speed
+                self.limits.mrsp = np.minimum(self._mrsp_grid, code.speed)
+        elif self._code_speed is not None:
+            self._code_speed = None
+            self.limits.mrsp = self._mrsp_grid
 
     def _drive(
         self, now: float, dt: float, verdict: Verdict, inputs: CycleInputs, events: list[Event]

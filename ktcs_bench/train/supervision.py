@@ -64,19 +64,30 @@ class SupervisionLimits:
         return i, f - i
 
     def ebd_at(self, x: float) -> float:
-        """EBD speed at x, linear between grid nodes (the grid is uniform)."""
-        i, frac = self._index(x)
-        a = float(self.ebd[i])
+        """EBD speed at x, linear between grid nodes (the grid is uniform).
+
+        Called a few dozen times per cycle (bisections): kept to plain float arithmetic and
+        `ndarray.item` (the array may be updated in place between calls).
+        """
+        f = (x - self._x0) / self._step
+        ebd = self.ebd
+        if f <= 0.0:
+            return float(ebd.item(0))
+        i = int(f)
+        if i >= self._n - 1:
+            return float(ebd.item(self._n - 1))
+        a: float = ebd.item(i)
+        frac = f - i
         if frac == 0.0:
             return a
-        b = float(self.ebd[i + 1])
-        if math.isinf(a) or math.isinf(b):
+        b: float = ebd.item(i + 1)
+        if a == math.inf or b == math.inf:
             return min(a, b)
         return a + (b - a) * frac
 
     def mrsp_at(self, x: float) -> float:
         i, _ = self._index(x)
-        return float(self.mrsp[i])
+        return float(self.mrsp.item(i))
 
 
 class Supervisor:
@@ -89,6 +100,25 @@ class Supervisor:
         self.sb_applied = False
         self._release_requested = False
         self.last: Verdict | None = None
+
+    @property
+    def times(self) -> CurveTimes:
+        return self._times
+
+    @times.setter
+    def times(self, times: CurveTimes) -> None:
+        self._times = times
+        t_tr = times.t_traction
+        self._t_bec = t_tr + (times.t_be - t_tr if times.t_be > t_tr else 0.0)
+        """D_bec / V at a_est = 0: exactly the sum `CurveTimes.bec` forms."""
+        f = times.fixed
+        self._leads = (
+            0.0,
+            times.t_bs2,
+            times.t_bs2 + f.t_warning,
+            times.t_bs2 + f.t_driver,
+            times.t_bs2 + f.t_driver + times.t_indication,
+        )
 
     def release(self) -> None:
         """Driver's explicit release of the latched emergency brake (honoured at standstill)."""
@@ -104,24 +134,25 @@ class Supervisor:
         self, lim: SupervisionLimits, x: float, v: float, lead: float, a: float
     ) -> bool:
         """True when the train at (x, v) is beyond the target curve offset by `lead` seconds."""
+        if a <= 0.0 and v >= 0.0:  # `CurveTimes.bec` at a_est = 0, inlined
+            return v > lim.ebd_at(x + v * self._t_bec + v * lead)
         v_bec, d_bec = self.times.bec(v, 0.0, a)
         return v_bec > lim.ebd_at(x + d_bec + v * lead)
 
     def check(self, lim: SupervisionLimits, x: float, v: float, a: float = 0.0) -> Verdict:
         """Supervise the train at max-safe front x with speed v and acceleration a."""
-        t = self.times
-        f = t.fixed
+        f = self.times.fixed
         if self.eb_latched and v <= 0.0 and self._release_requested:
             self.eb_latched = False
         self._release_requested = False
         v_mrsp = lim.mrsp_at(x)
-        past_ebi = v > v_mrsp + f.dv_ebi(v_mrsp) or self._limit_speed(lim, x, v, 0.0, a)
-        past_sbi = v > v_mrsp + f.dv_sbi(v_mrsp) or self._limit_speed(lim, x, v, t.t_bs2, a)
-        past_w = v > v_mrsp + f.dv_warning(v_mrsp) or self._limit_speed(
-            lim, x, v, t.t_bs2 + f.t_warning, a
-        )
-        past_p = v > v_mrsp or self._limit_speed(lim, x, v, t.t_bs2 + f.t_driver, a)
-        past_i = self._limit_speed(lim, x, v, t.t_bs2 + f.t_driver + t.t_indication, a)
+        l_ebi, l_sbi, l_w, l_p, l_i = self._leads
+        beyond = self._limit_speed
+        past_ebi = v > v_mrsp + f.dv_ebi(v_mrsp) or beyond(lim, x, v, l_ebi, a)
+        past_sbi = v > v_mrsp + f.dv_sbi(v_mrsp) or beyond(lim, x, v, l_sbi, a)
+        past_w = v > v_mrsp + f.dv_warning(v_mrsp) or beyond(lim, x, v, l_w, a)
+        past_p = v > v_mrsp or beyond(lim, x, v, l_p, a)
+        past_i = beyond(lim, x, v, l_i, a)
         permitted = self.permitted_speed(lim, x)
         reason = ""
         if past_ebi and v > 0:
@@ -157,14 +188,15 @@ class Supervisor:
 
     def permitted_speed(self, lim: SupervisionLimits, x: float) -> float:
         """Highest v that is not past the permitted curve at x (bisection; for driver and ATO)."""
-        t = self.times
-        lead = t.t_bs2 + t.fixed.t_driver
+        lead = self._leads[3]
+        t_bec = self._t_bec
+        ebd_at = lim.ebd_at
         lo, hi = 0.0, lim.mrsp_at(x)
-        if not self._limit_speed(lim, x, hi, lead, 0.0):
+        if not hi > ebd_at(x + hi * t_bec + hi * lead):
             return hi
         for _ in range(18):
             mid = 0.5 * (lo + hi)
-            if self._limit_speed(lim, x, mid, lead, 0.0):
+            if mid > ebd_at(x + mid * t_bec + mid * lead):
                 hi = mid
             else:
                 lo = mid
