@@ -288,7 +288,7 @@ class Grid:
         """∫_x0^x A_gradient dx at any location (exact)."""
         pts, hv = self._pts, self._hv
         i = min(max(bisect.bisect_right(pts, x) - 1, 0), len(pts) - 2)
-        return hv[i] + (hv[i + 1] - hv[i]) * (x - pts[i]) / (pts[i + 1] - pts[i])
+        return float(hv[i] + (hv[i + 1] - hv[i]) * (x - pts[i]) / (pts[i + 1] - pts[i]))
 
     @classmethod
     def uniform(cls, start: float, stop: float, step: float, decel: SafeDeceleration) -> Grid:

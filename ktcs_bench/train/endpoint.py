@@ -373,16 +373,7 @@ class TrainEndpoint:
             ("permitted", t.t_bs2 + f.t_driver, None),
         ):
             ceiling = out["mrsp"] + (dv(out["mrsp"]) if dv is not None else 0.0)
-            lo, hi = 0.0, ceiling
-            if sup._limit_speed(lim, x, hi, lead, 0.0):
-                for _ in range(25):
-                    mid = 0.5 * (lo + hi)
-                    if sup._limit_speed(lim, x, mid, lead, 0.0):
-                        hi = mid
-                    else:
-                        lo = mid
-                hi = lo
-            out[name] = hi
+            out[name] = sup.limit_speed(lim, x, ceiling, lead, 25)
         return out
 
     @property

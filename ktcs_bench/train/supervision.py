@@ -188,16 +188,44 @@ class Supervisor:
 
     def permitted_speed(self, lim: SupervisionLimits, x: float) -> float:
         """Highest v that is not past the permitted curve at x (bisection; for driver and ATO)."""
-        lead = self._leads[3]
+        return self.limit_speed(lim, x, lim.mrsp_at(x), self._leads[3], 18)
+
+    def limit_speed(
+        self, lim: SupervisionLimits, x: float, hi: float, lead: float, iterations: int
+    ) -> float:
+        """Highest v ≤ hi not beyond the curve `lead` seconds before the EBD at x (a_est = 0):
+        hi itself if it is not beyond, else a bisection of `iterations` halvings from [0, hi].
+
+        The driver and ATO ask this twice a cycle, so `_limit_speed`/`ebd_at` are inlined.
+        """
         t_bec = self._t_bec
-        ebd_at = lim.ebd_at
-        lo, hi = 0.0, lim.mrsp_at(x)
-        if not hi > ebd_at(x + hi * t_bec + hi * lead):
-            return hi
-        for _ in range(18):
-            mid = 0.5 * (lo + hi)
-            if mid > ebd_at(x + mid * t_bec + mid * lead):
-                hi = mid
+        item = lim.ebd.item
+        x0, step, last = lim._x0, lim._step, lim._n - 1
+        lo = 0.0
+        v = hi
+        for k in range(iterations + 1):
+            if k:
+                v = 0.5 * (lo + hi)
+            f = (x + v * t_bec + v * lead - x0) / step
+            if f <= 0.0:
+                e: float = item(0)
             else:
-                lo = mid
+                i = int(f)
+                if i >= last:
+                    e = item(last)
+                else:
+                    e = item(i)
+                    frac = f - i
+                    if frac != 0.0:
+                        b: float = item(i + 1)
+                        if e == math.inf or b == math.inf:
+                            e = min(e, b)
+                        else:
+                            e = e + (b - e) * frac
+            if v > e:
+                hi = v
+            elif k:
+                lo = v
+            else:
+                return hi
         return lo
