@@ -154,6 +154,7 @@ def run_suite(
             except KtcsError as exc:
                 raise PeerError(str(exc)) from exc
             wire1 = Type1Wire(transport, profile)
+            wire1.ack_wait = timing.ack_timeout + timing.tolerance
         else:
             try:
                 opener = _Type2Opener(endpoint, profile, tls, server_hostname)

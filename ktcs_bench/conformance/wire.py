@@ -158,6 +158,7 @@ class Type1Wire(_WireBase):
         super().__init__(profile)
         self.transport = transport
         self.auto_ack = True
+        self.ack_wait = 1.0  # how long settle() waits for an ACK (the runner sets it from timing)
         # Start at a random SEQ: a device remembers the last SEQ it accepted from an earlier run.
         self.seq = random.randrange(self.codec.seq_modulo)
 
@@ -206,17 +207,14 @@ class Type1Wire(_WireBase):
         (everything it had queued -- a REQUEST_ALL after recovery, a LINK_TEST -- acknowledged)."""
         self.auto_ack = True
         end = time.monotonic() + limit
-        for _ in range(3):
+        for _ in range(2):
             seq = self.next_seq()
             self.send_raw(self.codec.encode(seq, self.op["LINK_TEST"]))
-            if self.wait_for(self.ack_of(seq), max(0.3, 3 * self.ack_budget())) is not None:
+            if self.wait_for(self.ack_of(seq), self.ack_wait) is not None:
                 break
         while time.monotonic() < end:
             if not self.poll(quiet):
                 return
-
-    def ack_budget(self) -> float:
-        return 0.5
 
     def close(self) -> None:
         self.transport.close()
