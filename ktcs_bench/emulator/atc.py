@@ -92,5 +92,8 @@ class AtcDevice(Device):
             **super().status(),
             "station": self.station,
             "link": bool(self.port and self.port.up),
+            "state": self.atc.full_state(),
+            "sent": dict(self.port.state) if self.port else {},
+            "rails": bool(self.rails and self.rails.connected),
             "codes": self._wire(self.atc.track_codes()),
         }

@@ -68,6 +68,7 @@ class CodePort:
         self.runner: LinkRunner | None = None
         self.frames_in = 0
         self._stopping = False
+        self._unsent: set[str] = set()
 
     def _new_link(self) -> Type1Link:
         return variants.type1_link(
@@ -114,8 +115,16 @@ class CodePort:
             if name in self.state and self.state[name] != int(value):
                 self.state[name] = int(value)
                 items.append([self.tx_chart.number_of(name), int(value)])
-        if not items or not self.up or self.runner is None:
+        if not items:
             return
+        if not self.up or self.runner is None:
+            # the peer may already hold an ALL_INFO older than this: send these when the link is up
+            self._unsent.update(self.tx_chart.name_of(code) or "" for code, _ in items)
+            return
+        self._send_items(items)
+
+    def _send_items(self, items: list[list[int]]) -> None:
+        assert self.runner is not None
         for k in range(0, len(items), MAX_ITEMS):
             self.runner.send(self.link.message("CHANGE", items=items[k : k + MAX_ITEMS]))
 
@@ -152,8 +161,16 @@ class CodePort:
         elif isinstance(event, LinkUp):
             self.up = True
             log.info("%s: link up", self.name)
+            if self._unsent and self.runner is not None:
+                names, self._unsent = self._unsent, set()
+                self._send_items(
+                    [[self.tx_chart.number_of(n), self.state[n]] for n in sorted(names) if n]
+                )
             self.on_link(True)
         elif isinstance(event, LinkDown | CommunicationError):
+            # what was queued (CHANGE, or the ALL_INFO answering the peer's REQUEST_ALL) was
+            # discarded, and the peer may not have noticed the outage: push everything on recovery
+            self._unsent.update(self.state)
             if self.up:
                 log.warning("%s: link down (%s)", self.name, type(event).__name__)
             self.up = False

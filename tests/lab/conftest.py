@@ -1,0 +1,128 @@
+"""A real lab for the tests: `ktcs-bench lab up` as a subprocess, every device its own process,
+Type I over paced ptys through taps, Type II over TCP through taps."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from ktcs_bench.datafiles import data_dir
+from ktcs_bench.emulator import jsonlines
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def request(address: str, obj: dict[str, Any], timeout: float = 20.0) -> dict[str, Any]:
+    host, _, port = address.rpartition(":")
+    return asyncio.run(jsonlines.request(host, int(port), obj, timeout=timeout))
+
+
+def wait_until(what: str, predicate: Callable[[], Any], timeout: float = 30.0) -> Any:
+    end = time.monotonic() + timeout
+    last: Any = None
+    while time.monotonic() < end:
+        last = predicate()
+        if last:
+            return last
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for: {what} (last: {last!r})")
+
+
+class RunningLab:
+    def __init__(self, proc: subprocess.Popen[str], first: dict[str, Any], run_dir: Path) -> None:
+        self.proc, self.info, self.run_dir = proc, first, run_dir
+        self.control = first["control"]
+        self.links = {e["link"]: e for e in first["links"]}
+
+    def state(self) -> dict[str, Any]:
+        return json.loads((self.run_dir / "labs" / self.info["lab"] / "lab.json").read_text())
+
+    def device(self, name: str) -> str:
+        return str(self.state()["devices"][name]["control"])
+
+    def status(self, name: str) -> dict[str, Any]:
+        answer = request(self.device(name), {"cmd": "status"})
+        return answer["status"]  # type: ignore[no-any-return]
+
+    def ctc(self, obj: dict[str, Any]) -> dict[str, Any]:
+        return request(self.device("ctc"), obj)
+
+    def lab(self, obj: dict[str, Any]) -> dict[str, Any]:
+        return request(self.control, obj, timeout=60)
+
+    def cli(self, *args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "ktcs_bench.cli.main", *args], capture_output=True, text=True,
+            timeout=60, env={**os.environ, "KTCS_BENCH_RUN_DIR": str(self.run_dir)},
+        )  # fmt: skip
+
+
+def lab_file(tmp: Path, name: str) -> Path:
+    """The shipped reference lab under another name, with the console on any free port."""
+    text = (data_dir("emulators") / "labs" / "reference.yaml").read_text(encoding="utf-8")
+    text = text.replace("lab: reference", f"lab: {name}").replace("port: 8020", "port: 0")
+    line = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
+    text = text.replace("line: ../lines/reference.yaml", f"line: {line}")
+    path = tmp / f"{name}.yaml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+@pytest.fixture(scope="module")
+def running_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab]:
+    tmp = tmp_path_factory.mktemp("lab")
+    run_dir = tmp / "run"
+    path = lab_file(tmp, "testlab")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(path), "--json", "--interval", "5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env={**os.environ, "KTCS_BENCH_RUN_DIR": str(run_dir)},
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        if not line:
+            raise AssertionError(f"lab up failed: {proc.stderr.read() if proc.stderr else ''}")
+        lab = RunningLab(proc, json.loads(line), run_dir)
+        # drain the status stream so the lab never blocks on a full pipe
+        import threading
+
+        threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()  # type: ignore[union-attr]
+        wait_until(
+            "every station synced at the CTC, the empty line reported clear",
+            lambda: all(
+                s["link"] == "up" and s["synced"] and s["mode"] == "center" and not s["occupied"]
+                for s in lab.ctc({"cmd": "status"})["status"]["stations"].values()
+            ),
+            timeout=60,
+        )
+        yield lab
+    finally:
+        try:
+            pids = [d.get("pid") for d in json.loads(
+                (run_dir / "labs" / "testlab" / "lab.json").read_text())["devices"].values()]  # fmt: skip
+        except (OSError, ValueError, KeyError):
+            pids = []
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGTERM)
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        for pid in pids:  # nothing the lab started may outlive it
+            if pid:
+                try:
+                    os.killpg(pid, signal.SIGKILL)
+                except (ProcessLookupError, PermissionError):
+                    pass
