@@ -150,6 +150,8 @@ class CtcDevice(Device):
             return {"ok": True, "log": self.command_log[-int(obj.get("last", 50)) :]}
         if cmd in ("route", "point", "signal", "mode", "control"):
             return await self.operate(obj)
+        if cmd == "timed_route":
+            return await self.timed_route(obj)
         return await super().command(obj)
 
     async def operate(self, obj: dict[str, Any]) -> dict[str, Any]:
@@ -183,6 +185,27 @@ class CtcDevice(Device):
         self.note("control", f"station {st} {code_name}={value}: {text}")
         return {"ok": result.accepted, "code": code_name, "result": text,
                 "reason": int(result.reason)}  # fmt: skip
+
+    async def timed_route(self, obj: dict[str, Any]) -> dict[str, Any]:
+        """Set a route and time, in this process's clock, CONTROL sent -> CONTROL_RESULT -> the
+        entry signal's proceed indication (the benchmark's end-to-end figure)."""
+        st = int(obj["station"])
+        entry = _signal(str(obj["entry"]))
+        aspects = self.line.station(st).signal(entry).aspects
+        t0 = time.monotonic()
+        answer = await self.operate({**obj, "cmd": "route", "action": "set"})
+        t_result = time.monotonic() - t0
+        if not answer.get("ok"):
+            return answer
+        chart = self.ind[st]
+        codes = [chart.number_of(n.asp(st, entry, a)) for a in aspects if a != "R"]
+
+        def proceed() -> bool:  # a proceed aspect shown (not merely "R" no longer shown)
+            view = self.server.stations.get(st)
+            return view is not None and any(view.state.get(c) == 1 for c in codes)
+
+        await self.server.wait_until(proceed, float(obj.get("timeout", 30.0)))
+        return {**answer, "result_s": t_result, "proceed_s": time.monotonic() - t0}
 
     # -- life cycle ------------------------------------------------------------------------------
     async def start(self) -> None:
