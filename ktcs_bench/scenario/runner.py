@@ -70,14 +70,20 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
     now = 0.0
     rm_seen = 0
     still = 0
+    dt = scn.dt
     for k in range(n_steps):
-        now = k * scn.dt
-        if rm is not None:
+        now = k * dt
+        if rm is not None and pending_points:
             for due, point, position in [p for p in pending_points if p[0] <= now]:
                 rm.point_detected(point, position, now)
                 pending_points.remove((due, point, position))
-        zones = tuple((z.start, z.end) for z in scn.zones if z.active_from <= now < z.active_until)
+        zones = (
+            tuple((z.start, z.end) for z in scn.zones if z.active_from <= now < z.active_until)
+            if scn.zones
+            else ()
+        )
         snapshot = tuple(messages.values())
+        record_limits = k % RECORD_LIMITS_EVERY == 0
         for t in trains:
             tid = t.cfg.train_id
             authority = None
@@ -92,12 +98,13 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
                 for cmd in grant.commands:
                     pending_points.append((now + scn.point_throw_time, cmd.point, cmd.position))
             code = code_at(scn, t.state.position) if t.cfg.mode == "ktcs" else None
-            out = t.step(now, CycleInputs(snapshot, authority, code, False, zones), scn.dt)
+            out = t.step(now, CycleInputs(snapshot, authority, code, False, zones), dt)
             messages[tid] = out.message
-            events.extend(out.events)
+            if out.events:
+                events.extend(out.events)
             tr = traces[tid]
             s = t.state
-            tr.t.append(now + scn.dt)
+            tr.t.append(now + dt)
             tr.head.append(s.position)
             tr.tail.append(s.position - t.cfg.params.length)
             tr.est_head.append(out.position.head)
@@ -105,7 +112,7 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
             tr.status.append(out.verdict.status.value)
             tr.target.append(out.target_point)
             tr.ebd_at_head.append(t.limits.ebd_at(s.position))
-            if k % RECORD_LIMITS_EVERY == 0:
+            if record_limits:
                 tr.limits_x.append(out.position.max_safe_front)
                 for name, v in t.limit_speeds().items():
                     tr.limits.setdefault(name, []).append(v)
@@ -123,4 +130,4 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
             break
     if progress is not None:
         progress(1.0)
-    return RunResult(scn, traces, events, now + scn.dt)
+    return RunResult(scn, traces, events, now + dt)

@@ -256,6 +256,8 @@ class Grid:
     """Breakpoints of the gradient integral (increasing)."""
     hv: FloatArray = field(init=False, repr=False)
     """∫_x0^hp A_gradient dx."""
+    flat: bool = field(init=False)
+    """No gradient anywhere (h ≡ 0)."""
 
     def __post_init__(self) -> None:
         x = self.x
@@ -283,6 +285,7 @@ class Grid:
         self.h = np.repeat(ags[seg], counts) * x
         self.h += np.repeat(hv[seg] - ags[seg] * pts[seg], counts)
         self.a_min = min(self.decel.brake.values) + float(ags[seg].min())
+        self.flat = not bool(ags.any())
 
     def h_at(self, x: float) -> float:
         """∫_x0^x A_gradient dx at any location (exact)."""
@@ -322,11 +325,25 @@ def ebd_segment(
     lo = max(int(x.searchsorted(x_from, side="left")) - 1, 0)
     if lo >= k:
         return k, k, _EMPTY
-    vals = np.full(k - lo, np.inf)
     brake = grid.decel.brake
     steps = brake.steps
     h = grid.h
     xs, hs = loc, grid.h_at(loc)
+    if len(steps) == 1:  # one brake band (the endpoint's case, every cycle): one pass
+        v2 = xs - x[lo:k]
+        v2 *= 2.0 * brake.values[0]
+        v2 += v2s
+        if not grid.flat:  # on a flat line the gradient term is exactly 0
+            hterm = hs - h[lo:k]
+            hterm *= 2.0
+            v2 += hterm
+        start = k - int(v2[::-1].searchsorted(v_cap * v_cap, side="left"))
+        band = v2[start - lo :]
+        np.maximum(band, 0.0, out=band)
+        np.sqrt(band, out=band)
+        v2[: start - lo] = np.inf
+        return lo, k, v2
+    vals = np.full(k - lo, np.inf)
     hi = k  # x[lo:hi] still to fill
     while hi > lo:
         v_now = math.sqrt(v2s)

@@ -253,9 +253,10 @@ class TrainEndpoint:
         target = self.line.length
         if inputs.authority_end is not None:
             target = min(target, inputs.authority_end)
-        leader = leader_of(self.cfg.train_id, pos.head, list(inputs.messages))
-        if leader is not None:
-            target = min(target, target_from_leader(leader, self.cfg.safety_distance))
+        if inputs.messages:
+            leader = leader_of(self.cfg.train_id, pos.head, inputs.messages)
+            if leader is not None:
+                target = min(target, target_from_leader(leader, self.cfg.safety_distance))
         for start, end in inputs.protection_zones:
             if end > pos.min_safe_rear and start > pos.head - 1.0:
                 target = min(target, start)

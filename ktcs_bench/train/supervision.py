@@ -21,6 +21,9 @@ from enum import Enum
 from ktcs_bench.train.curves import CurveTimes
 from ktcs_bench.train.deceleration import FloatArray
 
+_GUARD = 1e-7
+"""m/s: bisection points this close to a cell's root are evaluated in full, not by the root."""
+
 
 class Status(Enum):
     NORMAL = "normal"
@@ -100,6 +103,8 @@ class Supervisor:
         self.sb_applied = False
         self._release_requested = False
         self.last: Verdict | None = None
+        self._ceil_for = math.nan
+        self._ceilings = (0.0, 0.0, 0.0)
 
     @property
     def times(self) -> CurveTimes:
@@ -146,13 +151,27 @@ class Supervisor:
             self.eb_latched = False
         self._release_requested = False
         v_mrsp = lim.mrsp_at(x)
+        if v_mrsp != self._ceil_for:  # V_MRSP + dV ceilings, kept while the MRSP is the same
+            self._ceil_for = v_mrsp
+            self._ceilings = (
+                v_mrsp + f.dv_ebi(v_mrsp),
+                v_mrsp + f.dv_sbi(v_mrsp),
+                v_mrsp + f.dv_warning(v_mrsp),
+            )
+        c_ebi, c_sbi, c_w = self._ceilings
         l_ebi, l_sbi, l_w, l_p, l_i = self._leads
-        beyond = self._limit_speed
-        past_ebi = v > v_mrsp + f.dv_ebi(v_mrsp) or beyond(lim, x, v, l_ebi, a)
-        past_sbi = v > v_mrsp + f.dv_sbi(v_mrsp) or beyond(lim, x, v, l_sbi, a)
-        past_w = v > v_mrsp + f.dv_warning(v_mrsp) or beyond(lim, x, v, l_w, a)
-        past_p = v > v_mrsp or beyond(lim, x, v, l_p, a)
-        past_i = beyond(lim, x, v, l_i, a)
+        # as `_limit_speed`, with (V_bec, D_bec) formed once for the five curves
+        if a <= 0.0 and v >= 0.0:
+            v_bec, d_bec = v, v * self._t_bec
+        else:
+            v_bec, d_bec = self.times.bec(v, 0.0, a)
+        x_bec = x + d_bec
+        ebd_at = lim.ebd_at
+        past_ebi = v > c_ebi or v_bec > ebd_at(x_bec + v * l_ebi)
+        past_sbi = v > c_sbi or v_bec > ebd_at(x_bec + v * l_sbi)
+        past_w = v > c_w or v_bec > ebd_at(x_bec + v * l_w)
+        past_p = v > v_mrsp or v_bec > ebd_at(x_bec + v * l_p)
+        past_i = v_bec > ebd_at(x_bec + v * l_i)
         permitted = self.permitted_speed(lim, x)
         reason = ""
         if past_ebi and v > 0:
@@ -196,36 +215,61 @@ class Supervisor:
         """Highest v ≤ hi not beyond the curve `lead` seconds before the EBD at x (a_est = 0):
         hi itself if it is not beyond, else a bisection of `iterations` halvings from [0, hi].
 
-        The driver and ATO ask this twice a cycle, so `_limit_speed`/`ebd_at` are inlined.
+        The driver and ATO ask this twice a cycle, so it is the bisection of `_limit_speed`
+        with `ebd_at` inlined, plus one shortcut that keeps the result bit for bit: once both
+        ends of the bracket look ahead into the same grid cell, "beyond" is linear in v there,
+        so each remaining halving is decided by comparing with that cell's root (a point within
+        `_GUARD` of the root is still evaluated in full).
         """
         t_bec = self._t_bec
         item = lim.ebd.item
         x0, step, last = lim._x0, lim._step, lim._n - 1
+        inf = math.inf
         lo = 0.0
         v = hi
+        cell, ea, eb = -1, inf, inf  # the grid cell last read
+        f = (x - x0) / step
+        cell_lo = -1 if f <= 0.0 else min(int(f), last)
+        cell_hi = -1
+        root, rising, fast = 0.0, True, False
         for k in range(iterations + 1):
             if k:
                 v = 0.5 * (lo + hi)
-            f = (x + v * t_bec + v * lead - x0) / step
-            if f <= 0.0:
-                e: float = item(0)
+            if fast and abs(v - root) > _GUARD:
+                beyond = (v > root) == rising
+                i = cell
             else:
-                i = int(f)
-                if i >= last:
-                    e = item(last)
+                f = (x + v * t_bec + v * lead - x0) / step
+                if f <= 0.0:
+                    e: float = item(0)
+                    i = -1
                 else:
-                    e = item(i)
-                    frac = f - i
-                    if frac != 0.0:
-                        b: float = item(i + 1)
-                        if e == math.inf or b == math.inf:
-                            e = min(e, b)
+                    i = int(f)
+                    if i >= last:
+                        e = item(last)
+                        i = last
+                    else:
+                        if i != cell:
+                            cell, ea, eb = i, item(i), item(i + 1)
+                        frac = f - i
+                        if frac == 0.0:
+                            e = ea
+                        elif ea == inf or eb == inf:
+                            e = min(ea, eb)
                         else:
-                            e = e + (b - e) * frac
-            if v > e:
-                hi = v
+                            e = ea + (eb - ea) * frac
+                beyond = v > e
+            if beyond:
+                hi, cell_hi = v, i
             elif k:
-                lo = v
+                lo, cell_lo = v, i
             else:
                 return hi
+            if not fast and cell_lo == cell_hi == cell and 0 <= cell < last:
+                if ea != inf and eb != inf:
+                    d = eb - ea
+                    slope = 1.0 - d * (t_bec + lead) / step
+                    if abs(slope) > 1e-3:
+                        root = (ea + d * ((x - x0) / step - cell)) / slope
+                        rising, fast = slope > 0.0, True
         return lo

@@ -7,6 +7,7 @@ keeps its last rear (the leader can only have moved forward, so that stays safe)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 
@@ -20,10 +21,14 @@ class T2TMessage:
     time: float
 
 
-def leader_of(me: str, my_head: float, messages: list[T2TMessage]) -> T2TMessage | None:
-    """The nearest train whose rear is ahead of my head."""
-    ahead = [m for m in messages if m.train_id != me and m.tail > my_head - 1e-6]
-    return min(ahead, key=lambda m: m.tail) if ahead else None
+def leader_of(me: str, my_head: float, messages: Sequence[T2TMessage]) -> T2TMessage | None:
+    """The nearest train whose rear is ahead of my head (the first such on a tie)."""
+    best: T2TMessage | None = None
+    limit = my_head - 1e-6
+    for m in messages:
+        if m.tail > limit and m.train_id != me and (best is None or m.tail < best.tail):
+            best = m
+    return best
 
 
 def target_from_leader(msg: T2TMessage, safety_distance: float) -> float:
