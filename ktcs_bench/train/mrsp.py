@@ -57,8 +57,11 @@ class SpeedProfile:
         return self.speeds[max(i, 0)]
 
     def on_grid(self, x: FloatArray) -> FloatArray:
-        idx = np.searchsorted(np.asarray(self.starts), x, side="right") - 1
-        out: FloatArray = np.asarray(self.speeds)[np.clip(idx, 0, None)]
+        """The profile at every location of the sorted array `x` (before the first start: the
+        first speed). One pass: the starts are located in `x` and each speed repeated."""
+        edges = x.searchsorted(np.asarray(self.starts[1:]), side="left")
+        counts = np.diff(edges, prepend=0, append=len(x))
+        out: FloatArray = np.repeat(np.asarray(self.speeds, dtype=np.float64), counts)
         return out
 
     def targets(self) -> list[Target]:
