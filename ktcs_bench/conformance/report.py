@@ -49,7 +49,8 @@ def junit_xml(suite: SuiteResult) -> bytes:
             ET.SubElement(tc, "skipped", message=r.message)
         ET.SubElement(tc, "system-out").text = _frames_text(r)
     ET.indent(root)
-    return ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    out: bytes = ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    return out
 
 
 def as_json(suite: SuiteResult, evidence: bool = True) -> dict[str, Any]:

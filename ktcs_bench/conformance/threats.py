@@ -199,7 +199,7 @@ def _frames(tap: PtyTap | TcpTap, since: int, direction: str) -> list[tuple[floa
             continue
         for f in StreamDecoder(profile).feed(rec.data):
             if isinstance(f, Frame):
-                out.append((rec.time, f))
+                out.append((rec.time or 0.0, f))
     return out
 
 
@@ -278,7 +278,7 @@ def deletion(lab: ThreatLab) -> ThreatResult:
 
 def insertion(lab: ThreatLab) -> ThreatResult:
     tap = lab.t1
-    last = [f.seq for _, f in _frames(tap, 0, "atc>ixl") if _is_data1(f)]
+    last = [f.seq for _, f in _frames(tap, 0, "atc>ixl") if _is_data1(f) and f.seq is not None]
     seq = ((last[-1] if last else 0) + 100) % 256
     code = lab.atc_chart.number_of(lab.tcs[0])
     frame = FrameCodec(T1).encode_message(seq, "CHANGE", items=[[code, 1]])
