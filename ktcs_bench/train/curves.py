@@ -328,22 +328,23 @@ def ebd_segment(
     brake = grid.decel.brake
     steps = brake.steps
     h = grid.h
-    xs, hs = loc, grid.h_at(loc)
     if len(steps) == 1:  # one brake band (the endpoint's case, every cycle): one pass
-        v2 = xs - x[lo:k]
+        v2 = loc - x[lo:k]
         v2 *= 2.0 * brake.values[0]
         v2 += v2s
-        if not grid.flat:  # on a flat line the gradient term is exactly 0
-            hterm = hs - h[lo:k]
+        if not grid.flat:  # on a flat line the gradient term is exactly 0 and v² ≥ 0
+            hterm = grid.h_at(loc) - h[lo:k]
             hterm *= 2.0
             v2 += hterm
         start = k - int(v2[::-1].searchsorted(v_cap * v_cap, side="left"))
         band = v2[start - lo :]
-        np.maximum(band, 0.0, out=band)
+        if not grid.flat:
+            np.maximum(band, 0.0, out=band)
         np.sqrt(band, out=band)
         v2[: start - lo] = np.inf
         return lo, k, v2
     vals = np.full(k - lo, np.inf)
+    xs, hs = loc, grid.h_at(loc)
     hi = k  # x[lo:hi] still to fill
     while hi > lo:
         v_now = math.sqrt(v2s)

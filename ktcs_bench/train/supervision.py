@@ -194,9 +194,21 @@ class Supervisor:
             status = Status.INDICATION
         else:
             status = Status.NORMAL
+        traction_cut = status in (Status.WARNING, Status.INTERVENTION) or self.sb_applied
+        last = self.last
+        if (  # the same verdict as last cycle (the usual case): no new object
+            last is not None
+            and last.status is status
+            and last.permitted == permitted
+            and last.traction_cut is traction_cut
+            and last.service_brake is self.sb_applied
+            and last.emergency_brake is self.eb_latched
+            and last.reason == reason
+        ):
+            return last
         verdict = Verdict(
             status=status,
-            traction_cut=status in (Status.WARNING, Status.INTERVENTION) or self.sb_applied,
+            traction_cut=traction_cut,
             service_brake=self.sb_applied,
             emergency_brake=self.eb_latched,
             permitted=permitted,
@@ -222,19 +234,20 @@ class Supervisor:
         `_GUARD` of the root is still evaluated in full).
         """
         t_bec = self._t_bec
+        if not hi > lim.ebd_at(x + hi * t_bec + hi * lead):
+            return hi  # the common case far from any target: one look-up
         item = lim.ebd.item
         x0, step, last = lim._x0, lim._step, lim._n - 1
         inf = math.inf
         lo = 0.0
-        v = hi
         cell, ea, eb = -1, inf, inf  # the grid cell last read
         f = (x - x0) / step
         cell_lo = -1 if f <= 0.0 else min(int(f), last)
-        cell_hi = -1
+        f = (x + hi * t_bec + hi * lead - x0) / step
+        cell_hi = -1 if f <= 0.0 else min(int(f), last)
         root, rising, fast = 0.0, True, False
-        for k in range(iterations + 1):
-            if k:
-                v = 0.5 * (lo + hi)
+        for _ in range(iterations):
+            v = 0.5 * (lo + hi)
             if fast and abs(v - root) > _GUARD:
                 beyond = (v > root) == rising
                 i = cell
@@ -261,10 +274,8 @@ class Supervisor:
                 beyond = v > e
             if beyond:
                 hi, cell_hi = v, i
-            elif k:
-                lo, cell_lo = v, i
             else:
-                return hi
+                lo, cell_lo = v, i
             if not fast and cell_lo == cell_hi == cell and 0 <= cell < last:
                 if ea != inf and eb != inf:
                     d = eb - ea
