@@ -574,6 +574,9 @@ class _EnvelopeShift:
                 cuts = [k for k in breaks if a < k < b]
                 runs.extend(zip([a, *cuts], [*cuts, b], strict=True))
         self.runs = runs
+        # a run whose EBD never rises cannot fold back, whatever the lead (x rises strictly)
+        with np.errstate(invalid="ignore"):
+            self.may_fold = bool((self.both & (ebd[1:] > ebd[:-1])).any())
 
     def __call__(self, lead_time: float) -> FloatArray:
         x, ebd = self.x, self.ebd
@@ -582,10 +585,12 @@ class _EnvelopeShift:
             return out
         with np.errstate(invalid="ignore"):
             s = x - ebd * lead_time
-            folds = np.flatnonzero((s[1:] <= s[:-1]) & self.both) + 1
         runs = self.runs
-        if folds.size:  # never for one target's curve; kept for odd envelopes
-            cut = sorted({*(a for a, _ in runs), *folds.tolist()})
+        folds: list[int] = []
+        if self.may_fold:
+            folds = (np.flatnonzero((s[1:] <= s[:-1]) & self.both) + 1).tolist()
+        if folds:  # never for an envelope of braking curves; kept for odd ones
+            cut = sorted({*(a for a, _ in runs), *folds})
             runs = [
                 (c, min(nb, b))
                 for a, b in runs
