@@ -631,9 +631,12 @@ def curves_on_grid(
     )
     shift = _EnvelopeShift(x, ebd, breaks)
     ebi, sbi, warn, perm, ind = (shift(t_be + lead) for lead in leads)
-    np.minimum(ebi, mrsp + _ramp_vec(mrsp, fixed, "ebi"), out=ebi)
-    np.minimum(sbi, mrsp + _ramp_vec(mrsp, fixed, "sbi"), out=sbi)
-    np.minimum(warn, mrsp + _ramp_vec(mrsp, fixed, "warning"), out=warn)
+    # ceilings V_MRSP + dV: the MRSP is a step profile, so dV is formed per step and repeated
+    starts = np.concatenate(([0], np.flatnonzero(mrsp[1:] != mrsp[:-1]) + 1))
+    counts = np.diff(starts, append=len(mrsp))
+    steps = mrsp[starts]
+    for curve, which in ((ebi, "ebi"), (sbi, "sbi"), (warn, "warning")):
+        np.minimum(curve, np.repeat(steps + _ramp_vec(steps, fixed, which), counts), out=curve)
     np.minimum(perm, mrsp, out=perm)
     np.minimum(ind, mrsp, out=ind)
     return CurveSet(
