@@ -67,6 +67,7 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
         pos = t.position
         messages[t.cfg.train_id] = T2TMessage(t.cfg.train_id, pos.head, pos.min_safe_rear, 0.0, 0.0)
     n_steps = int(round(scn.duration / scn.dt))
+    per_train = [(t, t.cfg.train_id, t.cfg.mode == "ktcs", traces[t.cfg.train_id]) for t in trains]
     now = 0.0
     rm_seen = 0
     still = 0
@@ -84,34 +85,37 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
         )
         snapshot = tuple(messages.values())
         record_limits = k % RECORD_LIMITS_EVERY == 0
-        for t in trains:
-            tid = t.cfg.train_id
-            authority = None
-            if rm is not None:
-                grant = rm.request(
-                    tid,
-                    t.position.min_safe_rear,
-                    min(t.position.head + 3000.0, scn.line.length),
-                    now,
-                )
-                authority = grant.authority_end
-                for cmd in grant.commands:
-                    pending_points.append((now + scn.point_throw_time, cmd.point, cmd.position))
-            code = code_at(scn, t.state.position) if t.cfg.mode == "ktcs" else None
-            out = t.step(now, CycleInputs(snapshot, authority, code, False, zones), dt)
+        shared = CycleInputs(snapshot, None, None, False, zones)  # trains without own inputs
+        for t, tid, ktcs, tr in per_train:
+            inputs = shared
+            if rm is not None or ktcs:
+                authority = None
+                if rm is not None:
+                    grant = rm.request(
+                        tid,
+                        t.position.min_safe_rear,
+                        min(t.position.head + 3000.0, scn.line.length),
+                        now,
+                    )
+                    authority = grant.authority_end
+                    for cmd in grant.commands:
+                        pending_points.append((now + scn.point_throw_time, cmd.point, cmd.position))
+                code = code_at(scn, t.state.position) if ktcs else None
+                inputs = CycleInputs(snapshot, authority, code, False, zones)
+            out = t.step(now, inputs, dt)
             messages[tid] = out.message
             if out.events:
                 events.extend(out.events)
-            tr = traces[tid]
             s = t.state
+            x = s.position
             tr.t.append(now + dt)
-            tr.head.append(s.position)
-            tr.tail.append(s.position - t.cfg.params.length)
+            tr.head.append(x)
+            tr.tail.append(x - t.cfg.params.length)
             tr.est_head.append(out.position.head)
             tr.speed.append(s.speed)
             tr.status.append(out.verdict.status.value)
             tr.target.append(out.target_point)
-            tr.ebd_at_head.append(t.limits.ebd_at(s.position))
+            tr.ebd_at_head.append(t.limits.ebd_at(x))
             if record_limits:
                 tr.limits_x.append(out.position.max_safe_front)
                 for name, v in t.limit_speeds().items():
