@@ -4,6 +4,7 @@ Type I over paced ptys through taps, Type II over TCP through taps."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 import signal
@@ -67,10 +68,13 @@ class RunningLab:
         )  # fmt: skip
 
 
-def lab_file(tmp: Path, name: str) -> Path:
-    """The shipped reference lab under another name, with the console on any free port."""
+def lab_file(tmp: Path, name: str, extra_devices: str = "") -> Path:
+    """The shipped reference lab under another name, with the console on any free port (and
+    `extra_devices`, YAML lines added under `devices:`)."""
     text = (data_dir("emulators") / "labs" / "reference.yaml").read_text(encoding="utf-8")
     text = text.replace("lab: reference", f"lab: {name}").replace("port: 8020", "port: 0")
+    if extra_devices:
+        text = text.replace("\nlinks:\n", f"{extra_devices}\nlinks:\n")
     line = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
     text = text.replace("line: ../lines/reference.yaml", f"line: {line}")
     path = tmp / f"{name}.yaml"
@@ -78,21 +82,25 @@ def lab_file(tmp: Path, name: str) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def running_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab]:
-    tmp = tmp_path_factory.mktemp("lab")
+@contextlib.contextmanager
+def start_lab(
+    tmp: Path, name: str, extra_devices: str = "", clear: bool = True
+) -> Iterator[RunningLab]:
+    """Start a lab and wait until every station is synced at the CTC in center mode (and, with
+    `clear`, the empty line reported clear)."""
     run_dir = tmp / "run"
-    path = lab_file(tmp, "testlab")
+    path = lab_file(tmp, name, extra_devices)
+    stderr = open(tmp / f"{name}.stderr", "w")  # noqa: SIM115 -- closed below
     proc = subprocess.Popen(
         [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(path), "--json", "--interval", "5"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        stdout=subprocess.PIPE, stderr=stderr, text=True, start_new_session=True,
         env={**os.environ, "KTCS_BENCH_RUN_DIR": str(run_dir)},
     )  # fmt: skip
     try:
         assert proc.stdout is not None
         line = proc.stdout.readline()
         if not line:
-            raise AssertionError(f"lab up failed: {proc.stderr.read() if proc.stderr else ''}")
+            raise AssertionError(f"lab up failed: {(tmp / f'{name}.stderr').read_text()}")
         lab = RunningLab(proc, json.loads(line), run_dir)
         # drain the status stream so the lab never blocks on a full pipe
         import threading
@@ -101,7 +109,10 @@ def running_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab
         wait_until(
             "every station synced at the CTC, the empty line reported clear",
             lambda: all(
-                s["link"] == "up" and s["synced"] and s["mode"] == "center" and not s["occupied"]
+                s["link"] == "up"
+                and s["synced"]
+                and s["mode"] == "center"
+                and not (clear and s["occupied"])
                 for s in lab.ctc({"cmd": "status"})["status"]["stations"].values()
             ),
             timeout=60,
@@ -110,7 +121,7 @@ def running_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab
     finally:
         try:
             pids = [d.get("pid") for d in json.loads(
-                (run_dir / "labs" / "testlab" / "lab.json").read_text())["devices"].values()]  # fmt: skip
+                (run_dir / "labs" / name / "lab.json").read_text())["devices"].values()]  # fmt: skip
         except (OSError, ValueError, KeyError):
             pids = []
         if proc.poll() is None:
@@ -120,9 +131,16 @@ def running_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait()
+        stderr.close()
         for pid in pids:  # nothing the lab started may outlive it
             if pid:
                 try:
                     os.killpg(pid, signal.SIGKILL)
                 except (ProcessLookupError, PermissionError):
                     pass
+
+
+@pytest.fixture(scope="module")
+def running_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab]:
+    with start_lab(tmp_path_factory.mktemp("lab"), "testlab") as lab:
+        yield lab

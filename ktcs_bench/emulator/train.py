@@ -1,0 +1,173 @@
+"""The train process: one `train.TrainEndpoint` (dynamics + onboard ATP + ATO) stepped every 100 ms
+of wall time, in kTCS mode -- its antenna reads the code of the track circuit under its head from
+the rails, and its axles (head..tail) occupy track circuits there.
+
+A code's speed is the target speed at the exit of its track circuit (the wayside ATC's stepped
+codes: 0 in the last track circuit before a stop point), and its target distance locates the
+stop point. So in a track circuit the ceiling is the speed the train was allowed to enter it with
+-- the code of the previous track circuit -- (or this code, if that is higher), and the braking
+curve to the stop point does the rest: a train is never given a ceiling it is already above.
+No code at the antenna (none received yet, a dead track circuit, the rails lost) means stop here:
+a train never runs on the absence of a code.
+
+The train's line data (tags, gradients, speed limits) come from the lab's line file, so the ATP
+and the wayside ATC see the same line. Runs in the up direction (rising chainage).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from ktcs_bench.emulator.device import Device
+from ktcs_bench.emulator.endpoints import Endpoint
+from ktcs_bench.emulator.rails import RailsClient
+from ktcs_bench.errors import UsageError
+from ktcs_bench.station.model import Line
+from ktcs_bench.train.deceleration import GradientProfile
+from ktcs_bench.train.dynamics import TrainParams
+from ktcs_bench.train.endpoint import (
+    CYCLE,
+    CycleInputs,
+    LineData,
+    TrackCode,
+    TrainConfig,
+    TrainEndpoint,
+)
+from ktcs_bench.train.mrsp import Restriction
+from ktcs_bench.train.units import kmh
+
+
+def train_line(line: Line) -> LineData:
+    """The onboard view of a reference line: tags every `tag_spacing_m`, gradients, speed limits."""
+    tags = []
+    x = line.start_m
+    while x <= line.end_m:
+        tags.append(x)
+        x += line.tag_spacing_m
+    grads = sorted(line.gradients, key=lambda g: g.from_m)
+    gradient = GradientProfile(tuple(g.from_m for g in grads), tuple(g.permille for g in grads))
+    restrictions = [Restriction(s.from_m, s.to_m, kmh(s.kmh)) for s in line.speed_limits]
+    return LineData(line.end_m, tags, gradient, restrictions, [])
+
+
+class TrainDevice(Device):
+    kind = "train"
+
+    def __init__(
+        self,
+        name: str,
+        line: Line,
+        config: TrainConfig,
+        rails: Endpoint,
+        control: tuple[str, int] = ("127.0.0.1", 0),
+    ) -> None:
+        super().__init__(name, control)
+        self.line = line
+        self.config = config
+        self.endpoint = TrainEndpoint(config, train_line(line))
+        self.tcs = {t.name: t for t in line.all_track_circuits()}
+        self.code: TrackCode | None = None
+        self.code_tc: str | None = None
+        self.entry_kmh: float | None = None  # the previous track circuit's code speed
+        self.code_kmh = 0.0
+        self.rails = RailsClient(rails, {"role": "train", "name": name, "train": config.train_id},
+                                 self._from_rails)  # fmt: skip
+        self.last: Any = None
+        self.release = False
+
+    @classmethod
+    def from_args(
+        cls, name: str, lab: Any, line: Line, links: dict[str, Endpoint], train: str | None,
+        control: tuple[str, int],
+    ) -> TrainDevice:  # fmt: skip
+        spec = lab.devices.get(name)
+        opts = dict(spec.options) if spec is not None else {}
+        if "rails" not in links:
+            raise UsageError(
+                "emulator train needs --link rails=tcp://HOST:PORT (the track circuits)"
+            )
+        params = TrainParams(
+            length=float(opts.get("length_m", 100.0)),
+            max_speed=kmh(float(opts.get("max_speed_kmh", 80.0))),
+            brake_build_up=float(opts.get("brake_build_up_s", 0.5)),
+        )
+        cfg = TrainConfig(
+            train_id=str(train or opts.get("train", name)),
+            params=params,
+            start=float(opts.get("start_m", 300.0)),
+            mode="ktcs",
+            ato=bool(opts.get("ato", True)),
+            driver_speed=kmh(float(opts.get("max_speed_kmh", 80.0))),
+        )
+        return cls(name, line, cfg, links["rails"], control)
+
+    def _from_rails(self, obj: dict[str, Any]) -> None:
+        if "code" not in obj:
+            return
+        wire, tc = obj["code"], obj.get("tc")
+        if tc != self.code_tc and self.code is not None:
+            self.entry_kmh = self.code_kmh  # leaving a track circuit: its exit speed is our entry
+        if wire is None or tc not in self.tcs:
+            self.code, self.code_tc = None, tc  # fail-safe: see `_inputs`
+            return
+        _, speed_kmh, gradient, distance = wire
+        self.code_kmh = float(speed_kmh)
+        ceiling = max(self.code_kmh, self.entry_kmh or 0.0)
+        entry = self.tcs[tc].from_m  # up direction: the code counts from the entry end
+        self.code = TrackCode(kmh(ceiling), float(gradient), entry + float(distance))
+        self.code_tc = tc
+
+    def _code_now(self) -> TrackCode:
+        if self.code is None or not self.rails.connected:
+            return TrackCode(0.0, 0.0, self.endpoint.dynamics.state.position)  # stop here
+        return self.code
+
+    def _position(self) -> dict[str, float]:
+        head = self.endpoint.dynamics.state.position
+        return {"head": head, "tail": head - self.config.params.length}
+
+    async def _cycle(self) -> None:
+        loop = asyncio.get_running_loop()
+        start = loop.time()
+        k = 0
+        self.rails.send({"position": self._position()})
+        while True:
+            k += 1
+            await asyncio.sleep(max(0.0, start + k * CYCLE - loop.time()))
+            now = loop.time() - start
+            release, self.release = self.release, False
+            out = self.endpoint.step(now, CycleInputs(code=self._code_now(), release_eb=release))
+            self.last = out
+            for e in out.events:
+                self.note(e.kind, e.text)
+            self.rails.send({"position": self._position()})
+
+    async def tasks(self) -> list[asyncio.Task[None]]:
+        return [asyncio.ensure_future(self.rails.run()), asyncio.ensure_future(self._cycle())]
+
+    def status(self) -> dict[str, Any]:
+        s = self.endpoint.dynamics.state
+        verdict = self.last.verdict if self.last is not None else None
+        return {
+            **super().status(),
+            "train": self.config.train_id,
+            **self._position(),
+            "speed_kmh": round(s.speed * 3.6, 2),
+            "code_tc": self.code_tc,
+            "code": None
+            if self.code is None
+            else [
+                round(self.code.speed * 3.6, 1),
+                self.code.gradient,
+                self.code.target_point,
+            ],  # fmt: skip
+            "status": None if verdict is None else str(verdict.status),
+            "target_point": None if self.last is None else self.last.target_point,
+        }
+
+    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
+        if obj.get("cmd") == "release_eb":
+            self.release = True
+            return {"ok": True}
+        return await super().command(obj)
