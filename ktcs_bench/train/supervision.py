@@ -246,41 +246,52 @@ class Supervisor:
         f = (x + hi * t_bec + hi * lead - x0) / step
         cell_hi = -1 if f <= 0.0 else min(int(f), last)
         root, rising, fast = 0.0, True, False
-        for _ in range(iterations):
+        t_all = t_bec + lead
+        done = 0
+        while done < iterations and not fast:  # full look-ups until the bracket is in one cell
             v = 0.5 * (lo + hi)
-            if fast and abs(v - root) > _GUARD:
-                beyond = (v > root) == rising
-                i = cell
+            done += 1
+            f = (x + v * t_bec + v * lead - x0) / step
+            if f <= 0.0:
+                e: float = item(0)
+                i = -1
             else:
-                f = (x + v * t_bec + v * lead - x0) / step
-                if f <= 0.0:
-                    e: float = item(0)
-                    i = -1
+                i = int(f)
+                if i >= last:
+                    e = item(last)
+                    i = last
                 else:
-                    i = int(f)
-                    if i >= last:
-                        e = item(last)
-                        i = last
+                    if i != cell:
+                        cell, ea, eb = i, item(i), item(i + 1)
+                    frac = f - i
+                    if frac == 0.0:
+                        e = ea
+                    elif ea == inf or eb == inf:
+                        e = min(ea, eb)
                     else:
-                        if i != cell:
-                            cell, ea, eb = i, item(i), item(i + 1)
-                        frac = f - i
-                        if frac == 0.0:
-                            e = ea
-                        elif ea == inf or eb == inf:
-                            e = min(ea, eb)
-                        else:
-                            e = ea + (eb - ea) * frac
-                beyond = v > e
-            if beyond:
+                        e = ea + (eb - ea) * frac
+            if v > e:
                 hi, cell_hi = v, i
             else:
                 lo, cell_lo = v, i
-            if not fast and cell_lo == cell_hi == cell and 0 <= cell < last:
-                if ea != inf and eb != inf:
-                    d = eb - ea
-                    slope = 1.0 - d * (t_bec + lead) / step
-                    if abs(slope) > 1e-3:
-                        root = (ea + d * ((x - x0) / step - cell)) / slope
-                        rising, fast = slope > 0.0, True
+            if cell_lo == cell_hi == cell and 0 <= cell < last and ea != inf and eb != inf:
+                d = eb - ea
+                slope = 1.0 - d * t_all / step
+                if abs(slope) > 1e-3:
+                    root = (ea + d * ((x - x0) / step - cell)) / slope
+                    rising, fast = slope > 0.0, True
+        ebd_at = lim.ebd_at
+        while done < iterations:  # "beyond" is v > root (or < when falling); close to it: look
+            v = 0.5 * (lo + hi)
+            done += 1
+            if v - root > _GUARD:
+                beyond = rising
+            elif root - v > _GUARD:
+                beyond = not rising
+            else:
+                beyond = v > ebd_at(x + v * t_bec + v * lead)
+            if beyond:
+                hi = v
+            else:
+                lo = v
         return lo
