@@ -28,8 +28,8 @@ def test_ato_train_runs_through_station_18_and_releases_the_routes(train_lab: Ru
                        lambda: (s := lab.status("train1"))["code_tc"] and s)  # fmt: skip
     assert first["code_tc"] == "TC1851"
     assert first["speed_kmh"] == 0.0, "with the home signal at stop the train must stand"
-    occupied = lab.ctc({"cmd": "show", "station": 18})["summary"]["occupied"]
-    assert "TC1851" in occupied
+    wait_until("the CTC shows the train's track circuit occupied (rails -> ATC -> IXL -> CTC)",
+               lambda: "TC1851" in lab.ctc({"cmd": "show", "station": 18})["summary"]["occupied"])  # fmt: skip
     for entry, exit_ in (("01", "11"), ("11", "91")):
         answer = lab.ctc(
             {"cmd": "route", "action": "set", "station": 18, "entry": entry, "exit": exit_}
