@@ -26,6 +26,7 @@ from ktcs_bench.datafiles import data_dir
 from ktcs_bench.scenario.model import load_scenario
 from ktcs_bench.scenario.runner import run
 from ktcs_bench.train.curves import (
+    CurveBuilder,
     CurveTimes,
     Grid,
     Target,
@@ -106,6 +107,23 @@ def bench_curves(repeats: int, full: bool) -> str:
     return _stats(*_interleaved(work, _baseline_pass(), repeats, 5))
 
 
+def bench_curves_cycle(repeats: int) -> str:
+    """Every curve, as a cycle rebuilds them: grid, static (MRSP) envelope, its curves and the
+    ceilings cached; the EoA moves (here to places spread over the whole line, so on average
+    half the line lies beyond where its curve can reach back)."""
+    decel, restr, _ = _line()
+    mrsp = build_mrsp(restr, kmh(160.0), 200.0)
+    times = CurveTimes(t_be=2.0, t_bs=3.0, service_brake_command=True)
+    grid = Grid.uniform(0.0, LENGTH, 1.0, decel)
+    builder = CurveBuilder(grid, mrsp.targets(), mrsp.on_grid(grid.x), times, kmh(180.0))
+
+    def work(i: int) -> object:
+        return builder.update(1000.0 + (i * 1237.3) % 13500.0)
+
+    work(0)
+    return _stats(*_interleaved(work, _baseline_pass(), repeats, 5))
+
+
 def bench_cycle_update(repeats: int) -> str:
     """What the ATP cycle itself rebuilds: the static EBD is cached at start-up, each cycle only
     the moving stop target's curve is laid over it (here it moves 0.83 m a cycle, 30 km/h)."""
@@ -158,7 +176,11 @@ def main(argv: list[str]) -> int:
         f"same line: {bench_curves(reps, full=True)} (goal ≤ 5 ms)"
     )
     print(
-        "ATP cycle curve update (static EBD cached, moving EoA laid over it), same line: "
+        "all curves per cycle (grid, static envelope, its curves and ceilings cached; EoA moved "
+        f"over the line), same line: {bench_curves_cycle(reps)} (goal ≤ 5 ms)"
+    )
+    print(
+        "ATP cycle supervised EBD update (static EBD cached, moving EoA laid over it), same line: "
         f"{bench_cycle_update(reps * 5)}"
     )
     print(f"seed 001 two-train 15 km scenario: {bench_scenario(3 if quick else 7)} (goal ≥ 500×)")

@@ -606,6 +606,32 @@ class _EnvelopeShift:
         return out
 
 
+def _leads(times: CurveTimes) -> list[float]:
+    """T_be + the lead of EBI, SBI, warning, permitted and indication (§3.13.9.3)."""
+    fixed = times.fixed
+    t_be = times.t_traction + times.t_berem
+    return [
+        t_be + lead
+        for lead in (
+            0.0,
+            times.t_bs2,
+            times.t_bs2 + fixed.t_warning,
+            times.t_bs2 + fixed.t_driver,
+            times.t_bs2 + fixed.t_driver + times.t_indication,
+        )
+    ]
+
+
+def _ceilings(mrsp: FloatArray, fixed: FixedValues) -> list[FloatArray]:
+    """V_MRSP + dV for EBI, SBI and warning, V_MRSP for permitted and indication. The MRSP is a
+    step profile, so dV is formed per step and repeated."""
+    starts = np.concatenate(([0], np.flatnonzero(mrsp[1:] != mrsp[:-1]) + 1))
+    counts = np.diff(starts, append=len(mrsp))
+    steps = mrsp[starts]
+    out = [np.repeat(steps + _ramp_vec(steps, fixed, w), counts) for w in ("ebi", "sbi", "warning")]
+    return [*out, mrsp, mrsp]
+
+
 def curves_on_grid(
     grid: Grid,
     targets: list[Target],
@@ -618,30 +644,68 @@ def curves_on_grid(
     The EBD is the minimum over every target; the other curves are that envelope shifted by
     v·(T_be + lead) (`_EnvelopeShift`), each capped by its ceiling V_MRSP + dV.
     """
-    fixed = times.fixed
-    x = grid.x
-    ebd, breaks = _ebd_envelope(grid, targets, fixed, v_cap)
-    t_be = times.t_traction + times.t_berem
-    leads = (
-        0.0,
-        times.t_bs2,
-        times.t_bs2 + fixed.t_warning,
-        times.t_bs2 + fixed.t_driver,
-        times.t_bs2 + fixed.t_driver + times.t_indication,
-    )
-    shift = _EnvelopeShift(x, ebd, breaks)
-    ebi, sbi, warn, perm, ind = (shift(t_be + lead) for lead in leads)
-    # ceilings V_MRSP + dV: the MRSP is a step profile, so dV is formed per step and repeated
-    starts = np.concatenate(([0], np.flatnonzero(mrsp[1:] != mrsp[:-1]) + 1))
-    counts = np.diff(starts, append=len(mrsp))
-    steps = mrsp[starts]
-    for curve, which in ((ebi, "ebi"), (sbi, "sbi"), (warn, "warning")):
-        np.minimum(curve, np.repeat(steps + _ramp_vec(steps, fixed, which), counts), out=curve)
-    np.minimum(perm, mrsp, out=perm)
-    np.minimum(ind, mrsp, out=ind)
-    return CurveSet(
-        x=x, mrsp=mrsp, ebd=ebd, ebi=ebi, sbi=sbi, warning=warn, permitted=perm, indication=ind
-    )
+    ebd, breaks = _ebd_envelope(grid, targets, times.fixed, v_cap)
+    shift = _EnvelopeShift(grid.x, ebd, breaks)
+    curves = [shift(t) for t in _leads(times)]
+    for curve, ceiling in zip(curves, _ceilings(mrsp, times.fixed), strict=True):
+        np.minimum(curve, ceiling, out=curve)
+    ebi, sbi, warn, perm, ind = curves
+    return CurveSet(grid.x, mrsp, ebd, ebi, sbi, warn, perm, ind)
+
+
+class CurveBuilder:
+    """One train's full curve set, rebuilt every cycle for its moving stop target (EoA).
+
+    What does not move is built once: the grid, the envelope of the static (MRSP) targets, its
+    shifted curves and the ceilings. An update lays the stop target's EBD over the static
+    envelope on its window and recomputes the shifted curves only from where they can see that
+    window: a curve at node j depends on the EBD at nodes j … j + v·T only, so nodes further back
+    keep their static values. Same values as `curves_on_grid` with the stop target added (the
+    stop curve is the band-walk `ebd_segment`, equal to the envelope's form to ~1e-12 on a flat
+    line, to the crossing-cell interpolation with gradients).
+    """
+
+    def __init__(
+        self,
+        grid: Grid,
+        static_targets: list[Target],
+        mrsp: FloatArray,
+        times: CurveTimes,
+        v_cap: float,
+    ) -> None:
+        self.grid, self.mrsp, self.times, self.v_cap = grid, mrsp, times, v_cap
+        self._static, self._breaks = _ebd_envelope(grid, static_targets, times.fixed, v_cap)
+        self._leads = _leads(times)
+        self._ceilings = _ceilings(mrsp, times.fixed)
+        shift = _EnvelopeShift(grid.x, self._static, self._breaks)
+        self._curves = [shift(t) for t in self._leads]
+        for curve, ceiling in zip(self._curves, self._ceilings, strict=True):
+            np.minimum(curve, ceiling, out=curve)
+        step = float(grid.x[1] - grid.x[0]) if len(grid.x) > 1 else 1.0
+        top = max(self._leads) * v_cap if math.isfinite(v_cap) else math.inf
+        self._reach = int(math.ceil(top / step)) + 2 if math.isfinite(top) else len(grid.x)
+
+    def update(self, stop: float) -> CurveSet:
+        """The curve set with the stop target (EoA) at `stop`."""
+        x, n = self.grid.x, len(self.grid.x)
+        lo, k, vals = ebd_segment(self.grid, Target(stop), self.times.fixed, self.v_cap)
+        static = self._static
+        ebd = static.copy()
+        np.minimum(static[lo:k], vals, out=ebd[lo:k])
+        ebd[k:] = 0.0
+        breaks = [b for b in self._breaks if b < k and ebd[b - 1] == static[b - 1]]
+        if k < n:
+            breaks.append(k)
+        w = max(min(lo, k) - self._reach, 0)
+        shift = _EnvelopeShift(x[w:], ebd[w:], [b - w for b in breaks if b > w])
+        curves = []
+        for cached, lead, ceiling in zip(self._curves, self._leads, self._ceilings, strict=True):
+            curve = cached.copy()
+            part = shift(lead)
+            np.minimum(part, ceiling[w:], out=curve[w:])
+            curves.append(curve)
+        ebi, sbi, warn, perm, ind = curves
+        return CurveSet(x, self.mrsp, ebd, ebi, sbi, warn, perm, ind)
 
 
 def _ramp_vec(v: FloatArray, fixed: FixedValues, which: str) -> FloatArray:

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from ktcs_bench.train.curves import (
+    CurveBuilder,
     CurveTimes,
     Grid,
     Target,
@@ -127,3 +128,22 @@ def test_h_is_the_exact_gradient_integral() -> None:
     for i in (0, 51, 200, 201, 700, 950):
         assert grid.h[i] == pytest.approx(cum[i * 100], abs=1e-9)
         assert grid.h_at(float(grid.x[i])) == pytest.approx(float(grid.h[i]), abs=1e-9)
+
+
+@pytest.mark.parametrize("gradients", [False, True])
+@pytest.mark.parametrize("seed", range(3))
+def test_builder_update_is_the_full_rebuild(gradients: bool, seed: int) -> None:
+    grid, targets = _line(seed, BRAKES["three bands"], gradients)
+    static = [t for t in targets if t.kind is TargetKind.SPEED]
+    times = CurveTimes(t_be=1.5 + seed, t_bs=2.0 + seed, service_brake_command=True)
+    mrsp = build_mrsp([], kmh(160.0), 200.0).on_grid(grid.x)
+    builder = CurveBuilder(grid, static, mrsp, times, kmh(180.0))
+    tol = 2e-3 if gradients else 1e-9
+    for stop in (-10.0, 0.0, 150.3, 1999.5, 3100.0, 5999.9, 6000.0, 6500.0):
+        want = curves_on_grid(grid, [*static, Target(stop)], mrsp, times, kmh(180.0))
+        have = builder.update(stop)
+        for name in ("ebd", "ebi", "sbi", "warning", "permitted", "indication"):
+            a, b = getattr(want, name), getattr(have, name)
+            assert np.array_equal(np.isfinite(a), np.isfinite(b)), (stop, name)
+            both = np.isfinite(a)
+            assert float(np.abs(a[both] - b[both]).max(initial=0.0)) <= tol, (stop, name)
