@@ -89,7 +89,8 @@ class SupervisionLimits:
         return a + (b - a) * frac
 
     def mrsp_at(self, x: float) -> float:
-        i, _ = self._index(x)
+        f = (x - self._x0) / self._step
+        i = 0 if f <= 0.0 else min(int(f), self._n - 1)
         return float(self.mrsp.item(i))
 
 
