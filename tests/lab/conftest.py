@@ -3,11 +3,11 @@ Type I over paced ptys through taps, Type II over TCP through taps."""
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -18,14 +18,20 @@ from typing import Any
 import pytest
 
 from ktcs_bench.datafiles import data_dir
-from ktcs_bench.emulator import jsonlines
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def request(address: str, obj: dict[str, Any], timeout: float = 20.0) -> dict[str, Any]:
+    """One command to a device's JSON-lines control port (plain blocking socket: it works beside
+    any event loop, Playwright's included)."""
     host, _, port = address.rpartition(":")
-    return asyncio.run(jsonlines.request(host, int(port), obj, timeout=timeout))
+    with socket.create_connection((host, int(port)), timeout=timeout) as sock:
+        sock.sendall(json.dumps(obj).encode() + b"\n")
+        line = sock.makefile("rb").readline()
+    if not line:
+        raise ConnectionError(f"{address} closed without answering")
+    return json.loads(line)  # type: ignore[no-any-return]
 
 
 def wait_until(what: str, predicate: Callable[[], Any], timeout: float = 30.0) -> Any:
