@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 from ktcs_bench.datafiles import data_dir
+from tests.console.conftest import browser_context  # noqa: F401 -- headless Chromium, for the console test
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 from playwright.sync_api import expect
 
-from tests.console.conftest import ARTIFACTS, browser_context  # noqa: F401 -- the fixture
+from tests.console.conftest import ARTIFACTS
 
 from .conftest import RunningLab, start_lab, wait_until
 
@@ -23,7 +23,7 @@ def console_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab
 
 def test_route_set_by_clicks_in_the_lab_console(
     browser_context: Any, console_lab: RunningLab
-) -> None:  # noqa: F811
+) -> None:
     lab = console_lab
     url = lab.state()["devices"]["ctc"]["console"]
     page = browser_context.new_page()
