@@ -27,9 +27,13 @@ any link; check a device against the protocol conformance suite.
 
 EPILOG = """\
 examples:
+  ktcs-bench lab up                                  # the reference lab: 3 stations, CTC, ATC, I/O
+  ktcs-bench ctc route set 18 S1 S11                 # operate it from another shell
+  ktcs-bench monitor st18-atc                        # watch a link decoded live, Fig. 7 style
   ktcs-bench decode protocols/captures/fig7.hex --profile auto
-  ktcs-bench decode '02 00 00 10 06 00 03 87 00 00 03'
-  ktcs-bench encode --protocol type1 --seq 0x10 --op REQUEST_ALL --data '00 00 FF FF'
+  ktcs-bench emulator atc --station 18 --link ixl=pty   # one device alone, for a real peer
+  ktcs-bench conformance --role atc --target /dev/ttyUSB0
+  ktcs-bench scenario run emulators/scenarios/seed001_follower.yaml
 
 exit codes: 0 ok, 1 a check failed (bad CRC, failed case), 2 usage/config error,
             3 peer or I/O failure, 130 interrupted.

@@ -233,6 +233,7 @@ class StreamDecoder:
         (stx, hs, unpack, i_len, i_seq, i_op, i_sub, fixed, max_len, trailer, crc_fn, crc_init,
          crc_table, crc_xor, crc_from, crc_to, tail_unpack, tail_ok) = self._hot  # fmt: skip
         find = buf.find
+        new = tuple.__new__
         mv = memoryview(buf)
         try:
             while i < n:
@@ -261,9 +262,9 @@ class StreamDecoder:
                             append(Garbage(base + g, mv[g:i].tobytes()))
                             g = -1
                         append(
-                            Frame(base + i, mv[i:end].tobytes(), h[i_seq], h[i_op],
-                                  None if i_sub is None else h[i_sub], hs, hs + data_len,
-                                  calc, calc, None)
+                            new(Frame, (base + i, mv[i:end].tobytes(), h[i_seq], h[i_op],
+                                        None if i_sub is None else h[i_sub], hs, hs + data_len,
+                                        calc, calc, None))
                         )  # fmt: skip
                         i = end
                         continue
