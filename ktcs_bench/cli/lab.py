@@ -147,7 +147,8 @@ def _up(args: argparse.Namespace) -> int:
                                if colour else "") + text, flush=True)  # fmt: skip
                         last = text
                 try:
-                    await asyncio.wait_for(runner.stop_requested.wait(), args.interval)
+                    async with asyncio.timeout(args.interval):
+                        await runner.stop_requested.wait()
                 except TimeoutError:
                     pass
             return 0

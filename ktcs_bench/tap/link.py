@@ -380,8 +380,11 @@ class Tap:
             pending = [t for t in deadlines if t is not None]
             timeout = None if not pending else max(0.0, min(pending) - time.time()) + 0.001
             self._wake.clear()
+            # asyncio.timeout, not wait_for: on 3.11 wait_for can swallow a cancellation that
+            # races with the wake-up, and this loop would then outlive stop()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), timeout)
+                async with asyncio.timeout(timeout):
+                    await self._wake.wait()
 
     async def _control_client(
         self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter

@@ -261,7 +261,8 @@ class CtcServer:
             fut: asyncio.Future[None] = loop.create_future()
             self._waiters.append(fut)
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(fut, left)
+                async with asyncio.timeout(left):  # not wait_for: it may swallow a cancel (3.11)
+                    await fut
 
     def _link_of(self, station: int) -> _CtcLink:
         cl = self._links.get(station)
@@ -550,7 +551,8 @@ class IxlClient:
             fut: asyncio.Future[None] = loop.create_future()
             self._waiters.append(fut)
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(fut, left)
+                async with asyncio.timeout(left):  # not wait_for: it may swallow a cancel (3.11)
+                    await fut
 
     def _notify(self) -> None:
         waiters, self._waiters = self._waiters, []
