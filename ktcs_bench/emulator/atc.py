@@ -3,61 +3,32 @@ rails, a code per track circuit out to the rails (the most restrictive on commun
 
 from __future__ import annotations
 
-import asyncio
 from dataclasses import astuple
 from typing import Any
 
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
-from ktcs_bench.charts.generate import station_chart
-from ktcs_bench.emulator.codeport import CodePort
-from ktcs_bench.emulator.device import Device
+from ktcs_bench.emulator.device import IxlPeerDevice
 from ktcs_bench.emulator.endpoints import Endpoint
-from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.station.model import Line
-from ktcs_bench.type1 import LinkConfig
 
 
-class AtcDevice(Device):
+class AtcDevice(IxlPeerDevice):
     kind = "atc"
+    tx_chart, rx_chart = "atc_to_ixl", "ixl_to_atc"
 
     def __init__(
-        self,
-        name: str,
-        line: Line,
-        station: int,
-        links: dict[str, Endpoint],
-        *,
-        type1: LinkConfig | None = None,
-        type1_profile: str = "ktcs-type1",
-        control: tuple[str, int] = ("127.0.0.1", 0),
-        faults: frozenset[str] = frozenset(),
+        self, name: str, line: Line, station: int, links: dict[str, Endpoint], **kwargs: Any
     ) -> None:
-        super().__init__(name, control)
-        view = line.view(station)
-        self.station = station
         self.atc = WaysideAtc(line, station)
-        self.port: CodePort | None = None
-        if "ixl" in links:
-            self.port = CodePort(
-                f"{name}-ixl", links["ixl"], station_chart(view, "atc_to_ixl"),
-                station_chart(view, "ixl_to_atc"), self.atc.full_state(), self._from_ixl,
-                self._link, type1_profile, type1, faults=faults,
-            )  # fmt: skip
-            if self.port.path:
-                self.ready_info["ptys"] = {"ixl": self.port.path}
-        self.rails = (
-            RailsClient(links["rails"], {"role": "atc", "name": name}, self._from_rails)
-            if "rails" in links
-            else None
-        )
+        super().__init__(name, line, station, links, self.atc.full_state(), **kwargs)
 
-    def _from_ixl(self, codes: dict[str, int]) -> None:
+    def from_ixl(self, codes: dict[str, int]) -> None:
         self.apply(self.atc.receive(codes, self.now()))
 
-    def _link(self, up: bool) -> None:
+    def link_changed(self, up: bool) -> None:
         self.apply(self.atc.link_state(up, self.now()))
 
-    def _from_rails(self, obj: dict[str, Any]) -> None:
+    def from_rails(self, obj: dict[str, Any]) -> None:
         occ = obj.get("occupancy")
         if isinstance(occ, dict):
             self.apply(self.atc.set_occupancy({k: bool(v) for k, v in occ.items()}, self.now()))
@@ -76,22 +47,9 @@ class AtcDevice(Device):
         for e in out.events:
             self.note(e.kind, e.text)
 
-    async def tasks(self) -> list[asyncio.Task[None]]:
-        out = [asyncio.ensure_future(self.port.run())] if self.port else []
-        if self.rails is not None:
-            out.append(asyncio.ensure_future(self.rails.run()))
-        return out
-
-    async def close(self) -> None:
-        if self.port is not None:
-            self.port.stop()
-        await super().close()
-
     def status(self) -> dict[str, Any]:
         return {
             **super().status(),
-            "station": self.station,
-            "link": bool(self.port and self.port.up),
             "state": self.atc.full_state(),
             "sent": dict(self.port.state) if self.port else {},
             "rails": bool(self.rails and self.rails.connected),

@@ -16,7 +16,13 @@ import time
 from collections import deque
 from typing import Any
 
+from ktcs_bench.charts.generate import station_chart
 from ktcs_bench.emulator import jsonlines
+from ktcs_bench.emulator.codeport import CodePort
+from ktcs_bench.emulator.endpoints import Endpoint
+from ktcs_bench.emulator.rails import RailsClient
+from ktcs_bench.station.model import Line
+from ktcs_bench.type1 import LinkConfig
 
 log = logging.getLogger("ktcs_bench.emulator")
 
@@ -132,3 +138,70 @@ class Device:
                 task.cancel()
             await asyncio.gather(*running, return_exceptions=True)
             await self.close()
+
+
+class IxlPeerDevice(Device):
+    """A station device on a Type I link to its IXL (`--link ixl=...`) and on the rails
+    (`--link rails=...`): the wayside ATC and the trackside I/O. Subclasses name their charts and
+    react to codes from the IXL, the link state and the rails."""
+
+    tx_chart = ""  # e.g. "atc_to_ixl"
+    rx_chart = ""  # e.g. "ixl_to_atc"
+
+    def __init__(
+        self,
+        name: str,
+        line: Line,
+        station: int,
+        links: dict[str, Endpoint],
+        state: dict[str, int],
+        *,
+        type1: LinkConfig | None = None,
+        type1_profile: str = "ktcs-type1",
+        control: tuple[str, int] = ("127.0.0.1", 0),
+        faults: frozenset[str] = frozenset(),
+    ) -> None:
+        super().__init__(name, control)
+        view = line.view(station)
+        self.station = station
+        self.port: CodePort | None = None
+        if "ixl" in links:
+            self.port = CodePort(
+                f"{name}-ixl", links["ixl"], station_chart(view, self.tx_chart),
+                station_chart(view, self.rx_chart), state, self.from_ixl, self.link_changed,
+                type1_profile, type1, faults=faults,
+            )  # fmt: skip
+            if self.port.path:
+                self.ready_info["ptys"] = {"ixl": self.port.path}
+        self.rails = (
+            RailsClient(links["rails"], {"role": self.kind, "name": name}, self.from_rails)
+            if "rails" in links
+            else None
+        )
+
+    def from_ixl(self, codes: dict[str, int]) -> None:
+        raise NotImplementedError
+
+    def link_changed(self, up: bool) -> None:
+        raise NotImplementedError
+
+    def from_rails(self, obj: dict[str, Any]) -> None:
+        raise NotImplementedError
+
+    async def tasks(self) -> list[asyncio.Task[None]]:
+        out = [asyncio.ensure_future(self.port.run())] if self.port else []
+        if self.rails is not None:
+            out.append(asyncio.ensure_future(self.rails.run()))
+        return out
+
+    async def close(self) -> None:
+        if self.port is not None:
+            self.port.stop()
+        await super().close()
+
+    def status(self) -> dict[str, Any]:
+        return {
+            **super().status(),
+            "station": self.station,
+            "link": bool(self.port and self.port.up),
+        }

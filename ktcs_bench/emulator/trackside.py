@@ -3,60 +3,31 @@ on a Type I link to their IXL, with track occupancy from the rails and a fault A
 
 from __future__ import annotations
 
-import asyncio
 from typing import Any
 
-from ktcs_bench.charts.generate import station_chart
-from ktcs_bench.emulator.codeport import CodePort
-from ktcs_bench.emulator.device import Device
+from ktcs_bench.emulator.device import IxlPeerDevice
 from ktcs_bench.emulator.endpoints import Endpoint
-from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.field.trackside import FieldOutput, Trackside
 from ktcs_bench.station.model import Line
-from ktcs_bench.type1 import LinkConfig
 
 
-class TracksideDevice(Device):
+class TracksideDevice(IxlPeerDevice):
     kind = "trackside"
+    tx_chart, rx_chart = "io_to_ixl", "ixl_to_io"
 
     def __init__(
-        self,
-        name: str,
-        line: Line,
-        station: int,
-        links: dict[str, Endpoint],
-        *,
-        type1: LinkConfig | None = None,
-        type1_profile: str = "ktcs-type1",
-        control: tuple[str, int] = ("127.0.0.1", 0),
-        faults: frozenset[str] = frozenset(),
+        self, name: str, line: Line, station: int, links: dict[str, Endpoint], **kwargs: Any
     ) -> None:
-        super().__init__(name, control)
-        view = line.view(station)
-        self.station = station
-        self.io = Trackside(view)
-        self.port: CodePort | None = None
-        if "ixl" in links:
-            self.port = CodePort(
-                f"{name}-ixl", links["ixl"], station_chart(view, "io_to_ixl"),
-                station_chart(view, "ixl_to_io"), self.io.full_state(), self._from_ixl,
-                self._link, type1_profile, type1, faults=faults,
-            )  # fmt: skip
-            if self.port.path:
-                self.ready_info["ptys"] = {"ixl": self.port.path}
-        self.rails = (
-            RailsClient(links["rails"], {"role": "trackside", "name": name}, self._from_rails)
-            if "rails" in links
-            else None
-        )
+        self.io = Trackside(line.view(station))
+        super().__init__(name, line, station, links, self.io.full_state(), **kwargs)
 
-    def _from_ixl(self, codes: dict[str, int]) -> None:
+    def from_ixl(self, codes: dict[str, int]) -> None:
         self.apply(self.io.receive(codes, self.now()))
 
-    def _link(self, up: bool) -> None:
+    def link_changed(self, up: bool) -> None:
         self.apply(self.io.link_state(up, self.now()))
 
-    def _from_rails(self, obj: dict[str, Any]) -> None:
+    def from_rails(self, obj: dict[str, Any]) -> None:
         occ = obj.get("occupancy")
         if isinstance(occ, dict):
             mine = {k: bool(v) for k, v in occ.items() if k in self.io.relays}
@@ -73,22 +44,9 @@ class TracksideDevice(Device):
     def tick(self) -> None:
         self.apply(self.io.tick(self.now()))
 
-    async def tasks(self) -> list[asyncio.Task[None]]:
-        out = [asyncio.ensure_future(self.port.run())] if self.port else []
-        if self.rails is not None:
-            out.append(asyncio.ensure_future(self.rails.run()))
-        return out
-
-    async def close(self) -> None:
-        if self.port is not None:
-            self.port.stop()
-        await super().close()
-
     def status(self) -> dict[str, Any]:
         return {
             **super().status(),
-            "station": self.station,
-            "link": bool(self.port and self.port.up),
             "state": self.io.full_state(),
         }
 
@@ -106,7 +64,8 @@ class TracksideDevice(Device):
             elif cmd == "clear_faults":
                 self.apply(self.io.clear_faults(now))
             else:
-                return await super().command(obj)
+                answer: dict[str, Any] = await super().command(obj)
+                return answer
         except (KeyError, ValueError) as exc:
             return {"ok": False, "error": str(exc)}
         return {"ok": True}
