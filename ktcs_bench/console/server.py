@@ -300,7 +300,10 @@ class ConsoleServer:
         return web.Response(text=self.layout.svg, content_type="image/svg+xml")
 
     async def _api_state(self, request: web.Request) -> web.Response:
-        return web.json_response({"stations": self.snapshot(), "log": list(self.log_entries)})
+        trains = self.trains.train_ids() if self.trains is not None else []
+        return web.json_response(
+            {"stations": self.snapshot(), "trains": trains, "log": list(self.log_entries)}
+        )
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
         ws = web.WebSocketResponse(heartbeat=20.0)

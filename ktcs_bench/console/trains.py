@@ -110,3 +110,30 @@ class EndpointTrains:
     async def speed_distance(self, train: str) -> SpeedDistance | None:
         ep = self._all().get(train)
         return None if ep is None else endpoint_speed_distance(train, ep)
+
+
+class RemoteTrains:
+    """A TrainSource over train processes (`ktcs-bench emulator train`): each is asked over its
+    control port, and computes its curves itself with `endpoint_speed_distance`."""
+
+    def __init__(self) -> None:
+        self._addresses: dict[str, tuple[str, int]] = {}
+
+    def add(self, train: str, host: str, port: int) -> None:
+        self._addresses[train] = (host, port)
+
+    def train_ids(self) -> list[str]:
+        return sorted(self._addresses)
+
+    async def speed_distance(self, train: str) -> SpeedDistance | None:
+        from ktcs_bench.emulator import jsonlines
+
+        address = self._addresses.get(train)
+        if address is None:
+            return None
+        try:
+            answer = await jsonlines.request(*address, {"cmd": "speed_distance"}, timeout=5.0)
+        except (OSError, TimeoutError, ValueError):
+            return None
+        data = answer.get("data")
+        return SpeedDistance(**data) if answer.get("ok") and isinstance(data, dict) else None

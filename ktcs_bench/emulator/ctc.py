@@ -66,6 +66,7 @@ class CtcDevice(Device):
         self.console_address = console
         self.taps = taps or []
         self.console: Any = None
+        self.remote_trains: Any = None
 
     # -- state as names ----------------------------------------------------------------------------
     def named(self, st: int) -> dict[str, int]:
@@ -152,6 +153,12 @@ class CtcDevice(Device):
             return await self.operate(obj)
         if cmd == "timed_route":
             return await self.timed_route(obj)
+        if cmd == "add_train":  # a train process the console may draw (the lab tells us)
+            if self.remote_trains is None:
+                return {"ok": False, "error": "this CTC serves no console"}
+            host, _, port = str(obj["control"]).rpartition(":")
+            self.remote_trains.add(str(obj["train"]), host, int(port))
+            return {"ok": True}
         return await super().command(obj)
 
     async def operate(self, obj: dict[str, Any]) -> dict[str, Any]:
@@ -216,9 +223,13 @@ class CtcDevice(Device):
             from ktcs_bench.console.server import ConsoleServer
 
             host, port = self.console_address
+            from ktcs_bench.console.trains import RemoteTrains
+
+            self.remote_trains = RemoteTrains()
             self.console = ConsoleServer(
-                self.server, self.line, taps=self.taps, host=host, port=port
-            )
+                self.server, self.line, taps=self.taps, trains=self.remote_trains, host=host,
+                port=port,
+            )  # fmt: skip
             await self.console.start()
             self.ready_info["console"] = self.console.url
 

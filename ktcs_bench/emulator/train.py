@@ -170,4 +170,9 @@ class TrainDevice(Device):
         if obj.get("cmd") == "release_eb":
             self.release = True
             return {"ok": True}
+        if obj.get("cmd") == "speed_distance":  # for the CTC console's speed-distance panel
+            from ktcs_bench.console.trains import endpoint_speed_distance
+
+            sd = endpoint_speed_distance(self.config.train_id, self.endpoint)
+            return {"ok": True, "data": sd.to_json()}
         return await super().command(obj)

@@ -154,8 +154,14 @@ class LabRunner:
                     role = lab.peer_role(lk, ixl.name)
                     self.endpoints.setdefault(peer, {})["ixl"] = ready["ptys"][role]
                     await self._start(peer)
+        ctcs = [c.name for c in lab.of_kind("ctc")]
         for d in lab.of_kind("train"):
-            await self._start(d.name)
+            ready = await self._start(d.name)
+            for ctc_name in ctcs:  # the CTC's console draws the train's speed-distance curves
+                host, _, port = self.children[ctc_name].ready["control"].rpartition(":")
+                train = str(d.options.get("train", d.name))
+                await jsonlines.request(host, int(port),
+                                        {"cmd": "add_train", "train": train, "control": ready["control"]})  # fmt: skip
         await self._serve_control()
         self._write_state()
 

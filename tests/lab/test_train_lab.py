@@ -7,7 +7,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from .conftest import RunningLab, start_lab, wait_until
+from .conftest import RunningLab, request, start_lab, wait_until
 
 TRAIN = "  train1: {kind: train, train: T1, start_m: 420, length_m: 100, max_speed_kmh: 80}\n"
 
@@ -48,3 +48,22 @@ def test_ato_train_runs_through_station_18_and_releases_the_routes(train_lab: Ru
     status = lab.status("train1")
     assert status["tail"] > 1100, status  # it really ran through the station
     assert status["status"] != "Status.INTERVENTION", status
+
+
+def test_console_lists_the_lab_train_and_its_curves_come_from_the_train_process(
+    train_lab: RunningLab,
+) -> None:
+    import json
+    import urllib.request
+
+    lab = train_lab
+    answer = lab.lab({"cmd": "status"})
+    assert answer["ok"]
+    sd = request(lab.device("train1"), {"cmd": "speed_distance"})
+    assert sd["ok"] and sd["data"]["train"] == "T1"
+    curves = sd["data"]["curves"]
+    assert set(curves) >= {"mrsp", "ebi", "sbi", "permitted"} and len(sd["data"]["x"]) > 10
+    url = lab.state()["devices"]["ctc"]["console"]
+    with urllib.request.urlopen(url + "api/state", timeout=10) as resp:
+        state = json.load(resp)
+    assert "T1" in state["trains"], state.get("trains")
