@@ -283,6 +283,10 @@ class LabRunner:
             if "listen" in child.ready:
                 out.append({"link": f"{name} listens", "type": self.lab.devices[name].kind,
                             "a_end": child.ready["listen"]})  # fmt: skip
+            if "console" in child.ready:
+                out.append(
+                    {"link": f"{name} console", "type": "web", "a_end": child.ready["console"]}
+                )
         return out
 
     # -- stop --------------------------------------------------------------------------------------
