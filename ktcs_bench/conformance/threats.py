@@ -12,17 +12,12 @@ the application did), and returns a `ThreatResult`.
 from __future__ import annotations
 
 import asyncio
-import json
-import os
-import selectors
-import signal
 import socket
-import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from ktcs_bench.capture.records import CaptureRecord
@@ -30,6 +25,7 @@ from ktcs_bench.charts.generate import station_chart
 from ktcs_bench.codec import Frame, FrameCodec, StreamDecoder, get_profile
 from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import PeerError
+from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
 from ktcs_bench.tap import Delay, DropFrame, DuplicateFrame, PtyTap, ReorderFrames, TcpTap
 
@@ -55,46 +51,18 @@ class ThreatResult:
                 "safe": self.safe, "evidence": self.evidence}  # fmt: skip
 
 
-class _Proc:
-    def __init__(self, args: list[str], log: Any) -> None:
-        cmd = [sys.executable, "-m", "ktcs_bench.cli.main", "emulator", *args]
-        self.p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, start_new_session=True)
-        self.log = log
-        assert self.p.stdout is not None
-        sel = selectors.DefaultSelector()
-        sel.register(self.p.stdout, selectors.EVENT_READ)
-        line, end = b"", time.monotonic() + READY_TIMEOUT
-        while not line.endswith(b"\n"):
-            if time.monotonic() > end or self.p.poll() is not None or not sel.select(0.2) and False:
-                self.stop()
-                raise PeerError(f"emulator {' '.join(args)} did not start")
-            if sel.select(0.1):
-                chunk = os.read(self.p.stdout.fileno(), 4096)
-                if not chunk:
-                    self.stop()
-                    raise PeerError(f"emulator {' '.join(args)} exited")
-                line += chunk
-        sel.close()
-        self.ready: dict[str, Any] = json.loads(line.decode().splitlines()[0])
+class _Proc(Child):
+    """One emulator process of the threat lab (a `lab.processes.Child`), with its control port."""
+
+    def __init__(self, args: list[str], log_dir: Path) -> None:
+        name = f"{args[0]}-{len(list(log_dir.glob('*.log')))}"
+        super().__init__(name, emulator_argv(*args), log_dir / f"{name}.log")
+        self.start()
         host, _, port = self.ready["control"].rpartition(":")
         self.control = (host, int(port))
 
     def ask(self, obj: dict[str, Any]) -> dict[str, Any]:
         return asyncio.run(jsonlines.request(*self.control, obj, timeout=5.0))
-
-    def stop(self) -> None:
-        if self.p.poll() is None:
-            try:
-                os.killpg(self.p.pid, signal.SIGTERM)
-                self.p.wait(5)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                try:
-                    os.killpg(self.p.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                self.p.wait(5)
-        if self.p.stdout is not None:
-            self.p.stdout.close()
 
 
 def _wait(pred: Callable[[], bool], timeout: float, step: float = 0.1) -> bool:
@@ -120,7 +88,7 @@ class ThreatLab:
         self.ctc_chart = station_chart(view, "ixl_to_ctc")
         self.procs: list[_Proc] = []
         self.taps: list[PtyTap | TcpTap] = []
-        self._log = tempfile.TemporaryFile()
+        self._logs = tempfile.TemporaryDirectory(prefix="ktcs-threats-")
         self.lab = lab
 
     def __enter__(self) -> ThreatLab:
@@ -136,7 +104,7 @@ class ThreatLab:
 
     def _spawn(self, *args: str) -> _Proc:
         extra = ["--lab", self.lab] if self.lab else []
-        p = _Proc([*args, *extra], self._log)
+        p = _Proc([*args, *extra], Path(self._logs.name))
         self.procs.append(p)
         return p
 
@@ -165,7 +133,7 @@ class ThreatLab:
             p.stop()
         for tap in self.taps:
             tap.stop()
-        self._log.close()
+        self._logs.cleanup()
 
     # -- what the application shows -------------------------------------------------------------
     def ixl_status(self) -> dict[str, Any]:
@@ -186,8 +154,7 @@ class ThreatLab:
                     and v["link"] == "up" and v["synced"])  # fmt: skip
 
     def ctc_log(self) -> str:
-        self._log.seek(0)
-        return self._log.read().decode(errors="replace")
+        return self.ctc.log_path.read_text(errors="replace")
 
 
 def _frames(tap: PtyTap | TcpTap, since: int, direction: str) -> list[tuple[float, Frame]]:
