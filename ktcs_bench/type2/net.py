@@ -151,7 +151,33 @@ class _CtcLink:
     pending: dict[int, deque[asyncio.Future[ev.ControlResult]]] = field(default_factory=dict)
 
 
-class CtcServer:
+class _Waitable:
+    """`wait_until(predicate)` for the server and the client: re-checked after every event."""
+
+    _waiters: list[asyncio.Future[None]]
+
+    async def wait_until(self, predicate: Callable[[], bool], timeout: float = 10.0) -> None:
+        """Wait until `predicate()` holds, re-checked after every event (TimeoutError otherwise)."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout
+        while not predicate():
+            left = deadline - loop.time()
+            if left <= 0:
+                raise TimeoutError("condition not reached")
+            fut: asyncio.Future[None] = loop.create_future()
+            self._waiters.append(fut)
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(left):  # not wait_for: it may swallow a cancel (3.11)
+                    await fut
+
+    def _notify(self) -> None:
+        waiters, self._waiters = self._waiters, []
+        for w in waiters:
+            if not w.done():
+                w.set_result(None)
+
+
+class CtcServer(_Waitable):
     """The CTC's Type II server: admits IXLs, keeps each station's indication state, sends controls.
 
     `admission`: an AdmissionPolicy, or just the configured station numbers. `port` 0 picks a free
@@ -250,31 +276,11 @@ class CtcServer:
         if cl is not None:
             cl.link.feed(cl.conn.close(reason))
 
-    async def wait_until(self, predicate: Callable[[], bool], timeout: float = 10.0) -> None:
-        """Wait until `predicate()` holds, re-checked after every event (TimeoutError otherwise)."""
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + timeout
-        while not predicate():
-            left = deadline - loop.time()
-            if left <= 0:
-                raise TimeoutError("condition not reached")
-            fut: asyncio.Future[None] = loop.create_future()
-            self._waiters.append(fut)
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(left):  # not wait_for: it may swallow a cancel (3.11)
-                    await fut
-
     def _link_of(self, station: int) -> _CtcLink:
         cl = self._links.get(station)
         if cl is None or not cl.conn.identified:
             raise UsageError(f"station {station} is not connected")
         return cl
-
-    def _notify(self) -> None:
-        waiters, self._waiters = self._waiters, []
-        for w in waiters:
-            if not w.done():
-                w.set_result(None)
 
     # -- one connection ------------------------------------------------------------------------
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -419,7 +425,7 @@ class StateTable:
         return self._control(code, value)
 
 
-class IxlClient:
+class IxlClient(_Waitable):
     """Station `station`'s IXL link to the CTC at host:port: connect, IDENT, serve, reconnect.
 
     Reconnects after every loss with exponential back-off from `backoff_initial` doubling up to
@@ -540,25 +546,6 @@ class IxlClient:
         if link.writer.transport.get_write_buffer_size() > READ_SIZE:
             with contextlib.suppress(ConnectionError, OSError):
                 await link.writer.drain()
-
-    async def wait_until(self, predicate: Callable[[], bool], timeout: float = 10.0) -> None:
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + timeout
-        while not predicate():
-            left = deadline - loop.time()
-            if left <= 0:
-                raise TimeoutError("condition not reached")
-            fut: asyncio.Future[None] = loop.create_future()
-            self._waiters.append(fut)
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(left):  # not wait_for: it may swallow a cancel (3.11)
-                    await fut
-
-    def _notify(self) -> None:
-        waiters, self._waiters = self._waiters, []
-        for w in waiters:
-            if not w.done():
-                w.set_result(None)
 
     # -- the connection loop -------------------------------------------------------------------
     async def _run(self) -> None:
