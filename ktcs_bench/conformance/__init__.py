@@ -1,8 +1,8 @@
-"""The conformance suite and the EN 50159 threat demonstration (SPEC §7, §10).
+"""The conformance suite (SPEC §7, §10); the EN 50159 threat campaign is `ktcs_bench.threats`.
 
 Owns: named cases built from raw frames (`type1_cases`, `type2_cases`), the suite's own wire ends
 (`wire`), the timings it judges by (`timing`), the runner, the reports (JUnit XML, JSON, a human
-summary) and the threat harness (`threats`). Must not use the bench's link code (`type1/`,
+summary). Must not use the bench's link code (`type1/`,
 `type2/` sessions) to judge a device -- only the codec.
 """
 

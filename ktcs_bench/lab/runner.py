@@ -306,6 +306,19 @@ class LabRunner:
             pass
 
 
+def running_labs() -> list[dict[str, Any]]:
+    """The state (lab.json) of every lab that is up on this machine, for tools that attach to one."""
+    out = []
+    for path in sorted((run_dir() / "labs").glob("*/lab.json")):
+        try:
+            state = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if isinstance(state, dict) and _pid_alive(int(state.get("pid", 0))):
+            out.append(state)
+    return out
+
+
 def _pid_alive(pid: int) -> bool:
     if pid <= 0:
         return False

@@ -13,7 +13,9 @@
     clear                     remove every fault (and end a cut)
     send DIR HEX...           inject bytes as if the sender of DIR had written them (replay)
     status                    one JSON line: ends, faults, counters
-    subscribe [history]       stream the recorded traffic as JSON lines {time, direction, hex}
+    subscribe [history]       stream the recorded traffic as JSON lines {time, direction, hex},
+                              in order with the tap's events {time, event, ...} (fault, send,
+                              connected, disconnected)
     help
 DIR is `a->b`, `a>b` or `both` (the default), with the tap's end names (`ixl>atc` works too).
 Replies are one line: `ok ...` or `error ...`; `subscribe` replies `ok {...}` then streams.

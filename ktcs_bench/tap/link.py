@@ -327,6 +327,8 @@ class Tap:
         elif cmd.verb == "send":
             assert cmd.direction is not None
             self.injectors[cmd.direction].feed(cmd.data, now)
+            self._emit({"time": now, "event": "send", "command": f"send {cmd.direction} "
+                        f"{cmd.data.hex()}"})  # fmt: skip
         elif cmd.fault is not None:
             self._apply(cmd.fault)
             return f"ok {cmd.fault.command()}"

@@ -1,0 +1,82 @@
+"""A threat's result and the campaign's reports: a Markdown table, JSON, and a coloured summary."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+_GREEN, _RED, _YELLOW, _BOLD, _RESET = "\x1b[32m", "\x1b[31m", "\x1b[33m", "\x1b[1m", "\x1b[0m"
+
+
+@dataclass
+class ThreatResult:
+    """`caught`: the named defence reacted on the wire. `safe`: the application outcome was safe;
+    None when the devices' state could not be read (a real device) -- the outcome says so."""
+
+    threat: str
+    link: str
+    injection: str
+    defence: str
+    caught: bool
+    outcome: str
+    safe: bool | None
+    evidence: list[str] = field(default_factory=list)
+    ran: bool = True
+
+    @property
+    def passed(self) -> bool:
+        return not self.ran or (self.caught and self.safe is not False)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"threat": self.threat, "link": self.link, "injection": self.injection,
+                "defence": self.defence, "caught": self.caught, "outcome": self.outcome,
+                "safe": self.safe, "ran": self.ran, "evidence": self.evidence}  # fmt: skip
+
+
+def not_run(threat: str, why: str) -> ThreatResult:
+    return ThreatResult(threat, "-", "-", "-", False, why, None, ran=False)
+
+
+def _mark(flag: bool | None) -> str:
+    return "yes" if flag else ("not observed" if flag is None else "NO")
+
+
+def markdown(results: list[ThreatResult]) -> str:
+    lines = ["| threat | link | injected through the tap | defence that caught it | caught | "
+             "application outcome | safe |", "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in results:
+        caught = _mark(r.caught) if r.ran else "not run"
+        lines.append(f"| {r.threat} | {r.link} | {r.injection} | {r.defence} | {caught} | "
+                     f"{r.outcome} | {_mark(r.safe) if r.ran else '-'} |")  # fmt: skip
+    return "\n".join(lines)
+
+
+def summary(results: list[ThreatResult], header: list[str], colour: bool) -> str:
+    """What a person reads: one block a threat, its verdicts coloured, its evidence indented."""
+
+    def paint(text: str, code: str) -> str:
+        return f"{code}{_BOLD}{text}{_RESET}" if colour else text
+
+    out = [*header, ""]
+    for r in results:
+        if not r.ran:
+            out.append(f"{paint('SKIP  ', _YELLOW)} {r.threat:13s} {r.outcome}")
+            continue
+        verdict = paint("CAUGHT", _GREEN) if r.caught else paint("MISSED", _RED)
+        out.append(f"{verdict} {r.threat:13s} {r.link}: {r.injection}")
+        out.append(f"       defence: {r.defence}")
+        safe = {True: paint("safe", _GREEN), False: paint("UNSAFE", _RED),
+                None: paint("not observed", _YELLOW)}[r.safe]  # fmt: skip
+        out.append(f"       outcome ({safe}): {r.outcome}")
+        out.extend(f"         - {e}" for e in r.evidence)
+    ran = [r for r in results if r.ran]
+    bad = [r for r in ran if not r.passed]
+    head = paint("FAILED", _RED) if bad else paint("PASSED", _GREEN)
+    unobserved = sum(1 for r in ran if r.safe is None)
+    tail = f"{head}: {sum(r.caught for r in ran)} of {len(ran)} threats caught"
+    if unobserved:
+        tail += f", {unobserved} application outcomes not observed"
+    if len(ran) < len(results):
+        tail += f", {len(results) - len(ran)} not run"
+    out += ["", tail]
+    return "\n".join(out)

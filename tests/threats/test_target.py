@@ -1,0 +1,63 @@
+"""`ktcs-bench threats --target TAP` against a link the test builds by hand, as an engineer wires
+a device the bench cannot read: `tap run` between an IXL and an ATC process. The verdicts come from
+the wire alone and the outcome is reported as not observed; an IXL that never NAKs is caught."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from tests.conformance.conftest import Proc, cli, spawn  # noqa: F401 -- the fixture
+
+TYPE1 = ["repetition", "deletion", "insertion", "corruption"]
+
+
+def _link(spawn: Callable[..., Proc], name: str, *ixl_args: str) -> None:  # noqa: F811
+    tap = spawn("tap", "run", "--pty", "--names", "ixl,atc", "--name", name, "--json")
+    ptys = tap.ready["paths"]
+    rails = spawn("emulator", "trackcircuit", "--listen", "127.0.0.1:0").ready["listen"]
+    spawn("emulator", "atc", "--station", "18", "--unpaced", "--link", f"ixl={ptys['atc']}",
+          "--link", f"rails=tcp://{rails}")  # fmt: skip
+    spawn("emulator", "ixl", "--station", "18", "--unpaced", "--link", f"atc={ptys['ixl']}",
+          *ixl_args)  # fmt: skip
+
+
+@pytest.fixture(autouse=True)
+def _run_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("KTCS_BENCH_RUN_DIR", str(tmp_path / "run"))  # taps announce themselves here
+
+
+def test_wire_only_target(spawn: Callable[..., Proc]) -> None:  # noqa: F811
+    _link(spawn, "bench-ixl-atc")
+    run = cli("threats", "--target", "bench-ixl-atc", "--json", timeout=180)
+    assert run.returncode == 0, run.stdout[-4000:] + run.stderr[-2000:]
+    report = json.loads(run.stdout)
+    (target,) = report["targets"]
+    assert target["dut"] == "ixl" and target["peer"] == "atc" and target["application"] is None
+    by_name = {r["threat"]: r for r in report["results"]}
+    for name in TYPE1:
+        r = by_name[name]
+        assert r["ran"] and r["caught"], r
+        assert r["safe"] is None and r["outcome"].startswith("not observed"), r
+    for name in ("resequencing", "delay", "masquerade"):
+        assert not by_name[name]["ran"] and "Type II" in by_name[name]["outcome"]
+    assert "REQUEST_ALL sent" in " ".join(by_name["insertion"]["evidence"])
+
+
+def test_a_device_without_nak_is_caught(spawn: Callable[..., Proc]) -> None:  # noqa: F811
+    _link(spawn, "bench-no-nak", "--fault", "no-nak")
+    run = cli("threats", "--target", "bench-no-nak", "--threat", "corruption", "--json")
+    assert run.returncode == 1, run.stdout[-4000:] + run.stderr[-2000:]
+    (r,) = json.loads(run.stdout)["results"]
+    assert r["threat"] == "corruption" and not r["caught"]
+    assert "NAK reason 1: no" in r["evidence"][0]
+
+
+def test_no_such_tap(tmp_path: Path) -> None:
+    run = cli("threats", "--target", "nowhere")
+    assert run.returncode == 2 and "no tap named 'nowhere'" in run.stderr
+    run = cli("threats", "--target", "127.0.0.1:1")
+    assert run.returncode == 3 and "cannot reach the tap" in run.stderr
