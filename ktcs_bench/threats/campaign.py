@@ -194,8 +194,8 @@ def insertion(t: Target) -> ThreatResult:
           f"{t.dut}: SEQ gap → REQUEST_ALL {'sent' if asked else 'NOT sent'}; {t.peer} ALL_INFO "
           f"{'sent' if answered else 'not seen'}"]  # fmt: skip
     outcome, safe = _outcome(app_ok, "inserted value replaced by the true state within one "
-                             "exchange (Type I has no source authentication: it was acted on "
-                             "until then)", "inserted value persists",
+                             "exchange (Type I has no source authentication: until then the "
+                             "IXL may act on it)", "inserted value persists",
                              "the full state was asked for and sent")  # fmt: skip
     return ThreatResult("insertion", t.link, f"tap: send {t.toward} (a well-formed CHANGE)",
                         "SEQ: gap → REQUEST_ALL, state rebuilt from the sender's ALL_INFO",
