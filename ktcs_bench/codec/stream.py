@@ -148,7 +148,8 @@ class StreamDecoder:
             h = self._header.unpack_from(raw, 1)
             seq, op = h[self._i_seq], h[self._i_op]
             sub = None if self._i_sub is None else h[self._i_sub]
-        return Frame(self._base + j, raw, seq, op, sub, self._hsize, len(raw), None, None,
+        start = min(self._hsize, len(raw))
+        return Frame(self._base + j, raw, seq, op, sub, start, len(raw), None, None,
                      "truncated")  # fmt: skip
 
     def _check(
@@ -315,9 +316,11 @@ class StreamDecoder:
         self._suspect_until = base + j + total
         if g >= 0:
             out.append(Garbage(base + g, mv[g:j].tobytes()))
+        # DATA as far as this record holds it: a candidate cut at an STX inside it is shorter
+        size = end - j
         out.append(
             Frame(base + j, mv[j:end].tobytes(), h[self._i_seq], h[self._i_op],
-                  None if self._i_sub is None else h[self._i_sub], hs,
-                  hs + data_len if data_len > 0 else hs, packet, calc, error)
+                  None if self._i_sub is None else h[self._i_sub], min(hs, size),
+                  min(hs + max(data_len, 0), size), packet, calc, error)
         )  # fmt: skip
         return end, -1, False

@@ -31,6 +31,8 @@ def assert_accounts_for_every_byte(records: list[Record], data: bytes) -> None:
     pos = 0
     for r in records:
         assert r.offset == pos, f"record at {r.offset}, expected {pos}"
+        if isinstance(r, Frame):  # DATA lies inside the frame's own bytes
+            assert 0 <= r.data_start <= r.data_end <= len(r.raw), r
         pos += len(r.raw)
     assert b"".join(r.raw for r in records) == data
 
@@ -87,6 +89,17 @@ def test_crc_error_is_reported_once_then_resync() -> None:
     good = [r for r in records if isinstance(r, Frame) and r.ok]
     assert [e.error for e in errors] == ["crc"]
     assert [g.raw for g in good] == [b]
+
+
+def test_crc_error_cut_at_an_inner_stx_keeps_data_inside_the_record() -> None:
+    """A bad CHANGE whose OP byte is STX (0x02) is reported up to that STX, then resynchronised."""
+    wire = bytearray(FrameCodec(T1).encode_message(0x77, "CHANGE", items=[[1, 1], [1, 1]]))
+    wire[T1.header_size + 5] ^= 0x02
+    records = decode_chunks(T1, [bytes(wire)])
+    assert_accounts_for_every_byte(records, bytes(wire))
+    first = records[0]
+    assert isinstance(first, Frame) and first.error == "crc" and first.seq == 0x77
+    assert first.data == first.raw[first.data_start :] and len(first.raw) < len(wire)
 
 
 def test_etx_error() -> None:
