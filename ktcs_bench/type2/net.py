@@ -42,6 +42,22 @@ def _peer_name(writer: asyncio.StreamWriter) -> tuple[str, str]:
     return str(peer), str(peer)
 
 
+async def _close(writer: asyncio.StreamWriter) -> None:
+    if not writer.is_closing():
+        writer.close()
+    with contextlib.suppress(Exception):
+        await writer.wait_closed()
+
+
+def _tls_reason(exc: ssl_module.SSLError) -> str:
+    """'certificate verify failed: self-signed certificate', not the '[SSL: ...] ... (_ssl.c:N)'."""
+    if isinstance(exc, ssl_module.SSLCertVerificationError) and exc.verify_message:
+        return f"certificate verify failed: {exc.verify_message}"
+    if exc.reason:
+        return str(exc.reason).lower().replace("_", " ")
+    return str(exc) or type(exc).__name__
+
+
 class _Link:
     """One session bound to one stream pair and the loop clock."""
 
@@ -209,14 +225,18 @@ class CtcServer(_Waitable):
         self._links: dict[int, _CtcLink] = {}  # identified connections by station
         self._all: set[_CtcLink] = set()
         self._tasks: set[asyncio.Task[None]] = set()
+        self._handshaking: set[asyncio.Task[None]] = set()  # connections still in the TLS handshake
+        self._stopping = False
         self._server: asyncio.Server | None = None
         self._waiters: list[asyncio.Future[None]] = []
         self.refusals: list[tuple[str, str]] = []  # (peer, reason), newest last
 
     # -- lifecycle -----------------------------------------------------------------------------
     async def start(self) -> None:
+        # plain TCP even for type2-tls: `_serve` upgrades after the address check, so a failed
+        # handshake is a refusal logged with the peer's address (SPEC §10), not a silent drop
         self._server = await asyncio.start_server(
-            self._serve, self.host, self._port, ssl=self.ssl, reuse_address=True
+            self._serve, self.host, self._port, reuse_address=True
         )
         log.info("Type II CTC listening on %s:%s", self.host, self.port)
 
@@ -227,8 +247,11 @@ class CtcServer(_Waitable):
         return int(self._server.sockets[0].getsockname()[1])
 
     async def close(self) -> None:
+        self._stopping = True
         if self._server is not None:
             self._server.close()
+        for task in list(self._handshaking):
+            task.cancel()
         for cl in list(self._all):
             cl.link.feed(cl.conn.close("CTC shutting down"))
         if self._tasks:
@@ -292,10 +315,26 @@ class CtcServer(_Waitable):
             decision = self.admission.check_address(host)
             if not decision:
                 self._refused(peer, decision.reason)
-                writer.close()
-                with contextlib.suppress(Exception):
-                    await writer.wait_closed()
+                await _close(writer)
                 return
+            if self.ssl is not None:
+                self._handshaking.add(task)
+                try:
+                    failure = await self._handshake(writer)
+                except asyncio.CancelledError:
+                    if not self._stopping:
+                        raise
+                    task.uncancel()  # close() cut it short: end quietly (3.11 logs a cancelled one)
+                    failure = "CTC shutting down"
+                finally:
+                    self._handshaking.discard(task)
+                if failure is not None:
+                    self._refused(peer, f"TLS handshake failed: {failure}")
+                    # the loop already closed the socket; not wait_closed(): a handshake cut
+                    # short never tells the stream protocol, so that would wait forever (3.11)
+                    if not writer.is_closing():
+                        writer.close()
+                    return
             conn = CtcConnection(asyncio.get_running_loop().time(), self.config)
             meter = self.admission.bad_frame_meter()
             holder: list[_CtcLink] = []
@@ -314,6 +353,27 @@ class CtcServer(_Waitable):
                 self._detach(cl)
         finally:
             self._tasks.discard(task)
+
+    async def _handshake(self, writer: asyncio.StreamWriter) -> str | None:
+        """Upgrade the accepted stream to TLS in place (the same reader and writer carry on).
+
+        Bounded by the IDENT timeout (the handshake is part of getting to IDENT); None when it
+        succeeded, else a short reason.
+        """
+        assert self.ssl is not None
+        timeout = self.config.ident_timeout
+        try:
+            async with asyncio.timeout(timeout):
+                await writer.start_tls(self.ssl)
+        except ssl_module.SSLError as exc:
+            return _tls_reason(exc)
+        except TimeoutError:
+            return f"no handshake within {timeout:g} s"
+        except (ConnectionError, OSError) as exc:
+            if str(exc):
+                return str(exc)
+            return "closed by the peer" if isinstance(exc, ConnectionResetError) else repr(exc)
+        return None
 
     def _refused(self, peer: str, reason: str) -> None:
         log.warning("Type II: refused %s: %s", peer, reason)

@@ -5,6 +5,7 @@ refusals logged with the peer's address."""
 from __future__ import annotations
 
 import asyncio
+import re
 import shutil
 import socket
 import subprocess
@@ -46,6 +47,16 @@ def _wait_log(proc: Proc, text: str, timeout: float = 5.0) -> str:
             return log
         time.sleep(0.1)
     return proc.stderr()
+
+
+def _tls_refusals(proc: Proc, at_least: int, timeout: float = 5.0) -> list[str]:
+    """The reasons of the CTC's logged TLS refusals of 127.0.0.1, once there are `at_least`."""
+    end = time.monotonic() + timeout
+    while True:
+        found = re.findall(r"refused 127\.0\.0\.1:\d+: TLS handshake failed: (.+)", proc.stderr())
+        if len(found) >= at_least or time.monotonic() >= end:
+            return found
+        time.sleep(0.1)
 
 
 def test_binds_loopback_and_source_allow_list(spawn: Callable[..., Proc]) -> None:
@@ -108,16 +119,24 @@ def test_type2_tls_client_certificates(spawn: Callable[..., Proc], tmp_path: Pat
     while not synced():
         assert time.monotonic() < end, ctc.stderr()
         time.sleep(0.2)
-    # plain TCP gets nothing; a stranger's certificate is not admitted
+    assert _tls_refusals(ctc, 0, timeout=0) == []
+    # plain TCP gets nothing, and the CTC logs the refusal with the peer's address
     assert _ident_answer(address, 20) == b""
+    refusals = _tls_refusals(ctc, 1)
+    assert len(refusals) == 1, ctc.stderr()
+    # a stranger's certificate is not admitted, and that is logged too
     tls = ["--profile", "type2-tls", "--tls-ca", str(c["ca.pem"]), "--case", "t2-ident"]
     stranger = cli("conformance", "--role", "ctc", "--target", f"tcp://{address}", "--station",
                    "20", "--tls-cert", str(c["stranger.pem"]), "--tls-key",
                    str(c["stranger.key"]), *tls)  # fmt: skip
     # TLS 1.3: the CTC rejects the certificate after the client's side of the handshake, so the
-    # suite sees the connection closed (no IDENT answer) rather than a handshake error
+    # suite sees the connection closed (no IDENT answer) rather than a handshake error; the CTC
+    # sees the handshake fail and logs "refused 127.0.0.1:PORT: TLS handshake failed: ..."
     assert stranger.returncode in (1, 3), stranger.stdout + stranger.stderr
     assert "closed" in stranger.stdout or "SSL" in stranger.stdout
+    refusals = _tls_refusals(ctc, 2)
+    assert len(refusals) >= 2, ctc.stderr()
+    assert all("certificate" in r for r in refusals[1:]), refusals
     good = cli("conformance", "--role", "ctc", "--target", f"tcp://{address}", "--station", "20",
                "--tls-cert", str(c["ixl18.pem"]), "--tls-key", str(c["ixl18.key"]), *tls)  # fmt: skip
     assert good.returncode == 0, good.stdout + good.stderr
