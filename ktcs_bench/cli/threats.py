@@ -36,7 +36,7 @@ EPILOG = """\
 examples:
   ktcs-bench threats                                  # the small lab, all seven threats
   ktcs-bench lab up &                                 # then, against the reference lab:
-  ktcs-bench threats --target st18-atc --target st18-ctc --markdown threats.md
+  ktcs-bench threats --target st18-atc --target st18-ctc --markdown threats.md --junit threats.xml
   ktcs-bench threats --target 127.0.0.1:40111 --dut ixl --threat corruption --json
 
 exit codes: 0 every threat run was caught and no outcome was unsafe, 1 a threat was missed or an
@@ -61,6 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--threat", action="append", default=[], help="run only these threats")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--markdown", metavar="FILE", help="also write the Markdown table here")
+    p.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report (a CI reads it)")
     p.add_argument("--colour", action=argparse.BooleanOptionalAction, default=None,
                    help="colour the summary (default: on a terminal)")  # fmt: skip
     p.set_defaults(handler=run)
@@ -78,7 +79,7 @@ def _lab_name(lab: str | None) -> str | None:
 def run(args: argparse.Namespace) -> int:
     from ktcs_bench.threats import THREATS, Target, WireTap, find_in_labs, run_campaign
     from ktcs_bench.threats.minilab import ThreatLab
-    from ktcs_bench.threats.report import markdown, summary
+    from ktcs_bench.threats.report import junit_xml, markdown, summary
 
     unknown = [t for t in args.threat if t not in THREATS]
     if unknown:
@@ -118,11 +119,15 @@ def run(args: argparse.Namespace) -> int:
                   f"{tm.heartbeat_period:g} s, retry count {tm.retry_count}")  # fmt: skip
         header.append(f"  {t.link}: {timing}; application read from "
                       f"{t.app.source or 'nowhere (not our emulators)'}")  # fmt: skip
-    if args.markdown:
-        try:
-            Path(args.markdown).write_text(markdown(results) + "\n", encoding="utf-8")
-        except OSError as exc:
-            raise UsageError(f"cannot write {args.markdown}: {exc.strerror}") from None
+    properties = {f"target.{t.tap.name}": f"{t.link}; application: {t.app.source or 'not read'}"
+                  for t in targets}  # fmt: skip
+    for path, data in ((args.markdown, (markdown(results) + "\n").encode()),
+                       (args.junit, junit_xml(results, properties))):  # fmt: skip
+        if path:
+            try:
+                Path(path).write_bytes(data)
+            except OSError as exc:
+                raise UsageError(f"cannot write {path}: {exc.strerror}") from None
     if args.json:
         report: dict[str, Any] = {
             "targets": [

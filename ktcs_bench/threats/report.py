@@ -80,3 +80,34 @@ def summary(results: list[ThreatResult], header: list[str], colour: bool) -> str
         tail += f", {len(results) - len(ran)} not run"
     out += ["", tail]
     return "\n".join(out)
+
+
+def junit_xml(results: list[ThreatResult], properties: dict[str, str]) -> bytes:
+    """One <testcase> a threat: a miss or an unsafe outcome is a failure, a threat not run is
+    skipped; the evidence goes to system-out."""
+    import xml.etree.ElementTree as ET
+
+    ran = [r for r in results if r.ran]
+    root = ET.Element("testsuites", name="ktcs-bench threats")
+    ts = ET.SubElement(root, "testsuite", name="ktcs-bench threats EN 50159",
+                       tests=str(len(results)), failures=str(sum(not r.passed for r in ran)),
+                       errors="0", skipped=str(len(results) - len(ran)))  # fmt: skip
+    props = ET.SubElement(ts, "properties")
+    for key, value in properties.items():
+        ET.SubElement(props, "property", name=key, value=value)
+    for r in results:
+        tc = ET.SubElement(ts, "testcase", name=r.threat, classname="threats.en50159")
+        if not r.ran:
+            ET.SubElement(tc, "skipped", message=r.outcome)
+            continue
+        if not r.passed:
+            what = "not caught" if not r.caught else "unsafe outcome"
+            ET.SubElement(tc, "failure", message=f"{what}: {r.outcome}",
+                          type="ThreatNotDefended").text = f"{r.defence}\n{r.outcome}"  # fmt: skip
+        ET.SubElement(tc, "system-out").text = "\n".join(
+            [f"link: {r.link}", f"injected: {r.injection}", f"defence: {r.defence}",
+             f"outcome: {r.outcome} (safe: {_mark(r.safe)})", *r.evidence]
+        )  # fmt: skip
+    ET.indent(root)
+    out: bytes = ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    return out

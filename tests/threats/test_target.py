@@ -5,6 +5,7 @@ the wire alone and the outcome is reported as not observed; an IXL that never NA
 from __future__ import annotations
 
 import json
+import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from pathlib import Path
 
@@ -47,13 +48,21 @@ def test_wire_only_target(spawn: Callable[..., Proc]) -> None:  # noqa: F811
     assert "REQUEST_ALL sent" in " ".join(by_name["insertion"]["evidence"])
 
 
-def test_a_device_without_nak_is_caught(spawn: Callable[..., Proc]) -> None:  # noqa: F811
+def test_a_device_without_nak_is_caught(spawn: Callable[..., Proc], tmp_path: Path) -> None:  # noqa: F811
     _link(spawn, "bench-no-nak", "--fault", "no-nak")
-    run = cli("threats", "--target", "bench-no-nak", "--threat", "corruption", "--json")
+    junit = tmp_path / "threats.xml"
+    run = cli("threats", "--target", "bench-no-nak", "--threat", "corruption", "--json",
+              "--junit", str(junit))  # fmt: skip
     assert run.returncode == 1, run.stdout[-4000:] + run.stderr[-2000:]
     (r,) = json.loads(run.stdout)["results"]
     assert r["threat"] == "corruption" and not r["caught"]
     assert "NAK reason 1: no" in r["evidence"][0]
+    suite = ET.parse(junit).getroot().find("testsuite")
+    assert suite is not None and suite.get("failures") == "1"
+    (case,) = suite.findall("testcase")
+    failure = case.find("failure")
+    assert case.get("name") == "corruption" and failure is not None
+    assert failure.get("message", "").startswith("not caught")
 
 
 def test_no_such_tap(tmp_path: Path) -> None:
