@@ -198,6 +198,17 @@ class FaultInjector:
         self._ops.clear()
         self._release_frames(now)
 
+    def discard(self) -> None:
+        """The connection this direction carried is gone: what is still queued for it (delayed,
+        held for a frame fault, half a frame) is dropped, never delivered on the next one."""
+        lost = sum(len(b) for _, b in self._out) + (len(self._held[1]) if self._held else 0)
+        if self._decoder is not None:
+            lost += self._decoder.buffered
+            self._decoder = StreamDecoder(self.profile)
+        self.stats.bytes_dropped += lost
+        self._out.clear()
+        self._held = None
+
     def describe(self) -> dict[str, Any]:
         return {
             "cut": self.cut,

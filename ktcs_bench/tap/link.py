@@ -656,6 +656,8 @@ class TcpTap(Tap):
         conn, self._conn = self._conn, None
         if conn is None:
             return
+        for inj in self.injectors.values():  # nothing of this connection reaches the next one
+            inj.discard()
         for w in (conn.a_writer, conn.b_writer):
             with contextlib.suppress(Exception):
                 w.close()

@@ -151,6 +151,20 @@ def test_delay_keeps_order_and_releases_late() -> None:
     assert inj.poll(T + 0.5) == b"onetwo"
 
 
+def test_discard_drops_what_is_queued_for_a_lost_connection() -> None:
+    inj = fresh()
+    inj.apply(Delay(0.5), T)
+    inj.feed(b"stale", T)
+    inj.apply(DuplicateFrame(), T)
+    inj.feed(frames(1)[0][:4], T)  # half a frame held by the frame stage
+    inj.discard()
+    assert inj.poll(T + 1.0) == b"" and inj.next_deadline() is None
+    assert inj.stats.bytes_dropped == 5 + 4
+    fresh_frame = frames(1, 7)[0]
+    inj.feed(fresh_frame, T + 1.0)  # the faults themselves still apply to the next connection
+    assert inj.poll(T + 1.2) == b"" and inj.poll(T + 1.5) == fresh_frame * 2
+
+
 def test_cut_and_restore() -> None:
     inj = fresh()
     inj.apply(Cut(), T)

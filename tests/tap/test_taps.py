@@ -14,7 +14,7 @@ import serial
 
 from ktcs_bench.capture import open_writer, read_capture
 from ktcs_bench.codec import FrameCodec, get_profile
-from ktcs_bench.tap import BitErrors, DropFrame, PtyTap, TapClient, TcpTap
+from ktcs_bench.tap import BitErrors, Delay, DropFrame, PtyTap, TapClient, TcpTap
 
 CODEC1 = FrameCodec(get_profile("ktcs-type1"))
 CODEC2 = FrameCodec(get_profile("ktcs-type2"))
@@ -227,6 +227,26 @@ def test_tcp_tap_cut_closes_and_refuses_restore_reconnects(echo: EchoServer) -> 
         with socket.create_connection(tap.listen_address, timeout=5) as s3:
             s3.sendall(b"again")
             assert recv_exactly(s3, 5) == b"again"
+
+
+def test_tcp_tap_delayed_bytes_die_with_their_connection(echo: EchoServer) -> None:
+    """A delayed chunk of a connection that closes is never delivered on the next one."""
+    with TcpTap(("127.0.0.1", 0), echo.address) as tap:
+        assert isinstance(tap, TcpTap) and tap.listen_address is not None
+        tap.inject(Delay(0.5, direction="a>b"))
+        with socket.create_connection(tap.listen_address, timeout=5) as s:
+            wait_until(lambda: tap.connected)
+            s.sendall(b"stale")
+            wait_until(lambda: tap.status()["directions"]["a>b"]["stats"]["bytes_in"] == 5)
+        wait_until(lambda: not tap.connected)
+        tap.clear()
+        with socket.create_connection(tap.listen_address, timeout=5) as s2:
+            time.sleep(0.8)  # past the delay: a leaked "stale" would be echoed by now
+            s2.sendall(b"fresh")
+            assert recv_exactly(s2, 5) == b"fresh"
+            s2.settimeout(0.3)
+            with pytest.raises(TimeoutError):
+                s2.recv(10)
 
 
 def test_tap_creation_failure_leaves_nothing_open() -> None:
