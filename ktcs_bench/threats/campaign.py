@@ -23,6 +23,7 @@ from ktcs_bench.threats.application import Application
 from ktcs_bench.threats.report import ThreatResult, not_run
 from ktcs_bench.threats.wire import WireTap, wait_for
 
+REPEAT_TRIES = 5  # repeat the peer's next frame until it is a data frame, not an ACK
 UNKNOWN_STATION = 65000  # IDENT as a station no CTC configures
 NOT_OBSERVED = "not observed (the device's state cannot be read: not one of our emulators)"
 
@@ -103,16 +104,20 @@ def _outcome(app_ok: bool | None, good: str, bad: str, wire: str) -> tuple[str, 
 
 # -- Type I ---------------------------------------------------------------------------------------
 def repetition(t: Target) -> ThreatResult:
-    mark = t.tap.act(f"duplicate 1 {t.toward}")
-
-    def repeated() -> Frame | None:
-        data = [f for f in t.tap.frames(mark, t.toward) if t.is_data(f)]
-        return next((f for i, f in enumerate(data) if any(g.raw == f.raw for g in data[i + 1 :])),
-                    None)  # fmt: skip
-
-    wait_for(lambda: repeated() is not None, 2 * t.timing.link_test_period + 2.0)
+    """The tap repeats the peer's next frame; when that is an ACK (not a delivery), again."""
+    twice: Frame | None = None
+    skipped = 0
+    mark = t.tap.mark()
+    for _ in range(REPEAT_TRIES):
+        mark = t.tap.act(f"duplicate 1 {t.toward}")
+        pair = t.tap.next_frames(mark, t.toward, 2, 2 * t.timing.link_test_period + 2)
+        if len(pair) < 2:
+            break
+        if pair[0].raw == pair[1].raw and t.is_data(pair[0]):
+            twice = pair[0]
+            break
+        skipped += 1
     time.sleep(0.5 + t.timing.ack_timeout)  # the ACK of the repeat
-    twice = repeated()
     back = t.tap.frames(mark, t.back)
     acks = [f for f in back if t.op(f) == "ACK" and twice is not None and f.seq == twice.seq]
     naks = [f for f in back if t.op(f) == "NAK"]
@@ -125,6 +130,8 @@ def repetition(t: Target) -> ThreatResult:
     ev = [f"{t.op(twice)} SEQ 0x{twice.seq:02X} delivered twice by the tap" if twice and twice.seq
           is not None else "no frame was repeated", f"ACKs of that SEQ: {len(acks)}, NAKs: "
           f"{len(naks)}, REQUEST_ALL: {len(resync)}"]  # fmt: skip
+    if skipped:
+        ev.insert(0, f"{skipped} repeated frame(s) before it were ACK/NAK, not deliveries")
     return ThreatResult("repetition", t.link, f"tap: duplicate 1 {t.toward}",
                         "SEQ: the repeat of the last accepted SEQ is ACKed, not delivered", caught,
                         outcome, safe, ev)  # fmt: skip
@@ -301,9 +308,11 @@ def masquerade(t: Target) -> ThreatResult:
     station = _connected_station(t)
     target = t.tap.info.get("target")
     if t.tap.kind != "tcp" or not target:
-        raise UsageError(f"masquerade needs a TCP tap in front of the CTC; {t.tap.name} is not")
+        return not_run("masquerade", f"not run: needs a TCP tap in front of the CTC; "
+                       f"{t.tap.name} is a {t.tap.kind} tap")  # fmt: skip
     if station is None:
-        raise UsageError(f"masquerade: no IDENT on {t.tap.name}'s record; give --station")
+        return not_run("masquerade", f"not run: no IDENT on {t.tap.name}'s record to learn the "
+                       "connected station from; give --station")  # fmt: skip
     address = (str(target[0]), int(target[1]))
     before = t.app.ctc_view()
     mark = t.tap.mark()
@@ -346,9 +355,21 @@ def settle(t: Target, timeout: float = 15.0) -> bool:
         return wait_for(lambda: bool(_synced(t)), timeout, 0.2)
     if t.tap.protocol == "type1" and t.app.readable:
         return wait_for(lambda: t.app.settled(t.app.ixl_status() or {}), timeout, 0.2)
+    if t.tap.protocol == "type2":
+        return wait_for(lambda: _steady(t), timeout, 0.0)
     mark = t.tap.mark()
     return wait_for(lambda: bool(t.tap.frames(mark, t.toward) and t.tap.frames(mark, t.back)),
                     timeout)  # fmt: skip
+
+
+def _steady(t: Target) -> bool:
+    """Type II seen from the wire alone: one connection, traffic both ways and no connect or
+    disconnect for two heartbeat periods (a reconnecting station is not yet a target)."""
+    mark = t.tap.mark()
+    time.sleep(2 * t.timing.heartbeat_period + 0.2)
+    churn = t.tap.events(mark, "connected") or t.tap.events(mark, "disconnected")
+    traffic = t.tap.frames(mark, t.toward) and t.tap.frames(mark, t.back)
+    return bool(traffic and not churn and t.tap.status().get("connected"))
 
 
 ThreatFn = Callable[[Target], ThreatResult]

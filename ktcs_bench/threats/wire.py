@@ -8,6 +8,7 @@ injection's own event in the stream, not a guess from a clock.
 
 from __future__ import annotations
 
+import bisect
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -148,7 +149,8 @@ class WireTap:
     def frames(self, since: int, direction: str) -> list[Frame]:
         """Frames recorded in `direction` ("a>b") from stream position `since`."""
         with self._lock:
-            return [f for pos, d, f in self._frames if pos >= since and d == direction]
+            first = bisect.bisect_left(self._frames, since, key=lambda e: e[0])
+            return [f for _, d, f in self._frames[first:] if d == direction]
 
     def op_name(self, frame: Frame) -> str:
         op = self.profile.opcodes.get(frame.op) if frame.op is not None else None
@@ -158,3 +160,9 @@ class WireTap:
         self, since: int, direction: str, pred: Callable[[Frame], bool], timeout: float
     ) -> bool:
         return wait_for(lambda: any(pred(f) for f in self.frames(since, direction)), timeout)
+
+    def next_frames(self, since: int, direction: str, n: int, timeout: float) -> list[Frame]:
+        """The first `n` frames in `direction` from `since`, waiting up to `timeout` (fewer if
+        they did not come)."""
+        wait_for(lambda: len(self.frames(since, direction)) >= n, timeout)
+        return self.frames(since, direction)[:n]

@@ -70,3 +70,24 @@ def test_no_such_tap(tmp_path: Path) -> None:
     assert run.returncode == 2 and "no tap named 'nowhere'" in run.stderr
     run = cli("threats", "--target", "127.0.0.1:1")
     assert run.returncode == 3 and "cannot reach the tap" in run.stderr
+
+
+def test_wire_only_type2_target(spawn: Callable[..., Proc]) -> None:  # noqa: F811
+    """A TCP tap in front of a CTC the bench does not read: resequencing, delay and masquerade
+    judged on the wire alone."""
+    ctc = spawn("emulator", "ctc", "--listen", "127.0.0.1:0").ready["listen"]
+    tap = spawn("tap", "run", "--tcp", "127.0.0.1:0", ctc, "--names", "ixl,ctc", "--name",
+                "bench-ixl-ctc", "--json")  # fmt: skip
+    host, port = tap.ready["listen"]
+    spawn("emulator", "ixl", "--station", "18", "--link", f"ctc=tcp://{host}:{port}")
+    run = cli("threats", "--target", "bench-ixl-ctc", "--json", timeout=180)
+    assert run.returncode == 0, run.stdout[-4000:] + run.stderr[-2000:]
+    report = json.loads(run.stdout)
+    assert report["targets"][0]["dut"] == "ctc" and report["targets"][0]["application"] is None
+    by_name = {r["threat"]: r for r in report["results"]}
+    for name in ("resequencing", "delay", "masquerade"):
+        r = by_name[name]
+        assert r["ran"] and r["caught"] and r["safe"] is None, r
+    evidence = " ".join(by_name["masquerade"]["evidence"])
+    assert "IDENT station 18 → refused" in evidence and "connection kept" in evidence
+    assert "ctc closed" in by_name["delay"]["evidence"][0]
