@@ -77,7 +77,14 @@ def _lab_name(lab: str | None) -> str | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ktcs_bench.threats import THREATS, Target, WireTap, find_in_labs, run_campaign
+    from ktcs_bench.threats import (
+        THREATS,
+        Application,
+        Target,
+        WireTap,
+        find_in_labs,
+        run_campaign,
+    )
     from ktcs_bench.threats.minilab import ThreatLab
     from ktcs_bench.threats.report import junit_xml, markdown, summary
 
@@ -99,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
                 # Type II: the CTC, the tap's target end; Type I: --dut, else the first end
                 dut = wire.names[1] if wire.protocol == "type2" else args.dut or wire.names[0]
                 app = find_in_labs(wire.name, lab_name)
+                if wire.protocol == "type1" and app.readable and app.device != dut:
+                    app = Application()  # the bench reads IXLs: a Type I DUT that is not one
                 targets.append(Target(wire, dut, app, station=args.station))
             chosen = args.threat or None
             protocols = {t.tap.protocol for t in targets}

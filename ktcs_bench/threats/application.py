@@ -42,6 +42,7 @@ class Application:
     ctc_chart: CodeChart | None = None  # IXL -> CTC
     guarded: tuple[str, ...] = ()
     source: str = ""
+    device: str = "ixl"  # the IXL's end name on the tapped link
     notes: list[str] = field(default_factory=list)
 
     @classmethod
@@ -154,4 +155,5 @@ def _from_state(state: dict[str, Any], link: dict[str, Any]) -> Application:
         ctc=_address(devices[ctc_name]["control"]) if ctc_name else None,
         ctc_log=lab_dir(str(state["lab"])) / "logs" / f"{ctc_name}.log" if ctc_name else None,
         source=f"lab {state['lab']} (devices {ixl_name}" + (f", {ctc_name})" if ctc_name else ")"),
+        device=ixl_name,
     )  # fmt: skip

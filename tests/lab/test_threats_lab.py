@@ -52,6 +52,21 @@ def test_threats_against_the_running_lab(tmp_path: Path) -> None:
         assert any(f.error == "crc" and f.seq == 0x77 for f in frames("atc20>ixl20"))
         nak = t1.opcodes.by_name["NAK"].op
         assert any(f.op == nak and f.data[:1] == b"\x01" for f in frames("ixl20>atc20"))
+        # the ATC as the device under test: the IXL's frames are forged; the ATC's state is not
+        # one the bench reads, so the outcome is the wire's alone
+        run = subprocess.run(
+            [sys.executable, "-m", "ktcs_bench.cli.main", "threats", "--target", "st20-atc",
+             "--dut", "atc20", "--threat", "corruption", "--threat", "insertion", "--json"],
+            capture_output=True, text=True, timeout=120,
+            env={**os.environ, "KTCS_BENCH_RUN_DIR": str(lab.run_dir)},
+        )  # fmt: skip
+        assert run.returncode == 0, run.stdout[-4000:] + run.stderr[-2000:]
+        report = json.loads(run.stdout)
+        assert [(t["dut"], t["peer"], t["application"]) for t in report["targets"]] == [
+            ("atc20", "ixl20", None)
+        ]
+        for r in report["results"]:
+            assert r["ran"] and r["caught"] and r["safe"] is None, r
         # and the lab is whole again: every station synced, the line clear
         wait_until(
             "every station synced again, the line clear",
