@@ -47,25 +47,43 @@ class TapClient:
         return line.decode("utf-8", errors="replace").rstrip("\n")
 
     def command(self, line: str) -> str:
-        """Send one command; the reply without its `ok ` prefix. Raises UsageError on `error`."""
-        self._file.write(line.strip().encode() + b"\n")
-        self._file.flush()
+        """Send one command; the reply without its `ok ` prefix. Raises UsageError on `error`,
+        PeerError when what answers is not a tap."""
+        try:
+            self._file.write(line.strip().encode() + b"\n")
+            self._file.flush()
+        except OSError as exc:
+            raise PeerError(f"tap control port: {exc}") from None
         reply = self._readline()
         if reply.startswith("error"):
             raise UsageError(f"tap: {reply[6:]}")
-        return reply[3:] if reply.startswith("ok ") else reply
+        if reply != "ok" and not reply.startswith("ok "):
+            raise PeerError(self._not_a_tap(reply))
+        return reply[3:]
+
+    def _not_a_tap(self, reply: str) -> str:
+        host, port = self.address
+        return f"{host}:{port} is not a tap's control port (it answered {reply[:60]!r})"
+
+    def _json(self, text: str) -> dict[str, Any]:
+        try:
+            obj = json.loads(text)
+        except ValueError:
+            obj = None
+        if not isinstance(obj, dict):
+            raise PeerError(self._not_a_tap(text))
+        return obj
 
     def status(self) -> dict[str, Any]:
-        result: dict[str, Any] = json.loads(self.command("status"))
-        return result
+        return self._json(self.command("status"))
 
     def subscribe(
         self, history: bool = False, timeout: float | None = None
     ) -> Iterator[dict[str, Any]]:
         """The header ({profile, names, ...}) first, then one dict per record or event."""
-        header = self.command("subscribe history" if history else "subscribe")
+        header = self._json(self.command("subscribe history" if history else "subscribe"))
         self._sock.settimeout(timeout)
-        yield json.loads(header)
+        yield header
         while True:
             try:
                 line = self._file.readline()
@@ -75,4 +93,4 @@ class TapClient:
                 raise PeerError(f"tap control port: {exc}") from None
             if not line:
                 return
-            yield json.loads(line)
+            yield self._json(line.decode("utf-8", errors="replace"))

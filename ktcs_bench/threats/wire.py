@@ -44,20 +44,26 @@ class WireTap:
         except BaseException:
             self._control.close()
             raise
-        stream = self._feed.subscribe(history=True)
-        header = next(stream)
+        self._thread: threading.Thread | None = None
         host, port = self.address
-        self.name = str(header.get("tap") or f"{host}:{port}")
-        self.kind = str(header.get("kind", "tap"))
-        names = header.get("names") or ["a", "b"]
-        self.names: tuple[str, str] = (str(names[0]), str(names[1]))
         try:
+            stream = self._feed.subscribe(history=True)
+            header = next(stream)
+            self.name = str(header.get("tap") or f"{host}:{port}")
+            self.kind = str(header.get("kind", "tap"))
+            names = header.get("names")
+            if not (isinstance(names, list) and len(names) == 2 and "profile" in header):
+                raise PeerError(f"{host}:{port} answered like a tap but without its ends/profile")
+            self.names: tuple[str, str] = (str(names[0]), str(names[1]))
             self.profile: FrameProfile = get_profile(str(header["profile"]))
-        except (KeyError, UsageError) as exc:
+        except UsageError as exc:
             self.close()
             raise UsageError(
-                f"tap {self.name}: its frame profile is unknown here ({exc})"
+                f"tap {host}:{port}: its frame profile is unknown here ({exc})"
             ) from None
+        except BaseException:
+            self.close()
+            raise
         self._events: list[dict[str, Any]] = []
         self._frames: list[tuple[int, str, Frame]] = []  # (stream position, direction, frame)
         self._decoders: dict[str, StreamDecoder] = {}
@@ -102,6 +108,8 @@ class WireTap:
         feed = getattr(self, "_feed", None)
         if feed is not None:
             feed.close()
+        if getattr(self, "_thread", None) is not None:
+            assert self._thread is not None
             self._thread.join(timeout=5)
 
     def __enter__(self) -> WireTap:

@@ -14,6 +14,7 @@ import serial
 
 from ktcs_bench.capture import open_writer, read_capture
 from ktcs_bench.codec import FrameCodec, get_profile
+from ktcs_bench.errors import PeerError
 from ktcs_bench.tap import BitErrors, Delay, DropFrame, PtyTap, TapClient, TcpTap
 
 CODEC1 = FrameCodec(get_profile("ktcs-type1"))
@@ -247,6 +248,12 @@ def test_tcp_tap_delayed_bytes_die_with_their_connection(echo: EchoServer) -> No
             s2.settimeout(0.3)
             with pytest.raises(TimeoutError):
                 s2.recv(10)
+
+
+def test_client_refuses_what_is_not_a_tap(echo: EchoServer) -> None:
+    """An echo server repeats `status` back: a clear PeerError, not a JSON traceback."""
+    with TapClient(echo.address) as client, pytest.raises(PeerError, match="not a tap's control"):
+        client.status()
 
 
 def test_tap_creation_failure_leaves_nothing_open() -> None:

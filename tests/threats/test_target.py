@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.conformance.conftest import Proc, cli, spawn  # noqa: F401 -- the fixture
+from tests.tap.test_taps import EchoServer
 
 TYPE1 = ["repetition", "deletion", "insertion", "corruption"]
 
@@ -70,6 +71,14 @@ def test_no_such_tap(tmp_path: Path) -> None:
     assert run.returncode == 2 and "no tap named 'nowhere'" in run.stderr
     run = cli("threats", "--target", "127.0.0.1:1")
     assert run.returncode == 3 and "cannot reach the tap" in run.stderr
+    echo = EchoServer()  # something else listening: named as not a tap, no traceback
+    try:
+        host, port = echo.address
+        run = cli("threats", "--target", f"{host}:{port}")
+    finally:
+        echo.close()
+    assert run.returncode == 3 and "is not a tap's control port" in run.stderr, run.stderr
+    assert "Traceback" not in run.stderr
 
 
 def test_wire_only_type2_target(spawn: Callable[..., Proc]) -> None:  # noqa: F811
