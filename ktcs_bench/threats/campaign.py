@@ -10,6 +10,7 @@ link's profile (`conformance.timing.SuiteTiming`), as the conformance suite judg
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import time
 from collections.abc import Callable
@@ -403,5 +404,14 @@ def run_campaign(
         if progress is not None:
             progress(f"{name} on {target.tap.name} ...")
         before_each(target)
-        out.append(fn(target))
+        try:
+            out.append(fn(target))
+        except BaseException:
+            _clear(target)  # Ctrl-C or a lost device mid-threat: never leave a link cut or delayed
+            raise
     return out
+
+
+def _clear(t: Target) -> None:
+    with contextlib.suppress(Exception):
+        t.tap.act("clear", timeout=2.0)

@@ -5,13 +5,17 @@ the wire alone and the outcome is reported as not observed; an IXL that never NA
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import time
 import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
-from tests.conformance.conftest import Proc, cli, spawn  # noqa: F401 -- the fixture
+from ktcs_bench.tap import TapClient
+from tests.conformance.conftest import CLI, Proc, cli, spawn  # noqa: F401 -- the fixture
 from tests.tap.test_taps import EchoServer
 
 TYPE1 = ["repetition", "deletion", "insertion", "corruption"]
@@ -100,3 +104,27 @@ def test_wire_only_type2_target(spawn: Callable[..., Proc]) -> None:  # noqa: F8
     evidence = " ".join(by_name["masquerade"]["evidence"])
     assert "IDENT station 18 → refused" in evidence and "connection kept" in evidence
     assert "ctc closed" in by_name["delay"]["evidence"][0]
+
+
+def test_interrupted_campaign_leaves_no_fault_behind(spawn: Callable[..., Proc]) -> None:  # noqa: F811
+    """Ctrl-C while the deletion threat holds the link cut: the campaign clears the tap."""
+    _link(spawn, "bench-interrupted")
+    campaign = subprocess.Popen([*CLI, "threats", "--target", "bench-interrupted", "--threat",
+                                 "deletion"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    try:
+        with TapClient("bench-interrupted") as tap:
+
+            def cut() -> bool:
+                return any(d["cut"] for d in tap.status()["directions"].values())
+
+            end = time.monotonic() + 30
+            while not cut():
+                assert time.monotonic() < end and campaign.poll() is None, "the cut never came"
+                time.sleep(0.1)
+            campaign.send_signal(signal.SIGINT)
+            assert campaign.wait(20) == 130
+            assert not cut()
+    finally:
+        if campaign.poll() is None:
+            campaign.kill()
+        campaign.communicate()
