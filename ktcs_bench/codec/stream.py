@@ -3,8 +3,10 @@
 Framing is by LEN (no byte stuffing), so STX may occur inside DATA and inside garbage. The decoder
 treats every STX as a candidate and resynchronises as SPEC §3.1 says:
 
-* a candidate whose LEN is out of range, or whose CRC or ETX fails, is an error frame -- unless a
-  complete valid frame starts inside it, in which case it was a false STX and its bytes are garbage;
+* a candidate whose LEN is out of range, or whose CRC or ETX fails, is an error frame (up to the
+  next STX inside it, where decoding resumes) -- unless a valid frame lies wholly inside it, in
+  which case it was a false STX and its bytes are garbage; only the candidate's own bytes decide,
+  so the verdict does not depend on how the input was chunked;
 * while a candidate waits for more bytes, any complete valid frame that starts after it wins, so a
   false STX in garbage announcing a long frame never swallows the good frame behind it;
 * after an error frame, candidates inside the failed frame's extent that fail too are garbage, not
@@ -183,6 +185,20 @@ class StreamDecoder:
             return None
         return self._check(buf, q, total, data_len)[2] is None
 
+    def _inner_frame(self, buf: bytearray, j: int, end: int) -> int | None:
+        """First q in (j, end) where a valid frame lies wholly inside the failed candidate [j, end).
+
+        Only the candidate's own bytes decide, so the verdict is the same however the input was
+        chunked, and it is reached as soon as the candidate is complete (a link NAKs at once).
+        """
+        q = j
+        while True:
+            q = buf.find(self._stx, q + 1, end)
+            if q < 0:
+                return None
+            if self._valid_at(buf, q, end):
+                return q
+
     def _probe(self, buf: bytearray, j: int, limit: int) -> int | None:
         """First q in (j, limit) where a complete valid frame starts, remembering what was ruled out."""
         base = self._base
@@ -308,7 +324,7 @@ class StreamDecoder:
             packet, calc, error = self._check(buf, j, total, data_len)
         if error is None:  # cannot happen: the fast path takes good frames
             raise AssertionError("slow path given a good frame")
-        q = self._probe(buf, j, j + total) if error != "length" else None
+        q = self._inner_frame(buf, j, j + total) if error != "length" else None
         if q is not None or base + j < self._suspect_until:
             return (j + 1 if q is None else q), (j if g < 0 else g), False
         nxt = buf.find(self._stx, j + 1, j + total)

@@ -91,6 +91,18 @@ def test_crc_error_is_reported_once_then_resync() -> None:
     assert [g.raw for g in good] == [b]
 
 
+def test_failed_candidate_judged_by_its_own_bytes_whatever_the_chunking() -> None:
+    """Garbage `02 03` before a Type II frame: the false candidate fails its CRC and the frame at
+    its inner STX ends past it; byte by byte and all at once must say the same (found by
+    hypothesis)."""
+    t2 = get_profile("ktcs-type2")
+    stream = b"\x02\x03" + b"\x02\x03'03\x9d\x9a"
+    whole = decode_chunks(t2, [stream])
+    assert decode_chunks(t2, [bytes([b]) for b in stream]) == whole
+    assert_accounts_for_every_byte(whole, stream)
+    assert isinstance(whole[-1], Frame) and whole[-1].ok and whole[-1].offset == 2
+
+
 def test_crc_error_cut_at_an_inner_stx_keeps_data_inside_the_record() -> None:
     """A bad CHANGE whose OP byte is STX (0x02) is reported up to that STX, then resynchronised."""
     wire = bytearray(FrameCodec(T1).encode_message(0x77, "CHANGE", items=[[1, 1], [1, 1]]))
