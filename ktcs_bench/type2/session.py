@@ -161,9 +161,11 @@ class Type2Session:
         if self.closed:
             return None
         cfg = self.config
-        due = min(self._last_tx + cfg.heartbeat_period, self._last_rx + cfg.t_max)
+        due = self._last_rx + cfg.t_max
         if self.state is SessionState.IDENTIFYING:
             due = min(due, self._opened_at + cfg.ident_timeout)
+        else:
+            due = min(due, self._last_tx + cfg.heartbeat_period)
         if self._awaiting is not None:
             due = min(due, self._nak_at + cfg.nak_repeat)
         return due
@@ -183,7 +185,8 @@ class Type2Session:
             self._nak_again(now)
             if self.closed:
                 return self._take_events()
-        if now - self._last_tx >= cfg.heartbeat_period:
+        # no HEARTBEAT before the IDENT exchange: the IXL's IDENT is the first frame of a session
+        if self.state is SessionState.OPEN and now - self._last_tx >= cfg.heartbeat_period:
             self._send(OP_HEARTBEAT, 0, b"", now)
         return self._take_events()
 

@@ -208,6 +208,20 @@ def test_no_ident_within_the_timeout_closes() -> None:
     assert ctc.handle_timer(3.0) == [ev.Closed("no IDENT exchange within 3 s")]
 
 
+def test_nothing_but_the_ident_answer_before_ident() -> None:
+    """The IXL's IDENT is a session's first frame: an unidentified CTC connection sends nothing
+    (no HEARTBEAT) until the IDENT timeout closes it."""
+    ctc = CtcConnection(0.0)
+    now = 0.0
+    while not ctc.closed:
+        due = ctc.next_deadline()
+        assert due is not None
+        now = due
+        ctc.handle_timer(now)
+        assert ctc.data_to_send() == b"", now
+    assert now == pytest.approx(3.0)
+
+
 def test_crc_error_is_naked_and_the_frame_retransmitted_once_delivered() -> None:
     w = Wire()
     w.open(full=[(1, 0), (2, 0)])
