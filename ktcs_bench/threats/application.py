@@ -22,7 +22,8 @@ from ktcs_bench.station.model import Line
 ASK_TIMEOUT = 5.0
 
 
-def _address(text: str) -> tuple[str, int]:
+def host_port(text: str) -> tuple[str, int]:
+    """`HOST:PORT` as a device's ready line gives it -> (host, port)."""
     host, _, port = text.rpartition(":")
     return host, int(port)
 
@@ -151,8 +152,8 @@ def _from_state(state: dict[str, Any], link: dict[str, Any]) -> Application:
     role = lab.peer_role(spec, ixl_name) if spec.type == "type1" else "atc"
     return Application.of_station(
         lab.load_line(), ixl_spec.station, role,
-        ixl=_address(devices[ixl_name]["control"]),
-        ctc=_address(devices[ctc_name]["control"]) if ctc_name else None,
+        ixl=host_port(devices[ixl_name]["control"]),
+        ctc=host_port(devices[ctc_name]["control"]) if ctc_name else None,
         ctc_log=lab_dir(str(state["lab"])) / "logs" / f"{ctc_name}.log" if ctc_name else None,
         source=f"lab {state['lab']} (devices {ixl_name}" + (f", {ctc_name})" if ctc_name else ")"),
         device=ixl_name,

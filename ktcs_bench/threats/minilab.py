@@ -13,16 +13,11 @@ from ktcs_bench.errors import PeerError
 from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
 from ktcs_bench.tap import PtyTap, TcpTap
-from ktcs_bench.threats.application import Application
+from ktcs_bench.threats.application import Application, host_port
 from ktcs_bench.threats.campaign import Target
 from ktcs_bench.threats.wire import WireTap, wait_for
 
 READY_TIMEOUT = 15.0
-
-
-def _address(text: str) -> tuple[str, int]:
-    host, _, port = text.rpartition(":")
-    return host, int(port)
 
 
 class ThreatLab:
@@ -61,7 +56,7 @@ class ThreatLab:
     def _start(self) -> None:
         st = str(self.station)
         self.ctc = self._spawn("ctc", "--listen", "127.0.0.1:0")
-        ctc_address = _address(self.ctc.ready["listen"])
+        ctc_address = host_port(self.ctc.ready["listen"])
         self.t2 = TcpTap(("127.0.0.1", 0), ctc_address, names=("ixl", "ctc"),
                          profile="ktcs-type2", name=f"st{st}-ctc")  # fmt: skip
         self.t1 = PtyTap(names=("ixl", "atc"), profile="ktcs-type1", name=f"st{st}-atc")
@@ -76,8 +71,8 @@ class ThreatLab:
         self.ixl = self._spawn("ixl", "--station", st, "--unpaced", "--link",
                                f"atc={self.t1.paths['ixl']}", "--link", f"ctc=tcp://{lh}:{lp}")  # fmt: skip
         self.app = Application.of_station(
-            self.line, self.station, "atc", ixl=_address(self.ixl.ready["control"]),
-            ctc=_address(self.ctc.ready["control"]), ctc_log=self.ctc.log_path,
+            self.line, self.station, "atc", ixl=host_port(self.ixl.ready["control"]),
+            ctc=host_port(self.ctc.ready["control"]), ctc_log=self.ctc.log_path,
             source="the threat lab",
         )  # fmt: skip
         if not wait_for(self.healthy, READY_TIMEOUT, 0.2):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -85,8 +86,6 @@ def summary(results: list[ThreatResult], header: list[str], colour: bool) -> str
 def junit_xml(results: list[ThreatResult], properties: dict[str, str]) -> bytes:
     """One <testcase> a threat: a miss or an unsafe outcome is a failure, a threat not run is
     skipped; the evidence goes to system-out."""
-    import xml.etree.ElementTree as ET
-
     ran = [r for r in results if r.ran]
     root = ET.Element("testsuites", name="ktcs-bench threats")
     ts = ET.SubElement(root, "testsuite", name="ktcs-bench threats EN 50159",

@@ -68,7 +68,6 @@ class WireTap:
         self._frames: list[tuple[int, str, Frame]] = []  # (stream position, direction, frame)
         self._decoders: dict[str, StreamDecoder] = {}
         self._lock = threading.Lock()
-        self.closed = False
         self._thread = threading.Thread(
             target=self._read, args=(stream,), name=f"wiretap-{self.name}", daemon=True
         )
@@ -88,9 +87,7 @@ class WireTap:
                     if len(self._events) > STREAM_LIMIT:
                         raise PeerError("the tap's stream outgrew the campaign's buffer")
         except (PeerError, ValueError):
-            pass
-        finally:
-            self.closed = True
+            pass  # the tap went away: the campaign sees no more traffic and says so
 
     def _decode(self, position: int, direction: str, text: str) -> None:
         """One decoder a direction, so a frame split over two records is still one frame."""

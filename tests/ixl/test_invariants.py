@@ -29,6 +29,7 @@ from ktcs_bench.charts import names as n
 from ktcs_bench.ixl import Interlocking, Mode, RouteStatus
 from ktcs_bench.ixl.interlocking import IxlOutput
 from ktcs_bench.station import load_line
+from ktcs_bench.station.model import Route
 
 LINE = load_line()
 STEPS = {"count": 0}
@@ -146,15 +147,19 @@ class InterlockingMachine(RuleBasedStateMachine):
         self.apply(self.ixl.control(n.rsc(self.st, route), 1, self.now))
         self.points_arrive()
 
+    def draw_cleared_route(self, data: st.DataObject) -> Route | None:
+        """A route whose entry signal shows proceed, or None when no signal does."""
+        cleared = [r for r in self.view.station.routes if self.ixl.aspect(r.entry) != "R"]
+        return data.draw(st.sampled_from(cleared)) if cleared else None
+
     # ---------------------------------------------------------------- rules: the field
 
     @rule(data=st.data())
     def disturb_a_cleared_route(self, data: st.DataObject) -> None:
         """Targeted fault: occupy a track circuit or upset a point of a route showing proceed."""
-        cleared = [r for r in self.view.station.routes if self.ixl.aspect(r.entry) != "R"]
-        if not cleared:
+        route = self.draw_cleared_route(data)
+        if route is None:
             return
-        route = data.draw(st.sampled_from(cleared))
         targets = list(route.all_track_circuits) + [s.point for s in route.all_points]
         target = data.draw(st.sampled_from(targets))
         if target in self.occ:
@@ -200,10 +205,9 @@ class InterlockingMachine(RuleBasedStateMachine):
     @rule(data=st.data())
     def train_enters(self, data: st.DataObject) -> None:
         """A train runs onto a route whose signal shows proceed."""
-        cleared = [r for r in self.view.station.routes if self.ixl.aspect(r.entry) != "R"]
-        if not cleared:
+        route = self.draw_cleared_route(data)
+        if route is None:
             return
-        route = data.draw(st.sampled_from(cleared))
         self.trains.append((route.track_circuits, 0))
         self.feed_occupancy(route.track_circuits[0], True)
 

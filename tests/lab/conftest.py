@@ -68,10 +68,10 @@ class RunningLab:
     def lab(self, obj: dict[str, Any]) -> dict[str, Any]:
         return request(self.control, obj, timeout=60)
 
-    def cli(self, *args: str) -> subprocess.CompletedProcess[str]:
+    def cli(self, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
         return subprocess.run(
             [sys.executable, "-m", "ktcs_bench.cli.main", *args], capture_output=True, text=True,
-            timeout=60, env={**os.environ, "KTCS_BENCH_RUN_DIR": str(self.run_dir)},
+            timeout=timeout, env={**os.environ, "KTCS_BENCH_RUN_DIR": str(self.run_dir)},
         )  # fmt: skip
 
 

@@ -5,9 +5,6 @@ and the lab healthy again afterwards."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 from ktcs_bench.capture.hexlog import parse_hex_log
@@ -20,12 +17,8 @@ from .conftest import start_lab, wait_until
 def test_threats_against_the_running_lab(tmp_path: Path) -> None:
     with start_lab(tmp_path, "threatlab") as lab:
         table = tmp_path / "threats.md"
-        run = subprocess.run(
-            [sys.executable, "-m", "ktcs_bench.cli.main", "threats", "--target", "st20-atc",
-             "--target", "st20-ctc", "--json", "--markdown", str(table)],
-            capture_output=True, text=True, timeout=240,
-            env={**os.environ, "KTCS_BENCH_RUN_DIR": str(lab.run_dir)},
-        )  # fmt: skip
+        run = lab.cli("threats", "--target", "st20-atc", "--target", "st20-ctc", "--json",
+                      "--markdown", str(table), timeout=240)  # fmt: skip
         assert run.returncode == 0, run.stdout[-4000:] + run.stderr[-2000:]
         report = json.loads(run.stdout)
         assert [(t["tap"], t["dut"], t["application"]) for t in report["targets"]] == [
@@ -54,12 +47,8 @@ def test_threats_against_the_running_lab(tmp_path: Path) -> None:
         assert any(f.op == nak and f.data[:1] == b"\x01" for f in frames("ixl20>atc20"))
         # the ATC as the device under test: the IXL's frames are forged; the ATC's state is not
         # one the bench reads, so the outcome is the wire's alone
-        run = subprocess.run(
-            [sys.executable, "-m", "ktcs_bench.cli.main", "threats", "--target", "st20-atc",
-             "--dut", "atc20", "--threat", "corruption", "--threat", "insertion", "--json"],
-            capture_output=True, text=True, timeout=120,
-            env={**os.environ, "KTCS_BENCH_RUN_DIR": str(lab.run_dir)},
-        )  # fmt: skip
+        run = lab.cli("threats", "--target", "st20-atc", "--dut", "atc20", "--threat",
+                      "corruption", "--threat", "insertion", "--json", timeout=120)  # fmt: skip
         assert run.returncode == 0, run.stdout[-4000:] + run.stderr[-2000:]
         report = json.loads(run.stdout)
         assert [(t["dut"], t["peer"], t["application"]) for t in report["targets"]] == [
