@@ -4,7 +4,8 @@ Owns: which SEQ a message gets, when a frame is (re)sent, when the sender gives 
 incoming SEQ is new, a duplicate or a gap. Knows nothing of bytes on the wire or of clocks: the link
 (`type1.link`) tells it the times.
 
-Sender: a queue, and at most one outstanding frame. Each transmission is counted when its bytes
+Sender: a queue, and at most one outstanding frame. A queue entry is a `Message`, or an `Owed`
+answer whose DATA is made only when it becomes outstanding (from the state of that moment). Each transmission is counted when its bytes
 are handed to the wire; its ACK deadline runs from the end of its bytes on the wire. A NAK or an
 ACK timeout asks for a retransmission with the same SEQ, until `max_transmissions` sends have
 failed: then the sender gives up (communication error) and moves on to the next SEQ.
@@ -29,6 +30,19 @@ class Verdict(enum.Enum):
     IGNORE = "ignore"
 
 
+@dataclass(frozen=True, slots=True)
+class Owed:
+    """An answer the peer asked for and we acknowledged (an ALL_INFO for its REQUEST_ALL of
+    `start`, `count`): queued as a promise, made into a message when it is first sent."""
+
+    op: int
+    start: int
+    count: int
+
+
+Queued = Message | Owed
+
+
 @dataclass(slots=True)
 class Outstanding:
     """The one data frame awaiting its ACK."""
@@ -36,6 +50,7 @@ class Outstanding:
     seq: int
     message: Message
     frame: bytes
+    owed: Owed | None = None  # the promise this frame keeps, if it is one
     transmissions: int = 0  # sends handed to the wire so far
     due: bool = True  # bytes waiting to be handed to the wire
     ack_deadline: float | None = None
@@ -46,14 +61,14 @@ class Sender:
         self.seq_modulo = seq_modulo
         self.max_transmissions = max_transmissions
         self.next_seq = first_seq % seq_modulo
-        self.queue: deque[Message] = deque()
+        self.queue: deque[Queued] = deque()
         self.outstanding: Outstanding | None = None
 
     @property
     def idle(self) -> bool:
         return self.outstanding is None and not self.queue
 
-    def push(self, message: Message, front: bool = False) -> None:
+    def push(self, message: Queued, front: bool = False) -> None:
         if front:
             self.queue.appendleft(message)
         else:
@@ -64,13 +79,18 @@ class Sender:
         out = self.outstanding
         return (out is not None and out.message.op == op) or any(m.op == op for m in self.queue)
 
-    def promote(self, encode: Callable[[int, Message], bytes]) -> Outstanding | None:
-        """Make the queue head outstanding (assigning the next SEQ) if nothing is."""
+    def promote(
+        self, encode: Callable[[int, Message], bytes], make: Callable[[Owed], Message]
+    ) -> Outstanding | None:
+        """Make the queue head outstanding (assigning the next SEQ) if nothing is; an `Owed`
+        head becomes `make(owed)` now."""
         if self.outstanding is None and self.queue:
-            message = self.queue.popleft()
+            head = self.queue.popleft()
+            owed = head if isinstance(head, Owed) else None
+            message = make(head) if isinstance(head, Owed) else head
             seq = self.next_seq
             self.next_seq = (seq + 1) % self.seq_modulo
-            self.outstanding = Outstanding(seq, message, encode(seq, message))
+            self.outstanding = Outstanding(seq, message, encode(seq, message), owed)
         return self.outstanding
 
     def transmitted(self, wire_end: float, ack_timeout: float) -> Outstanding:
@@ -110,14 +130,14 @@ class Sender:
         out.ack_deadline = None
         return Verdict.RETRANSMIT
 
-    def give_up(self) -> tuple[Outstanding, tuple[Message, ...]]:
+    def give_up(self) -> tuple[Outstanding, tuple[Queued, ...]]:
         """Drop the outstanding frame and everything queued behind it."""
         out = self.outstanding
         assert out is not None
         self.outstanding = None
         return out, self.discard()
 
-    def discard(self) -> tuple[Message, ...]:
+    def discard(self) -> tuple[Queued, ...]:
         dropped = tuple(self.queue)
         self.queue.clear()
         return dropped

@@ -22,13 +22,18 @@ the ACK timeout of a data frame runs from that moment.
 State rebuild (SPEC §3.4): when the link comes up (the first valid frame after being down) it
 queues REQUEST_ALL (start 0, count all) at the head of its queue. A REQUEST_ALL received is
 delivered as `MessageReceived` and, when the link was given a `state_provider(start, count)`
-returning status bytes, answered at once with ALL_INFO; without one the application answers with
+returning status bytes, the ALL_INFO that answers it is owed: it is queued as a promise, and
+`state_provider` is asked for the statuses only when that frame goes out, so it carries the state
+of that moment, not of the request. Without a provider the application answers with
 `link.send(link.message("ALL_INFO", statuses=...), now)`. A peer that recovered from an outage we
 did not see (its REQUEST_ALL arrives and we have not asked one within `link_down_after`), or a SEQ
 gap (the peer gave up on frames), makes this side ask REQUEST_ALL too, so both views are rebuilt.
 
 Communication error (4 transmissions without ACK) drops that message and the ones queued behind it
 (reported in the event) and puts the link down; the application goes fail-safe until `LinkUp`.
+An owed ALL_INFO is never dropped: we ACKed the request, so the peer waits for its answer. It is
+held while the link is down and queued again, after our own REQUEST_ALL, when the link comes up,
+made from the state of the moment it is sent.
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ from collections.abc import Callable, Sequence
 from ktcs_bench.codec import Frame, FrameCodec, FrameProfile, Garbage, StreamDecoder, get_profile
 from ktcs_bench.codec.opcodes import Opcode, PayloadError
 from ktcs_bench.errors import UsageError
-from ktcs_bench.type1.arq import Receiver, Sender, Verdict
+from ktcs_bench.type1.arq import Owed, Queued, Receiver, Sender, Verdict
 from ktcs_bench.type1.config import LinkConfig, LinkTimers
 from ktcs_bench.type1.events import (
     AckReceived,
@@ -101,6 +106,7 @@ class Type1Link:
         self._rx_pending_since: float | None = None  # ΔR runs from here
         self._last_request_all: float | None = None
         self._last_seq_seen = 0
+        self._held: list[Owed] = []  # answers owed to the peer, held while the link is down
 
     # -- application side ----------------------------------------------------------------------
     def message(self, op_name: str, **values: object) -> Message:
@@ -142,7 +148,7 @@ class Type1Link:
         self._start(now)
         parts = self._control
         self._control = []
-        out = self._sender.promote(self._encode)
+        out = self._sender.promote(self._encode, self._make)
         frame = out.frame if out is not None and out.due else None
         n = sum(map(len, parts)) + (len(frame) if frame is not None else 0)
         if not n:
@@ -167,7 +173,7 @@ class Type1Link:
         if self.up and now >= self._last_rx + t.link_down_after:
             self.up = False
             self._silenced = True
-            events.append(LinkDown("silence", self._sender.discard()))
+            events.append(LinkDown("silence", self._hold(self._sender.discard())))
         if self._idle and now >= self._tx_free_at + t.link_test_period:
             self._sender.push(Message(self._op["LINK_TEST"].op, b"", "LINK_TEST"))
         return events
@@ -210,6 +216,19 @@ class Type1Link:
     def _encode(self, seq: int, message: Message) -> bytes:
         return self._codec.encode(seq, message.op, message.data)
 
+    def _make(self, owed: Owed) -> Message:
+        """The owed ALL_INFO, from the application's state now (it is going out)."""
+        assert self.state_provider is not None
+        statuses = bytes(self.state_provider(owed.start, owed.count))
+        return Message(owed.op, statuses, "ALL_INFO")
+
+    def _hold(self, dropped: tuple[Queued, ...]) -> tuple[Message, ...]:
+        """Keep the owed answers among `dropped` for the link's recovery; return the rest."""
+        for item in dropped:
+            if isinstance(item, Owed) and item not in self._held:
+                self._held.append(item)
+        return tuple(m for m in dropped if isinstance(m, Message))
+
     def _records(self, records: list[Frame | Garbage], now: float, events: list[Event]) -> None:
         for rec in records:
             if isinstance(rec, Garbage):
@@ -233,6 +252,10 @@ class Type1Link:
             self._silenced = False
             self.up = True
             events.append(LinkUp())
+            for owed in reversed(self._held):  # after our REQUEST_ALL, before the rest
+                if owed not in self._sender.queue:
+                    self._sender.push(owed, front=True)
+            self._held.clear()
             self._request_all(now, front=True)
         if op == self._ack_op:
             if self._sender.ack(seq) is not None:
@@ -273,8 +296,9 @@ class Type1Link:
     def _answer_request_all(self, fields: dict[str, int], now: float) -> None:
         recent = self._last_request_all
         if self.state_provider is not None:
-            statuses = bytes(self.state_provider(fields.get("start", 0), fields.get("count", 0)))
-            self._sender.push(Message(self._op["ALL_INFO"].op, statuses, "ALL_INFO"))
+            owed = Owed(self._op["ALL_INFO"].op, fields.get("start", 0), fields.get("count", 0))
+            if owed not in self._sender.queue:  # one not yet sent will carry the state anyway
+                self._sender.push(owed)
         if recent is None or now - recent > self.timers.link_down_after:
             self._request_all(now)  # the peer recovered from an outage we did not see
 
@@ -298,8 +322,9 @@ class Type1Link:
             events.append(Retransmission(out.seq, out.message, out.transmissions + 1, cause))
             return
         out, dropped = self._sender.give_up()
+        discarded = self._hold(((out.owed,) if out.owed is not None else ()) + dropped)
         if self.up or out.message.op != self._op["LINK_TEST"].op:
-            events.append(CommunicationError(out.seq, out.message, out.transmissions, dropped))
+            events.append(CommunicationError(out.seq, out.message, out.transmissions, discarded))
         if self.up:
             self.up = False
             events.append(LinkDown("communication error"))
