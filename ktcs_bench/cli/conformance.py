@@ -23,6 +23,9 @@ frames, so it judges the device, not the bench's own link code.
 SERIAL: a device path (/dev/ttyUSB0), a pty path, or any pyserial URL (rfc2217://h:p, socket://h:p).
 Timings default to SPEC §3.4/§4 for the profile and the line; name them as a signalling engineer
 does: --delta-r, --ack-timeout, --heartbeat-period (Type I link-test period), --t-max, --retry-count.
+Every report gives the device's timers as measured on the wire; --timings auto measures them first
+(a device whose documentation is missing) and judges the device by them.
+A device that sends not one byte in a case stops the run: "no device answered", exit 3.
 """
 EPILOG = """\
 examples:
@@ -32,7 +35,10 @@ examples:
   ktcs-bench emulator ixl --station 18 --link ctc=tcp://127.0.0.1:6100
   ktcs-bench conformance --role ctc --target tcp://127.0.0.1:5000 --station 20 --case t2-seq-gap
 
-exit codes: 0 every case passed, 1 a case failed, 2 usage/config, 3 peer or I/O failure.
+  ktcs-bench conformance --role atc --target /dev/ttyUSB0 --timings auto --json
+
+exit codes: 0 every case passed, 1 a case failed, 2 usage/config, 3 peer or I/O failure (among
+them: no device answered, or a case was inconclusive because the suite broke its premise).
 """
 
 
@@ -55,6 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    "--station and the lab's charts)")  # fmt: skip
     p.add_argument("--lab", help="lab file for the charts (default: the reference lab)")
     g = p.add_argument_group("timing (defaults: SPEC §3.4 / §4)")
+    g.add_argument("--timings", choices=("given", "auto"), default="given",
+                   help="given: judge by the figures below (default); auto: measure the device's "
+                   "timers first and judge by what was measured")  # fmt: skip
     g.add_argument("--line-rate", type=float, default=9600.0, help="bit/s of the device's line")
     g.add_argument("--unpaced", action="store_true", help="the device does not pace its line "
                    "(an emulator run with --unpaced): wire times count as 0")  # fmt: skip
@@ -138,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     from ktcs_bench.codec.profile import get_profile
     from ktcs_bench.conformance import report
     from ktcs_bench.conformance.model import CaseResult
-    from ktcs_bench.conformance.runner import protocol_of, run_suite
+    from ktcs_bench.conformance.runner import SuiteResult, protocol_of, run_suite
     from ktcs_bench.conformance.timing import SuiteTiming
     from ktcs_bench.emulator.endpoints import parse_endpoint
 
@@ -165,17 +174,19 @@ def run(args: argparse.Namespace) -> int:
     colour = use_colour(sys.stdout, args.colour)
     live = not args.json
     if live:
-        from ktcs_bench.conformance.runner import SuiteResult
-
-        print(report.header(SuiteResult(args.role, args.target, protocol, profile.name, timing)))
+        head = SuiteResult(args.role, args.target, protocol, profile.name, timing,
+                           auto=args.timings == "auto")  # fmt: skip
+        print(report.header(head))
         print(flush=True)
 
-    def progress(result: CaseResult) -> None:
+    def progress(suite: SuiteResult, result: CaseResult) -> None:
         if live:
             print(report.case_block(result, colour, args.verbose), flush=True)
+            if result.case.name == "measure-timings" and not suite.stopped:
+                print(f"      judged from here by: {report.timing_line(suite)}", flush=True)
 
     suite = run_suite(args.role, args.target, profile, timing, cases=args.case, station=station,
-                      codes=_codes(args, protocol), tls=tls,
+                      codes=_codes(args, protocol), tls=tls, auto=args.timings == "auto",
                       server_hostname=args.tls_server_name, on_result=progress)  # fmt: skip
     if args.junit:
         try:
@@ -186,6 +197,9 @@ def run(args: argparse.Namespace) -> int:
         print(report.json_text(suite))
     else:
         print("\n" + report.footer(suite, colour))
+    if suite.stopped:
+        print(f"ktcs-bench: peer error: {suite.stopped}", file=sys.stderr)
+        return 3
     if any(r.verdict.value == "fail" for r in suite.results):
         return 1
     if any(r.verdict.value == "error" for r in suite.results):

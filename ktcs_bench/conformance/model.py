@@ -2,7 +2,9 @@
 
 A case is a named function of a `CaseContext`; it passes by returning, fails by `ctx.check`
 raising `CaseFailed`, is skipped with `NotApplicable`, and any other exception is an error (the
-suite, the line or the peer broke, not the rule). Its `Evidence` is kept whatever the verdict.
+suite, the line or the peer broke, not the rule) -- `Inconclusive` among them: the suite itself
+broke the case's premise (it sent while timing the device's silence). Its `Evidence` is kept
+whatever the verdict.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ktcs_bench.conformance.timing import SuiteTiming
+from ktcs_bench.conformance.timing import MeasuredTiming, SuiteTiming
 from ktcs_bench.conformance.wire import Evidence, Type1Wire, Type2Wire
 
 
@@ -41,6 +43,7 @@ class CaseContext:
     type1: Type1Wire | None = None
     open_type2: Callable[[], Type2Wire] | None = None
     opened: list[Type2Wire] = field(default_factory=list)
+    measured: MeasuredTiming = field(default_factory=MeasuredTiming)
 
     @property
     def wire(self) -> Type1Wire:
@@ -64,6 +67,17 @@ class CaseContext:
     def note(self, text: str) -> None:
         self.evidence.note("     " + text)
 
+    def check_period(self, name: str, times: list[float], period: float, limit: float,
+                     timer: str) -> None:  # fmt: skip
+        """The idle device sends `name` every `period` s (its `timer`): at least two seen in
+        `limit` s, and every interval within the timing's bounds."""
+        self.check(len(times) >= 2, f"the idle device sends {name} every {period:.3g} s "
+                   f"({len(times)} seen in {limit:.1f} s)")  # fmt: skip
+        for a, b in zip(times, times[1:], strict=False):
+            self.check(self.timing.within(b - a, period),
+                       f"{name} interval {(b - a) * 1000:.0f} ms: the {timer} "
+                       f"{period * 1000:.0f} ms")  # fmt: skip
+
 
 CaseFunction = Callable[[CaseContext], None]
 
@@ -85,6 +99,7 @@ class CaseResult:
     message: str
     duration: float
     evidence: Evidence
+    heard: int = 0  # bytes received from the device during the case
 
     def as_dict(self, evidence: bool = True) -> dict[str, Any]:
         out: dict[str, Any] = {

@@ -33,7 +33,10 @@ def junit_xml(suite: SuiteResult) -> bytes:
     )  # fmt: skip
     props = ET.SubElement(ts, "properties")
     for key, value in {"role": suite.role, "target": suite.target, "profile": suite.profile,
-                       **{k: str(v) for k, v in suite.timing.describe().items()}}.items():  # fmt: skip
+                       "timings": "auto" if suite.auto else "given",
+                       **suite.timing.describe(),
+                       **{f"measured.{k}": v for k, v in suite.measured.describe().items()},
+                       **({"stopped": suite.stopped} if suite.stopped else {})}.items():  # fmt: skip
         ET.SubElement(props, "property", name=key, value=str(value))
     for r in suite.results:
         tc = ET.SubElement(ts, "testcase", name=r.case.name,
@@ -59,7 +62,10 @@ def as_json(suite: SuiteResult, evidence: bool = True) -> dict[str, Any]:
         "target": suite.target,
         "protocol": suite.protocol,
         "profile": suite.profile,
+        "timings": "auto" if suite.auto else "given",
         "timing": suite.timing.describe(),
+        "measured": suite.measured.describe(),
+        "stopped": suite.stopped,
         "duration": round(suite.duration, 3),
         "summary": {v.value: suite.count(v) for v in Verdict},
         "cases": [r.as_dict(evidence) for r in suite.results],
@@ -82,17 +88,29 @@ def case_line(result: CaseResult, colour: bool) -> str:
 
 
 def header(suite: SuiteResult) -> str:
-    t = suite.timing
     head = (f"ktcs-bench conformance: role {suite.role}, target {suite.target}, "
             f"profile {suite.profile} ({suite.protocol})")  # fmt: skip
-    if suite.protocol == "type1":
-        timing = (f"ΔR {t.delta_r * 1000:.0f} ms, ACK timeout {t.ack_timeout * 1000:.0f} ms, "
-                  f"link-test period {t.link_test_period:g} s, T_MAX {t.t_max:g} s, "
-                  f"retry count {t.retry_count}, tolerance +{t.tolerance:g} s")  # fmt: skip
-    else:
-        timing = (f"heartbeat period {t.heartbeat_period:g} s, T_MAX {t.t2_t_max:g} s, "
-                  f"retry count {t.retry_count}, tolerance +{t.tolerance:g} s")  # fmt: skip
+    timing = timing_line(suite)
+    if suite.auto:
+        timing += "\n  --timings auto: measured first; the cases judge by what was measured"
     return f"{head}\n  {timing}"
+
+
+def timing_line(suite: SuiteResult) -> str:
+    """The timings the cases judge by."""
+    t = suite.timing
+    if suite.protocol == "type1":
+        return (f"ΔR {t.delta_r * 1000:.0f} ms, ACK timeout {t.ack_timeout * 1000:.0f} ms, "
+                f"link-test period {t.link_test_period:.3g} s, T_MAX {t.t_max:.3g} s, "
+                f"retry count {t.retry_count}, tolerance +{t.tolerance:g} s")  # fmt: skip
+    return (f"heartbeat period {t.heartbeat_period:.3g} s, T_MAX {t.t2_t_max:.3g} s, "
+            f"retry count {t.retry_count}, tolerance +{t.tolerance:g} s")  # fmt: skip
+
+
+def measured_line(suite: SuiteResult) -> str:
+    """The device's timers as the run measured them (empty when no case timed one)."""
+    text = suite.measured.text()
+    return f"measured: {text}" if text else ""
 
 
 def case_block(result: CaseResult, colour: bool, verbose: bool = False) -> str:
@@ -111,7 +129,12 @@ def footer(suite: SuiteResult, colour: bool) -> str:
         verdict = (
             f"{_COLOUR[Verdict.FAIL if suite.failed else Verdict.PASS]}{_BOLD}{verdict}{_RESET}"
         )
-    return f"{verdict}: {counts} in {suite.duration:.1f} s"
+    lines = [f"{verdict}: {counts} in {suite.duration:.1f} s"]
+    if measured_line(suite):
+        lines.insert(0, measured_line(suite))
+    if suite.stopped:
+        lines.append(f"stopped: {suite.stopped}")
+    return "\n".join(lines)
 
 
 def summary(suite: SuiteResult, colour: bool, verbose: bool = False) -> str:

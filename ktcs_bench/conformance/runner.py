@@ -5,10 +5,16 @@ results. Roles (the device under test) and what the suite plays:
 * `ixl` on a serial endpoint: the suite is its ATC (or IO, `peer="io"`);
 * `ixl` with `listen://HOST:PORT`: the suite is the CTC, the IXL connects to it (Type II);
 * `ctc` with `tcp://HOST:PORT`: the suite is an IXL client of the CTC (Type II).
+
+With `auto` the device's timers are measured first (a `measure-timings` step, listed and reported
+like a case) and the cases judge it by what was measured. A case in which the device sent not one
+byte, and that did not pass, stops the run: a dead target costs one case's time limit, and the run
+says "no device answered" (`SuiteResult.stopped`; the CLI exits 3).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import socket
 import ssl
 import time
@@ -17,6 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from ktcs_bench.codec import FrameProfile
+from ktcs_bench.conformance import type1_cases, type2_cases
 from ktcs_bench.conformance.model import (
     Case,
     CaseContext,
@@ -25,10 +32,10 @@ from ktcs_bench.conformance.model import (
     NotApplicable,
     Verdict,
 )
-from ktcs_bench.conformance.timing import SuiteTiming
+from ktcs_bench.conformance.timing import MeasuredTiming, SuiteTiming
 from ktcs_bench.conformance.type1_cases import TYPE1_CASES
 from ktcs_bench.conformance.type2_cases import TYPE2_CASES
-from ktcs_bench.conformance.wire import Evidence, Type1Wire, Type2Wire
+from ktcs_bench.conformance.wire import Evidence, Inconclusive, Type1Wire, Type2Wire
 from ktcs_bench.emulator.endpoints import Endpoint, parse_endpoint
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.transport.serialport import open_transport
@@ -36,6 +43,32 @@ from ktcs_bench.transport.serialport import open_transport
 ROLES = ("ixl", "atc", "ctc", "trackside")
 CASES: dict[str, Case] = {c.name: c for c in (*TYPE1_CASES, *TYPE2_CASES)}
 ACCEPT_TIMEOUT = 10.0  # an IXL retries with back-off of at most 5 s
+AUTO_LIMIT = 10.0  # --timings auto: the longest the suite waits for any one timer to fire
+
+
+def _measure_timings(ctx: CaseContext) -> None:
+    """The `measure-timings` step of `--timings auto`: passes when every timer was seen."""
+    if ctx.type1 is not None:
+        type1_cases.measure(ctx, AUTO_LIMIT)
+        timers: tuple[str, ...] = ("delta_r", "ack_timeout", "link_test_period", "retry_count")
+    else:
+        type2_cases.measure(ctx, AUTO_LIMIT)
+        timers = ("heartbeat_period", "t2_t_max")
+    missing = [k for k in timers if getattr(ctx.measured, k) is None]
+    ctx.check(not missing, "every timer measured" + (
+        f"; not seen: {', '.join(missing)} (judged by the given timings)" if missing else ""))  # fmt: skip
+
+
+MEASURE = {
+    p: Case(
+        "measure-timings",
+        p,
+        "measure the device's timers first (--timings auto)",
+        "§3.4" if p == "type1" else "§4",
+        _measure_timings,
+    )
+    for p in ("type1", "type2")
+}
 
 
 def protocol_of(role: str, target: Endpoint) -> str:
@@ -75,6 +108,9 @@ class SuiteResult:
     timing: SuiteTiming
     results: list[CaseResult] = field(default_factory=list)
     duration: float = 0.0
+    auto: bool = False  # the timings judged by were measured first (--timings auto)
+    measured: MeasuredTiming = field(default_factory=MeasuredTiming)
+    stopped: str | None = None  # why the run ended before its last case (the device is silent)
 
     @property
     def failed(self) -> list[CaseResult]:
@@ -133,9 +169,11 @@ def run_suite(
     codes: int | None = None,
     tls: ssl.SSLContext | None = None,
     server_hostname: str | None = None,
-    on_result: Callable[[CaseResult], None] | None = None,
+    auto: bool = False,
+    on_result: Callable[[SuiteResult, CaseResult], None] | None = None,
 ) -> SuiteResult:
-    """Run the selected cases (all that apply when none are named) in order."""
+    """Run the selected cases (all that apply when none are named) in order; with `auto`,
+    measure the device's timers first and judge it by them."""
     endpoint = parse_endpoint(target)
     protocol = protocol_of(role, endpoint)
     if profile.protocol != protocol:
@@ -143,7 +181,7 @@ def run_suite(
             f"profile {profile.name} is {profile.protocol}; this target needs {protocol}"
         )
     chosen = select(protocol, role, cases)
-    suite = SuiteResult(role, target, protocol, profile.name, timing)
+    suite = SuiteResult(role, target, protocol, profile.name, timing, auto=auto)
     t0 = time.monotonic()
     wire1: Type1Wire | None = None
     opener: _Type2Opener | None = None
@@ -160,11 +198,20 @@ def run_suite(
                 opener = _Type2Opener(endpoint, profile, tls, server_hostname)
             except OSError as exc:
                 raise UsageError(f"cannot listen on {target}: {exc}") from exc
-        for case in chosen:
-            result = _run_case(case, role, timing, station, codes, wire1, opener)
+        steps = [MEASURE[protocol], *chosen] if auto else chosen
+        for case in steps:
+            result = _run_case(case, role, suite, station, codes, wire1, opener)
+            if result.heard == 0 and result.verdict in (Verdict.FAIL, Verdict.ERROR):
+                result = _silent_device(suite, result)
             suite.results.append(result)
+            if case is MEASURE[protocol]:
+                suite.timing = suite.timing.adopt(suite.measured)
+                if wire1 is not None:
+                    wire1.ack_wait = suite.timing.ack_timeout + suite.timing.tolerance
             if on_result is not None:
-                on_result(result)
+                on_result(suite, result)
+            if suite.stopped:
+                break
     finally:
         if wire1 is not None:
             wire1.close()
@@ -174,13 +221,26 @@ def run_suite(
     return suite
 
 
-def _run_case(case: Case, role: str, timing: SuiteTiming, station: int | None,
+def _silent_device(suite: SuiteResult, result: CaseResult) -> CaseResult:
+    """The device sent nothing during a case that needed it to: stop the run (exit 3)."""
+    ever = any(r.heard for r in suite.results)
+    said = "the device stopped answering" if ever else "no device answered"
+    suite.stopped = (f"{said}: not one byte from {suite.target} in {result.case.name} "
+                     f"({result.duration:.1f} s); the run stops here")  # fmt: skip
+    why = ("failed check: " if result.verdict is Verdict.FAIL else "") + result.message
+    return dataclasses.replace(result, verdict=Verdict.ERROR, message=f"{said} ({why})")
+
+
+def _run_case(case: Case, role: str, suite: SuiteResult, station: int | None,
               codes: int | None, wire1: Type1Wire | None,
               opener: _Type2Opener | None) -> CaseResult:  # fmt: skip
     evidence = Evidence()
+    heard = 0
     if wire1 is not None:
         wire1.begin(evidence)
-    ctx = CaseContext(role, timing, evidence, station, codes, wire1, opener)
+        heard = -wire1.heard
+    ctx = CaseContext(role, suite.timing, evidence, station, codes, wire1, opener,
+                      measured=suite.measured)  # fmt: skip
     t0 = time.monotonic()
     try:
         case.run(ctx)
@@ -189,6 +249,8 @@ def _run_case(case: Case, role: str, timing: SuiteTiming, station: int | None,
         verdict, message = Verdict.FAIL, str(exc)
     except NotApplicable as exc:
         verdict, message = Verdict.SKIP, str(exc)
+    except Inconclusive as exc:
+        verdict, message = Verdict.ERROR, f"inconclusive: {exc}"
     except (PeerError, OSError, ssl.SSLError) as exc:
         verdict, message = Verdict.ERROR, f"{type(exc).__name__}: {exc}"
     except Exception as exc:  # a bug in a case must not stop the suite
@@ -197,4 +259,5 @@ def _run_case(case: Case, role: str, timing: SuiteTiming, station: int | None,
     finally:
         for w in ctx.opened:
             w.close()
-    return CaseResult(case, verdict, message, time.monotonic() - t0, evidence)
+    heard += wire1.heard if wire1 is not None else sum(w.heard for w in ctx.opened)
+    return CaseResult(case, verdict, message, time.monotonic() - t0, evidence, heard)

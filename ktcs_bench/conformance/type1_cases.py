@@ -11,6 +11,7 @@ import time
 
 from ktcs_bench.codec import Frame, FrameCodec
 from ktcs_bench.conformance.model import Case, CaseContext
+from ktcs_bench.conformance.timing import mean_interval
 from ktcs_bench.conformance.wire import Type1Wire
 
 NAK_CRC, NAK_TIMEOUT, NAK_FORMAT = 1, 2, 3
@@ -98,23 +99,36 @@ def crc_error_nak(ctx: CaseContext) -> None:
               "the same frame sent intact is acknowledged")  # fmt: skip
 
 
-def delta_r_nak(ctx: CaseContext) -> None:
+def _time_delta_r(ctx: CaseContext, limit: float) -> tuple[float, Frame] | None:
+    """Send the first 4 bytes of a frame, then keep silent -- no ACK of the device's LINK_TEST
+    either, which it would read as the rest of our frame -- until its NAK (at most `limit` s).
+    Returns (seconds from our last byte to the NAK, the NAK)."""
     w = ctx.wire
     w.settle()
     seq = w.next_seq()
     frame = w.codec.encode(seq, w.op["LINK_TEST"])
     t0 = w.send_raw(frame[:4], "first 4 bytes of a LINK_TEST, then silence")
+    with w.silent("the device times ΔR on our incomplete frame"):
+        nak = w.wait_for(w.nak(), limit)
+    if nak is None:
+        return None
+    if _nak_reason(nak[1]) == NAK_TIMEOUT:
+        ctx.measured.delta_r = nak[0] - t0
+    return nak[0] - t0, nak[1]
+
+
+def delta_r_nak(ctx: CaseContext) -> None:
     t = ctx.timing
-    nak = w.wait_for(w.nak(), t.delta_r + t.tolerance + 0.2)
-    ctx.check(nak is not None, f"an incomplete frame is answered with NAK (ΔR = {t.delta_r:.3f} s)")
-    assert nak is not None
-    ctx.check(_nak_reason(nak[1]) == NAK_TIMEOUT,
-              f"NAK reason is 2 (frame timeout ΔR), got {_nak_reason(nak[1])}")  # fmt: skip
-    waited = nak[0] - t0
+    got = _time_delta_r(ctx, t.delta_r + t.tolerance + 0.2)
+    ctx.check(got is not None, f"an incomplete frame is answered with NAK (ΔR = {t.delta_r:.3f} s)")
+    assert got is not None
+    waited, nak = got
+    ctx.check(_nak_reason(nak) == NAK_TIMEOUT,
+              f"NAK reason is 2 (frame timeout ΔR), got {_nak_reason(nak)}")  # fmt: skip
     ctx.check(t.within(waited, t.delta_r),
               f"NAK after {waited * 1000:.0f} ms: within ΔR {t.delta_r * 1000:.0f} ms "
               f"(-20 %, +{t.tolerance * 1000:.0f} ms)")  # fmt: skip
-    w.settle()
+    ctx.wire.settle()
 
 
 def _hold_one(ctx: CaseContext) -> tuple[float, Frame]:
@@ -130,49 +144,68 @@ def _hold_one(ctx: CaseContext) -> tuple[float, Frame]:
     return first
 
 
+def _transmissions(ctx: CaseContext, held: tuple[float, Frame], first: float,
+                   then: float | None, most: int) -> list[tuple[float, Frame]]:  # fmt: skip
+    """Keep silent while the device retransmits the frame we hold back: its transmissions (the
+    first included) with their times, waiting `first` s for the first retransmission and `then` s
+    for each next one (None: twice the first interval + tolerance), at most `most` of them."""
+    w = ctx.wire
+    t1, frame = held
+    seen = [held]
+    wait = first
+    with w.silent(f"the device times its ACK timeout on SEQ 0x{frame.seq:02X}"):
+        while len(seen) <= most:
+            got = w.wait_for(lambda f: w.is_data(f) and f.seq == frame.seq, wait)
+            if got is None:
+                break
+            seen.append(got)
+            wait = then if then is not None else 2 * (seen[1][0] - t1) + ctx.timing.tolerance
+    if len(seen) > 1:
+        ctx.measured.ack_timeout = seen[1][0] - t1 - ctx.timing.wire_time(len(frame.raw))
+    return seen
+
+
 def ack_timeout_retransmission(ctx: CaseContext) -> None:
-    w, t = ctx.wire, ctx.timing
-    t1, first = _hold_one(ctx)
-    again = w.wait_for(lambda f: w.is_data(f) and f.seq == first.seq,
-                       t.ack_timeout + t.wire_time(len(first.raw)) + t.tolerance)  # fmt: skip
-    assert first.seq is not None
-    ctx.check(
-        again is not None, "without an ACK the device retransmits the frame with the same SEQ"
-    )
-    assert again is not None
-    ctx.check(again[1].raw == first.raw, "the retransmission is byte for byte the same frame")
+    t = ctx.timing
+    held = _hold_one(ctx)
+    t1, first = held
     nominal = t.ack_timeout + t.wire_time(len(first.raw))
-    ctx.check(t.within(again[0] - t1, nominal),
-              f"retransmitted after {(again[0] - t1) * 1000:.0f} ms: the ACK timeout "
+    sent = _transmissions(ctx, held, nominal + t.tolerance, None, 1)
+    assert first.seq is not None
+    ctx.check(len(sent) > 1, "without an ACK the device retransmits the frame with the same SEQ")
+    at, again = sent[1]
+    ctx.check(again.raw == first.raw, "the retransmission is byte for byte the same frame")
+    ctx.check(t.within(at - t1, nominal),
+              f"retransmitted after {(at - t1) * 1000:.0f} ms: the ACK timeout "
               f"{t.ack_timeout * 1000:.0f} ms + wire time")  # fmt: skip
     _released(ctx, first.seq)
 
 
-def retry_limit(ctx: CaseContext) -> None:
-    w, t = ctx.wire, ctx.timing
-    t1, first = _hold_one(ctx)
-    assert first.seq is not None
-    times = [t1]
-    quiet = t.ack_timeout + t.wire_time(len(first.raw)) + t.tolerance + 0.3
-    while True:
-        got = w.wait_for(lambda f: w.is_data(f) and f.raw == first.raw, quiet)
-        if got is None:
-            break
-        times.append(got[0])
-        if len(times) > t.retry_count + 3:
-            break
-    ctx.check(len(times) == t.retry_count + 1,
-              f"{len(times)} transmissions of SEQ 0x{first.seq:02X}: exactly "
-              f"{t.retry_count + 1} (1 + {t.retry_count} retransmissions) then communication error")  # fmt: skip
-    # Communication error: the link is down, so our next frame brings it up and the device asks
-    # for the full state (SPEC §3.4: on recovery each side sends REQUEST_ALL).
+def _recover(ctx: CaseContext) -> bool:
+    """After a communication error: our next frame brings the link up, and the device asks for the
+    full state (SPEC §3.4: on recovery each side sends REQUEST_ALL). Did it?"""
+    w = ctx.wire
     w.auto_ack = True
     seq = w.next_seq()
     mark = len(w.received)
     w.send_raw(w.codec.encode(seq, w.op["LINK_TEST"]), f"LINK_TEST SEQ 0x{seq:02X} (recovery)")
     req = w.wait_for(lambda f: _op(w, f, "REQUEST_ALL"), 2 * _ack_window(ctx) + 1.5, mark)
-    ctx.check(req is not None, "after the communication error the device rebuilds: REQUEST_ALL")
-    w.settle()
+    return req is not None
+
+
+def retry_limit(ctx: CaseContext) -> None:
+    t = ctx.timing
+    held = _hold_one(ctx)
+    first = held[1]
+    assert first.seq is not None
+    quiet = t.ack_timeout + t.wire_time(len(first.raw)) + t.tolerance + 0.3
+    sent = _transmissions(ctx, held, quiet, quiet, t.retry_count + 3)
+    ctx.measured.retry_count = len(sent) - 1
+    ctx.check(len(sent) == t.retry_count + 1,
+              f"{len(sent)} transmissions of SEQ 0x{first.seq:02X}: exactly "
+              f"{t.retry_count + 1} (1 + {t.retry_count} retransmissions) then communication error")  # fmt: skip
+    ctx.check(_recover(ctx), "after the communication error the device rebuilds: REQUEST_ALL")
+    ctx.wire.settle()
 
 
 def nak_retransmission(ctx: CaseContext) -> None:
@@ -296,28 +329,53 @@ def unknown_opcode(ctx: CaseContext) -> None:
               "the unknown opcode is not acknowledged")  # fmt: skip
 
 
-def link_test_timing(ctx: CaseContext) -> None:
-    w, t = ctx.wire, ctx.timing
+def _link_tests(ctx: CaseContext, count: int, limit: float) -> list[float]:
+    """Keep the link idle (only ACKs from us) and return the arrival times of the device's next
+    `count` LINK_TESTs, waiting at most `limit` s for all of them."""
+    w = ctx.wire
     w.settle()
-    period = t.link_test_period
-    end = time.monotonic() + 2 * period + t.tolerance + 0.5
+    end = time.monotonic() + limit
     tests: list[float] = []
     seen: set[int] = set()
-    while time.monotonic() < end and len(tests) < 2:
-        got = w.wait_for(lambda f: _op(w, f, "LINK_TEST") and f.seq not in seen,
-                         end - time.monotonic())  # fmt: skip
-        if got is None:
-            break
-        assert got[1].seq is not None
-        seen.add(got[1].seq)
-        tests.append(got[0])
-    ctx.check(len(tests) >= 2, f"the idle device sends LINK_TEST every {period:g} s "
-              f"({len(tests)} seen in {2 * period + t.tolerance + 0.5:.1f} s)")  # fmt: skip
-    gaps = [b - a for a, b in zip(tests, tests[1:], strict=False)]
-    for gap in gaps:
-        ctx.check(t.within(gap, period),
-                  f"LINK_TEST interval {gap * 1000:.0f} ms: the link-test period "
-                  f"{period * 1000:.0f} ms")  # fmt: skip
+    with w.silent("the idle device times its link-test period", acks=True):
+        while time.monotonic() < end and len(tests) < count:
+            got = w.wait_for(lambda f: _op(w, f, "LINK_TEST") and f.seq not in seen,
+                             end - time.monotonic())  # fmt: skip
+            if got is None:
+                break
+            assert got[1].seq is not None
+            seen.add(got[1].seq)
+            tests.append(got[0])
+    ctx.measured.link_test_period = mean_interval(tests) or ctx.measured.link_test_period
+    return tests
+
+
+def link_test_timing(ctx: CaseContext) -> None:
+    t = ctx.timing
+    limit = 2 * t.link_test_period + t.tolerance + 0.5
+    tests = _link_tests(ctx, 2, limit)
+    ctx.check_period("LINK_TEST", tests, t.link_test_period, limit, "link-test period")
+
+
+def measure(ctx: CaseContext, limit: float) -> None:
+    """`--timings auto`: measure the link-test period, ΔR, the ACK timeout and the retry count,
+    waiting at most `limit` s for any one timer; the figures land in `ctx.measured`."""
+    m = ctx.measured
+    _link_tests(ctx, 3, 3 * limit)
+    ctx.note(f"link-test period: {_seconds(m.link_test_period)}")
+    _time_delta_r(ctx, limit)
+    ctx.note(f"ΔR: {_seconds(m.delta_r)}")
+    ctx.wire.settle()
+    sent = _transmissions(ctx, _hold_one(ctx), limit, None, 16)
+    if len(sent) > 1:
+        m.retry_count = len(sent) - 1
+    ctx.note(f"ACK timeout: {_seconds(m.ack_timeout)}; retry count: {m.retry_count}")
+    _recover(ctx)
+    ctx.wire.settle()
+
+
+def _seconds(value: float | None) -> str:
+    return "not seen" if value is None else f"{value * 1000:.0f} ms"
 
 
 TYPE1_CASES: tuple[Case, ...] = (

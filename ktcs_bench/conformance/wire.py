@@ -4,15 +4,18 @@ from our link code, so a case judges the device and not the bench.
 `Type1Wire` talks over any serial transport (pyserial URL, device path, a pty's slave path);
 `Type2Wire` over one TCP (or TLS) connection. Both record every frame, both directions, with its
 time since the case began (`Evidence`), and both are plain blocking code driven by the case.
+While a case times the device's reaction to silence (`silent()`), the suite's end sends nothing --
+not even an ACK -- and a send there is the suite breaking the case's premise (`Inconclusive`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import random
 import socket
 import ssl
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 from ktcs_bench.codec import Frame, FrameCodec, FrameProfile, Garbage, Record, StreamDecoder
@@ -20,6 +23,11 @@ from ktcs_bench.errors import PeerError
 from ktcs_bench.transport.base import Transport, TransportClosed
 
 SUITE, DEVICE = "suite>device", "device>suite"
+
+
+class Inconclusive(Exception):
+    """The suite itself broke the premise of the case (it sent while timing the device's silence):
+    the verdict is error, never fail -- the device was not given the conditions the rule is about."""
 
 
 @dataclass(slots=True)
@@ -81,6 +89,9 @@ class _WireBase:
         self.evidence = Evidence()
         self.received: list[Arrival] = []  # every record of the current case that is a frame
         self.garbage = 0
+        self.heard = 0  # bytes received from the device, ever (0: it never answered)
+        self.closed = False  # the device's end is gone: no frame can come any more
+        self._silence: tuple[str, bool] | None = None  # (what is being timed, ACKs allowed)
         ops = profile.opcodes.by_name
         self.op = {name: o.op for name, o in ops.items()}
 
@@ -102,17 +113,39 @@ class _WireBase:
         """Hook: a frame arrived (the Type I wire ACKs it here)."""
 
     def send_raw(self, data: bytes, summary: str | None = None) -> float:
-        self._write(data)
         if summary is None:
             recs = StreamDecoder(self.profile).feed(data)
             summary = "; ".join(summarize(self.profile, r) for r in recs) or "partial frame"
+        if self._silence is not None:
+            raise Inconclusive(f"the suite sent {summary} while {self._silence[0]}")
+        return self._transmit(data, summary)
+
+    def _transmit(self, data: bytes, summary: str) -> float:
+        self._write(data)
         return self.evidence.add(SUITE, data, summary)
+
+    @contextlib.contextmanager
+    def silent(self, why: str, acks: bool = False) -> Iterator[None]:
+        """The suite sends nothing inside (with `acks`, nothing but ACKs of the device's frames):
+        `why` names what the device is timing meanwhile. A send in here raises `Inconclusive`;
+        the device's frames are acknowledged when the silence ends (Type I)."""
+        self._silence = (why, acks)
+        self.evidence.note(f"     the suite keeps silent ({why})")
+        try:
+            yield
+        finally:
+            self._silence = None
+        self._after_silence()
+
+    def _after_silence(self) -> None:
+        """Hook: the silence is over (the Type I wire sends the ACK it held back)."""
 
     def poll(self, timeout: float) -> list[Arrival]:
         """Read for at most `timeout` s (returns as soon as something arrived)."""
         data = self._read(max(0.0, timeout))
         if not data:
             return []
+        self.heard += len(data)
         now = time.monotonic()
         out: list[Arrival] = []
         for rec in self.decoder.feed(data):
@@ -137,7 +170,7 @@ class _WireBase:
         end = time.monotonic() + timeout
         while True:
             left = end - time.monotonic()
-            if left <= 0:
+            if left <= 0 or self.closed:
                 return None
             for arrival in self.poll(min(left, 0.05)):
                 if pred(arrival[1]):
@@ -159,6 +192,7 @@ class Type1Wire(_WireBase):
         self.transport = transport
         self.auto_ack = True
         self.ack_wait = 1.0  # how long settle() waits for an ACK (the runner sets it from timing)
+        self._held: int | None = None  # SEQ of the device's last data frame while we kept silent
         # Start at a random SEQ: a device remembers the last SEQ it accepted from an earlier run.
         self.seq = random.randrange(self.codec.seq_modulo)
 
@@ -180,8 +214,18 @@ class Type1Wire(_WireBase):
     def _on_frame(self, now: float, frame: Frame) -> None:
         if self.auto_ack and self.is_data(frame):
             assert frame.seq is not None
-            self.send_raw(
+            if self._silence is not None and not self._silence[1]:
+                self._held = frame.seq  # stop-and-wait: the last one is the one outstanding
+                return
+            self._transmit(
                 self.codec.encode(frame.seq, self.op["ACK"]), f"ACK SEQ 0x{frame.seq:02X}"
+            )
+
+    def _after_silence(self) -> None:
+        seq, self._held = self._held, None
+        if seq is not None and self.auto_ack:
+            self.send_raw(
+                self.codec.encode(seq, self.op["ACK"]), f"ACK SEQ 0x{seq:02X} (held while silent)"
             )
 
     def next_seq(self) -> int:
@@ -227,7 +271,6 @@ class Type2Wire(_WireBase):
         super().__init__(profile)
         self.sock = sock
         self.seq = 0
-        self.closed = False
         sock.setblocking(True)
 
     def _read(self, timeout: float) -> bytes:
