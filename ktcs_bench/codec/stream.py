@@ -3,16 +3,27 @@
 Framing is by LEN (no byte stuffing), so STX may occur inside DATA and inside garbage. The decoder
 treats every STX as a candidate and resynchronises as SPEC §3.1 says:
 
-* a candidate whose LEN is out of range, or whose CRC or ETX fails, is an error frame (up to the
-  next STX inside it, where decoding resumes) -- unless a valid frame lies wholly inside it, in
-  which case it was a false STX and its bytes are garbage; only the candidate's own bytes decide,
-  so the verdict does not depend on how the input was chunked;
+* a complete candidate that fails a check is one error frame, its DATA whole, when its LEN is
+  borne out by its own bytes -- the ETX sits where LEN says the frame ends (or, for an ETX error,
+  the CRC over LEN checks) -- unless a valid frame lies wholly inside it, in which case it was a
+  false STX and its bytes up to that frame are garbage. One corrupted frame is one error record
+  (one NAK), whatever STX bytes its DATA or CRC holds;
+* a failed candidate whose LEN nothing bears out (no ETX in the profile, or the wrong byte there)
+  is an error frame up to the first inner STX that could begin a real frame -- one whose LEN is in
+  range and announces a frame ending past the candidate -- where decoding resumes; inner STX bytes
+  whose frames are ruled out by the candidate's own bytes do not cut it;
+* only the candidate's own bytes decide, so the verdict does not depend on how the input was
+  chunked, and it comes as soon as the candidate is complete (a link NAKs at once);
 * while a candidate waits for more bytes, any complete valid frame that starts after it wins, so a
   false STX in garbage announcing a long frame never swallows the good frame behind it;
 * after an error frame, candidates inside the failed frame's extent that fail too are garbage, not
-  further errors (one corrupted frame = one error record = one NAK);
+  further errors;
 * memory is bounded by the profile's largest frame: LEN is checked against `max_len` before it is
   used, and nothing is ever allocated from it.
+
+The price of the first rule: a false STX in garbage whose LEN-implied end happens to hold the ETX
+byte (1 in 256) is taken for a corrupted frame, and a good frame starting inside it and ending past
+it is lost with it (a link recovers it by its retransmission).
 
 `close()` reports a frame still incomplete at the end of input as "truncated"; `abandon()` does the
 same mid-stream, for a receiver whose ΔR timer expired.
@@ -64,6 +75,8 @@ class StreamDecoder:
         self._crc_little = p.little
         self._crc_from = p.offset_of(p.crc_first)[0]
         self._crc_to_header = None if p.crc_last == "data" else sum(p.offset_of(p.crc_last))
+        # a CRC that checks over LEN bears LEN out (for a frame whose only fault is its ETX)
+        self._crc_covers_len = p.crc_first in ("stx", "len")
         self._held = 0  # bytes at the start of _buf already known to be garbage, not yet reported
         self._pending = False  # _buf[_held] is an STX whose frame is still incomplete
         self._hot = (
@@ -199,6 +212,31 @@ class StreamDecoder:
             if self._valid_at(buf, q, end):
                 return q
 
+    def _len_borne_out(self, buf: bytearray, j: int, total: int, error: str) -> bool:
+        """Whether the failed candidate's own bytes confirm where its LEN says it ends."""
+        if error == "etx":
+            return self._crc_covers_len
+        return self._etx is not None and buf[j + total - 1] == self._etx
+
+    def _cut(self, buf: bytearray, j: int, end: int) -> int:
+        """Where an error frame [j, end) whose LEN nothing bears out stops: at the first inner STX
+        that could begin a real frame (its header runs past `end`, or its LEN is in range and
+        announces a frame ending past `end`), else at `end`. Inner candidates lying wholly inside
+        were all found invalid by `_inner_frame`, so they cannot be frames."""
+        hs, unpack, i_len = self._hsize, self._header.unpack_from, self._i_len
+        q = j
+        while True:
+            q = buf.find(self._stx, q + 1, end)
+            if q < 0:
+                return end
+            if end - q < hs:
+                return q
+            length = unpack(buf, q + 1)[i_len]
+            data_len = length - self._fixed
+            in_range = 0 <= data_len and length <= self._max_len
+            if in_range and q + hs + data_len + self._trailer > end:
+                return q
+
     def _probe(self, buf: bytearray, j: int, limit: int) -> int | None:
         """First q in (j, limit) where a complete valid frame starts, remembering what was ruled out."""
         base = self._base
@@ -327,8 +365,13 @@ class StreamDecoder:
         q = self._inner_frame(buf, j, j + total) if error != "length" else None
         if q is not None or base + j < self._suspect_until:
             return (j + 1 if q is None else q), (j if g < 0 else g), False
-        nxt = buf.find(self._stx, j + 1, j + total)
-        end = j + total if nxt < 0 else nxt
+        if error == "length":
+            nxt = buf.find(self._stx, j + 1, j + total)
+            end = j + total if nxt < 0 else nxt
+        elif self._len_borne_out(buf, j, total, error):
+            end = j + total
+        else:
+            end = self._cut(buf, j, j + total)
         self._suspect_until = base + j + total
         if g >= 0:
             out.append(Garbage(base + g, mv[g:j].tobytes()))
