@@ -117,21 +117,46 @@ class _Reader:
     def fail(self, place: str, problem: str) -> ConfigError:
         return ConfigError(self.file, place, problem)
 
-    def mapping(self, value: Any, place: str) -> dict[str, Any]:
+    def mapping(self, value: Any, place: str, keys: tuple[str, ...] = ()) -> dict[str, Any]:
+        """`value` as a mapping; with `keys`, any other key is refused (a misspelt key would
+        otherwise be ignored and give a silently different codec)."""
         if not isinstance(value, dict):
             raise self.fail(place, f"must be a mapping, not {type(value).__name__}")
+        for k in value:
+            if keys and k not in keys:
+                where = f"{place}.{k}" if place else str(k)
+                raise self.fail(where, f"unknown key (known: {', '.join(keys)})")
         return value
 
     def get(self, m: Mapping[str, Any], key: str, place: str, kind: type | tuple[type, ...]) -> Any:
         where = f"{place}.{key}" if place else key
         if key not in m:
             raise self.fail(where, "missing key")
-        value = m[key]
-        if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
-            names = (
-                kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
-            )
+        return self.typed(m[key], where, kind)
+
+    def optional(
+        self,
+        m: Mapping[str, Any],
+        key: str,
+        place: str,
+        kind: type | tuple[type, ...],
+        default: Any,
+    ) -> Any:
+        value = m.get(key)
+        return default if value is None else self.typed(value, f"{place}.{key}", kind)
+
+    def typed(self, value: Any, where: str, kind: type | tuple[type, ...]) -> Any:
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        # YAML's true/false are ints to Python; a bool is never a number here
+        if not isinstance(value, kinds) or (bool not in kinds and isinstance(value, bool)):
+            names = " or ".join(_KIND_NAMES.get(k, k.__name__) for k in kinds)
             raise self.fail(where, f"must be {names}, not {value!r}")
+        return value
+
+    def number(self, m: Mapping[str, Any], key: str, place: str, low: int, high: int) -> int:
+        value = int(self.get(m, key, place, int))
+        if not low <= value <= high:
+            raise self.fail(f"{place}.{key}", f"must be {low:#x}..{high:#x}, not {value:#x}")
         return value
 
     def byte(self, m: Mapping[str, Any], key: str, place: str) -> int:
@@ -141,81 +166,175 @@ class _Reader:
         return int(value)
 
 
+_KIND_NAMES = {int: "an integer", str: "a string", bool: "true or false", list: "a list",
+               dict: "a mapping"}  # fmt: skip
+_CRC_KEYS = ("poly", "reflect", "init", "xor_out", "check")
+_PROFILE_KEYS = ("description", "stx", "etx", "byte_order", "header", "length_counts", "max_len",
+                 "crc", "opcode_overrides")  # fmt: skip
+_OPCODE_KEYS = ("op", "name", "fields", "items", "statuses", "control", "subs", "reasons")
+# CRC widths crcmod computes that fit the largest CRC field (4 bytes)
+CRC_WIDTHS = (8, 16, 24, 32)
+MAX_CRC_PAD = 16
+MAX_OPCODE = 0xFFFF
+# keys of a parsed payload besides its fields: a field may not take these names
+_RESERVED_FIELD_NAMES = ("items", "statuses")
+
+
+def _crc_spec(r: _Reader, name: str, raw: Any) -> CrcSpec:
+    place = f"crc_algorithms.{name}"
+    cm = r.mapping(raw, place, _CRC_KEYS)
+    poly = r.get(cm, "poly", place, int)
+    width = poly.bit_length() - 1
+    if width not in CRC_WIDTHS:
+        raise r.fail(
+            f"{place}.poly",
+            f"must be a polynomial written with its top bit, of {', '.join(map(str, CRC_WIDTHS))} "
+            f"bits (0x18005 is CRC-16/ARC), not {poly:#x} ({max(width, 0)} bits)",
+        )
+    top = (1 << width) - 1
+    check = cm.get("check")
+    spec = CrcSpec(
+        str(name),
+        poly,
+        bool(r.get(cm, "reflect", place, bool)),
+        r.number(cm, "init", place, 0, top),
+        r.number(cm, "xor_out", place, 0, top),
+        None if check is None else r.number(cm, "check", place, 0, top),
+    )
+    try:
+        fn = spec.function()
+    except ValueError as exc:  # crcmod's own refusal, should a case slip past the checks above
+        raise r.fail(place, str(exc)) from None
+    if spec.check is not None and fn(b"123456789") != spec.check:
+        raise r.fail(place, f"check value over '123456789' is not {spec.check:#06x}")
+    return spec
+
+
 def _field_specs(r: _Reader, raw: Any, place: str) -> tuple[FieldSpec, ...]:
     if not isinstance(raw, list):
         raise r.fail(place, "must be a list of {name, type}")
     specs = []
     for i, f in enumerate(raw):
-        fm = r.mapping(f, f"{place}[{i}]")
+        fm = r.mapping(f, f"{place}[{i}]", ("name", "type"))
         name = r.get(fm, "name", f"{place}[{i}]", str)
         typ = r.get(fm, "type", f"{place}[{i}]", str)
+        if not name.isidentifier() or name in _RESERVED_FIELD_NAMES:
+            raise r.fail(f"{place}[{i}].name", f"{name!r} cannot name a field")
         if typ not in ("u8", "u16", "u32"):
             raise r.fail(f"{place}[{i}].type", f"must be u8, u16 or u32, not {typ!r}")
         specs.append(FieldSpec(name, typ))
     return tuple(specs)
 
 
-def _int_names(r: _Reader, raw: Any, place: str) -> dict[int, str]:
+def _int_names(r: _Reader, raw: Any, place: str, high: int) -> dict[int, str]:
     if raw is None:
         return {}
     m = r.mapping(raw, place)
     out: dict[int, str] = {}
     for k, v in m.items():
-        if not isinstance(k, int):
-            raise r.fail(f"{place}.{k}", "keys must be integers")
+        if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k <= high:
+            raise r.fail(f"{place}.{k}", f"keys must be integers 0..{high:#x}")
         out[k] = str(v)
     return out
 
 
 def _opcode(r: _Reader, raw: Any, place: str, little: bool) -> Opcode:
-    m = r.mapping(raw, place)
-    op = r.get(m, "op", place, int)
-    name = r.get(m, "name", place, str)
+    m = r.mapping(raw, place, _OPCODE_KEYS)
+    op = r.number(m, "op", place, 0, MAX_OPCODE)
+    name = r.get(m, "name", place, str).strip()
+    if not name or any(c.isspace() or c in "=,:" for c in name):
+        raise r.fail(f"{place}.name", f"{name!r} cannot name an opcode (used on command lines)")
     shapes = [k for k in ("items", "statuses") if m.get(k)]
     if len(shapes) > 1:
         raise r.fail(place, "an opcode carries items or statuses, not both")
+    fields = _field_specs(r, r.optional(m, "fields", place, list, []), f"{place}.fields")
+    items = _field_specs(r, r.optional(m, "items", place, list, []), f"{place}.items")
+    for part, specs in (("fields", fields), ("items", items)):
+        seen: set[str] = set()
+        for i, spec in enumerate(specs):
+            if spec.name in seen:
+                raise r.fail(f"{place}.{part}[{i}].name", f"{spec.name!r} appears twice")
+            seen.add(spec.name)
     return Opcode(
         op=op,
         name=name.upper(),
         little=little,
-        fields=_field_specs(r, m.get("fields", []), f"{place}.fields"),
-        items=_field_specs(r, m.get("items", []), f"{place}.items"),
-        statuses=bool(m.get("statuses", False)),
-        control=bool(m.get("control", False)),
-        subs=_int_names(r, m.get("subs"), f"{place}.subs"),
-        reasons=_int_names(r, m.get("reasons"), f"{place}.reasons"),
+        fields=fields,
+        items=items,
+        statuses=r.optional(m, "statuses", place, bool, False),
+        control=r.optional(m, "control", place, bool, False),
+        subs=_int_names(r, m.get("subs"), f"{place}.subs", 0xFFFFFFFF),
+        reasons=_int_names(r, m.get("reasons"), f"{place}.reasons", 0xFFFFFFFF),
     )
 
 
+def _opcode_list(r: _Reader, raw: Any, place: str, little: bool) -> list[tuple[str, Opcode]]:
+    """The opcodes of one list, each with its place; a number or name twice is refused."""
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        raise r.fail(place, f"must be a list of opcodes, not {raw!r}")
+    out: list[tuple[str, Opcode]] = []
+    numbers: dict[int, str] = {}
+    names: dict[str, str] = {}
+    for i, oraw in enumerate(raw):
+        where = f"{place}[{i}]"
+        o = _opcode(r, oraw, where, little)
+        if o.op in numbers:
+            raise r.fail(f"{where}.op", f"opcode {o.op:#06x} is also {numbers[o.op]}")
+        if o.name in names:
+            raise r.fail(f"{where}.name", f"opcode name {o.name} is also {names[o.name]}")
+        numbers[o.op], names[o.name] = where, where
+        out.append((where, o))
+    return out
+
+
+def _opcode_table(
+    r: _Reader, base: list[tuple[str, Opcode]], overrides: list[tuple[str, Opcode]],
+    header: dict[str, int],
+) -> OpcodeTable:  # fmt: skip
+    """The shared opcodes with a profile's overrides (which replace by number), checked against
+    the profile's OP and SUB widths."""
+    table = {o.op: (where, o) for where, o in base}
+    for where, o in overrides:
+        table[o.op] = (where, o)
+    names: dict[str, str] = {}
+    op_max = (1 << (8 * header["op"])) - 1
+    sub_max = (1 << (8 * header["sub"])) - 1 if "sub" in header else None
+    for where, o in table.values():
+        if o.op > op_max:
+            raise r.fail(f"{where}.op", f"{o.op:#x} does not fit the {header['op']}-byte op field")
+        if o.name in names:
+            raise r.fail(f"{where}.name", f"opcode name {o.name} is also {names[o.name]}")
+        names[o.name] = where
+        if o.subs and sub_max is None:
+            raise r.fail(f"{where}.subs", "the profile has no sub field")
+        if sub_max is not None and any(k > sub_max for k in o.subs):
+            raise r.fail(f"{where}.subs", f"keys must fit the {header['sub']}-byte sub field")
+    return OpcodeTable.of(o for _, o in table.values())
+
+
 def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
-    """Every profile defined in one protocol YAML file, validated."""
+    """Every profile defined in one protocol YAML file, checked whole: every key known, every
+    number in range, no opcode number or name twice. A problem is one ConfigError naming the file
+    and the key."""
     file = Path(path)
     r = _Reader(file)
-    top = r.mapping(load_yaml(file), "")
+    top = r.mapping(
+        load_yaml(file), "", ("protocol", "crc_algorithms", "profiles", "opcodes", "nak_reasons")
+    )
     protocol = r.get(top, "protocol", "", str)
     if protocol not in ("type1", "type2"):
         raise r.fail("protocol", f"must be type1 or type2, not {protocol!r}")
     crcs: dict[str, CrcSpec] = {}
     for cname, craw in r.mapping(r.get(top, "crc_algorithms", "", dict), "crc_algorithms").items():
-        place = f"crc_algorithms.{cname}"
-        cm = r.mapping(craw, place)
-        spec = CrcSpec(
-            str(cname),
-            r.get(cm, "poly", place, int),
-            bool(r.get(cm, "reflect", place, bool)),
-            r.get(cm, "init", place, int),
-            r.get(cm, "xor_out", place, int),
-            cm.get("check"),
-        )
-        if spec.check is not None and spec.function()(b"123456789") != spec.check:
-            raise r.fail(place, f"check value over '123456789' is not {spec.check:#06x}")
-        crcs[str(cname)] = spec
-    nak_reasons = _int_names(r, top.get("nak_reasons"), "nak_reasons")
+        crcs[str(cname)] = _crc_spec(r, str(cname), craw)
+    nak_reasons = _int_names(r, top.get("nak_reasons"), "nak_reasons", 0xFF)
     raw_opcodes = r.get(top, "opcodes", "", list)
     profiles: dict[str, FrameProfile] = {}
     for pname, praw in r.mapping(r.get(top, "profiles", "", dict), "profiles").items():
         place = f"profiles.{pname}"
-        pm = r.mapping(praw, place)
+        pm = r.mapping(praw, place, _PROFILE_KEYS)
         order = pm.get("byte_order", "little")
         if order not in ("little", "big"):
             raise r.fail(f"{place}.byte_order", f"must be little or big, not {order!r}")
@@ -223,7 +342,7 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
         header: list[tuple[str, int]] = []
         for i, h in enumerate(r.get(pm, "header", place, list)):
             hp = f"{place}.header[{i}]"
-            hm = r.mapping(h, hp)
+            hm = r.mapping(h, hp, ("name", "size"))
             hname = r.get(hm, "name", hp, str)
             size = r.get(hm, "size", hp, int)
             if hname not in HEADER_FIELDS:
@@ -238,8 +357,11 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
                 raise r.fail(f"{place}.header", f"needs a {needed!r} field")
         counts = r.get(pm, "length_counts", place, list)
         for i, c in enumerate(counts):
-            if c not in ("seq", "op", "sub", "data"):
-                raise r.fail(f"{place}.length_counts[{i}]", f"unknown part {c!r}")
+            if c != "data" and all(n != c for n, _ in header if n != "len"):
+                parts = ", ".join([n for n, _ in header if n != "len"] + ["data"])
+                raise r.fail(f"{place}.length_counts[{i}]", f"must be one of {parts}, not {c!r}")
+            if c in counts[:i]:
+                raise r.fail(f"{place}.length_counts[{i}]", f"{c!r} appears twice")
         if "data" not in counts:
             raise r.fail(f"{place}.length_counts", "LEN must count data")
         max_len = r.get(pm, "max_len", place, int)
@@ -248,7 +370,13 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
         len_size = dict(header)["len"]
         if max_len >= 1 << (8 * len_size):
             raise r.fail(f"{place}.max_len", f"does not fit the {len_size}-byte len field")
-        crc = r.mapping(r.get(pm, "crc", place, dict), f"{place}.crc")
+        fixed = sum(size for n, size in header if n in counts)
+        if max_len < fixed:
+            raise r.fail(
+                f"{place}.max_len", f"must be at least the {fixed} header bytes LEN counts"
+            )
+        crc = r.mapping(r.get(pm, "crc", place, dict), f"{place}.crc",
+                        ("algorithm", "covers", "size", "pad"))  # fmt: skip
         algo = r.get(crc, "algorithm", f"{place}.crc", str)
         if algo not in crcs:
             raise r.fail(f"{place}.crc.algorithm", f"unknown algorithm {algo!r}")
@@ -261,20 +389,18 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
         crc_size = r.get(crc, "size", f"{place}.crc", int)
         if crc_size not in (1, 2, 4) or crcs[algo].width_bits > 8 * crc_size:
             raise r.fail(f"{place}.crc.size", f"cannot carry a {crcs[algo].width_bits}-bit CRC")
+        pad = r.optional(crc, "pad", f"{place}.crc", int, 0)
+        if not 0 <= pad <= MAX_CRC_PAD:
+            raise r.fail(f"{place}.crc.pad", f"must be 0..{MAX_CRC_PAD} zero bytes, not {pad}")
         etx = pm.get("etx")
         if etx is not None:
             etx = r.byte(pm, "etx", place)
-        table = {}
-        for i, oraw in enumerate(raw_opcodes):
-            o = _opcode(r, oraw, f"opcodes[{i}]", little)
-            table[o.op] = o
-        for i, oraw in enumerate(pm.get("opcode_overrides", []) or []):
-            o = _opcode(r, oraw, f"{place}.opcode_overrides[{i}]", little)
-            table[o.op] = o
+        base = _opcode_list(r, raw_opcodes, "opcodes", little)
+        overrides = _opcode_list(r, pm.get("opcode_overrides"), f"{place}.opcode_overrides", little)
         profiles[str(pname)] = FrameProfile(
             name=str(pname),
             protocol=protocol,
-            description=str(pm.get("description", "")),
+            description=str(r.optional(pm, "description", place, str, "")),
             source=str(file),
             stx=r.byte(pm, "stx", place),
             etx=etx,
@@ -286,8 +412,8 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
             crc_first=covers[0],
             crc_last=covers[1],
             crc_size=crc_size,
-            crc_pad=int(crc.get("pad", 0)),
-            opcodes=OpcodeTable.of(table.values()),
+            crc_pad=pad,
+            opcodes=_opcode_table(r, base, overrides, dict(header)),
             nak_reasons=nak_reasons,
         )
     return profiles

@@ -104,8 +104,53 @@ BROKEN = [
     ("etx: 0x7F", "etx: 0x17F", "profiles.vendor-x.etx", "must be a byte value"),
 ]
 
+# Issue 13: each of these gave a traceback or a silently wrong codec.
+CRC_LINE = "crc: {algorithm: crc-16/ccitt-false, covers: [len, data], size: 2, pad: 0}"
+WHOLE = [
+    ("poly: 0x11021", "poly: 0", "crc_algorithms.crc-16/ccitt-false.poly", "must be a polynomial"),
+    (
+        "poly: 0x11021",
+        "poly: 0x1" + "0" * 40,
+        "crc_algorithms.crc-16/ccitt-false.poly",
+        "must be a polynomial",
+    ),
+    ("init: 0xFFFF", "init: 0x1FFFF", "crc_algorithms.crc-16/ccitt-false.init", "must be 0x0..0xffff"),
+    (CRC_LINE, CRC_LINE + "\n    opcode_overrides: 7", "profiles.vendor-x.opcode_overrides",
+     "must be a list of opcodes"),
+    ("name: LINK_TEST}", "name: change}", "opcodes[1].name", "opcode name CHANGE is also opcodes[0]"),
+    ("op: 0x0003,", "op: 0x0102,", "opcodes[1].op", "opcode 0x0102 is also opcodes[0]"),
+    (
+        CRC_LINE,
+        CRC_LINE + "\n    opcode_overrides: [{op: 0x0003, name: CHANGE}]",
+        "profiles.vendor-x.opcode_overrides[0].name",
+        "opcode name CHANGE is also opcodes[0]",
+    ),
+    ("size: 2, pad: 0", "size: 2, pad: 100000000", "profiles.vendor-x.crc.pad", "must be 0..16"),
+    ("op: 0x0003,", "op: 0x10000,", "opcodes[1].op", "must be 0x0..0xffff, not 0x10000"),
+    ("op: 0x0003,", "op: -1,", "opcodes[1].op", "must be 0x0..0xffff, not -0x1"),
+    (
+        "{name: op, size: 2}",
+        "{name: op, size: 1}",
+        "opcodes[0].op",
+        "0x102 does not fit the 1-byte op field",
+    ),
+    ("    etx: 0x7F\n", "    etx: 0x7F\n    ext: 0x03\n", "profiles.vendor-x.ext", "unknown key"),
+    ("name: LINK_TEST}", "name: LINK_TEST, statuses: yes please}", "opcodes[1].statuses",
+     "must be true or false"),
+    (
+        "length_counts: [seq, op, data]",
+        "length_counts: [seq, sub, data]",
+        "profiles.vendor-x.length_counts[1]",
+        "must be one of seq, op, data",
+    ),
+]  # fmt: skip
 
-@pytest.mark.parametrize(("old", "new", "place", "problem"), BROKEN, ids=[b[2] for b in BROKEN])
+
+@pytest.mark.parametrize(
+    ("old", "new", "place", "problem"),
+    BROKEN + WHOLE,
+    ids=[f"{b[2]}:{b[1]}" for b in BROKEN + WHOLE],
+)
 def test_broken_profile_is_one_clear_message(
     tmp_path: Path, old: str, new: str, place: str, problem: str
 ) -> None:
@@ -126,15 +171,20 @@ def test_yaml_syntax_error_names_line(tmp_path: Path) -> None:
     assert str(path) in str(info.value) and "line" in info.value.place
 
 
-def test_cli_reports_broken_profile_without_traceback(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("old", "new", "place", "problem"), WHOLE, ids=[w[1] for w in WHOLE])
+def test_cli_reports_broken_profile_without_traceback(
+    tmp_path: Path, old: str, new: str, place: str, problem: str
+) -> None:
     import subprocess
     import sys
 
-    path = write(tmp_path, VENDOR.replace("max_len: 200", "max_len: 300"))
+    path = write(tmp_path, VENDOR.replace(old, new, 1))
     out = subprocess.run(
-        [sys.executable, "-m", "ktcs_bench.cli.main", "decode", "--profile", f"{path}:vendor-x", "7e"],
+        [sys.executable, "-m", "ktcs_bench.cli.main", "decode", "--profile", f"{path}:vendor-x",
+         "7e 00 00 00 00"],
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
-    assert out.returncode == 2
+    assert out.returncode == 2, out.stderr
     assert "Traceback" not in out.stderr
-    assert f"{path}: profiles.vendor-x.max_len:" in out.stderr
+    assert f"{path}: {place}: " in out.stderr and problem in out.stderr, out.stderr
+    assert out.stderr.count("\n") == 1, "one message"
