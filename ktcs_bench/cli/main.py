@@ -34,6 +34,7 @@ examples:
   ktcs-bench emulator atc --station 18 --link ixl=pty   # one device alone, for a real peer
   ktcs-bench conformance --role atc --target /dev/ttyUSB0
   ktcs-bench scenario run emulators/scenarios/seed001_follower.yaml
+  ktcs-bench dissector --install                     # Wireshark shows ktcs1/ktcs2 in captures
 
 exit codes: 0 ok, 1 a check failed (bad CRC, failed case), 2 usage/config error,
             3 peer or I/O failure, 130 interrupted.
