@@ -171,6 +171,7 @@ class FaultInjector:
         elif isinstance(fault, Cut):
             self.cut = True
             self._out.clear()
+            self._last_release = 0.0
         elif isinstance(fault, DropBytes):
             self._drop_bytes += max(0, fault.count)
         elif isinstance(fault, InsertGarbage):
@@ -208,6 +209,7 @@ class FaultInjector:
         self.stats.bytes_dropped += lost
         self._out.clear()
         self._held = None
+        self._last_release = 0.0  # nothing queued is left to keep the next bytes behind
 
     def describe(self) -> dict[str, Any]:
         return {

@@ -165,6 +165,22 @@ def test_discard_drops_what_is_queued_for_a_lost_connection() -> None:
     assert inj.poll(T + 1.2) == b"" and inj.poll(T + 1.5) == fresh_frame * 2
 
 
+def test_what_was_thrown_away_holds_nothing_back() -> None:
+    """Bytes after a discard or a cut are not kept behind the due time of bytes that are gone."""
+    for lose in ("discard", "cut"):
+        inj = fresh()
+        inj.apply(Delay(30.0), T)
+        inj.feed(b"stale", T)
+        if lose == "discard":
+            inj.discard()
+        else:
+            inj.apply(Cut(), T)
+            inj.restore()
+        inj.clear(T + 1.0)
+        inj.feed(b"fresh", T + 1.0)
+        assert inj.poll(T + 1.0) == b"fresh", lose
+
+
 def test_cut_and_restore() -> None:
     inj = fresh()
     inj.apply(Cut(), T)
