@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import Any
 
 from ktcs_bench.station.loader import load_line
@@ -20,6 +22,24 @@ def span(tc: str) -> tuple[float, float]:
     return t.from_m, t.to_m
 
 
+@contextlib.contextmanager
+def route(lab: RunningLab, st: int, entry: str, exit_: str) -> Iterator[None]:
+    """Set a route and wait until its signal clears at the CTC; on the way out leave the station
+    as the test found it (the route cancelled, or already released by a train)."""
+    result = lab.ctc({"cmd": "route", "action": "set", "station": st, "entry": entry,
+                      "exit": exit_})  # fmt: skip
+    assert result["ok"] and result["result"] == "accepted", result
+    try:
+        wait_until(f"signal {entry} of station {st} clears at the CTC",
+                   lambda: summary(lab, st)["signals"][entry] != "R", timeout=30)  # fmt: skip
+        yield
+    finally:
+        lab.ctc({"cmd": "route", "action": "cancel", "station": st, "entry": entry,
+                 "exit": exit_})  # fmt: skip
+        wait_until(f"route {entry}{exit_} of station {st} released",
+                   lambda: f"{entry}{exit_}" not in summary(lab, st)["routes"], timeout=30)  # fmt: skip
+
+
 def place(lab: RunningLab, head: float, length: float = 40.0) -> None:
     answer = lab.lab({"cmd": "status"})  # the lab answers: it is alive
     assert answer["ok"]
@@ -31,47 +51,49 @@ def test_ctc_route_command_sets_points_clears_signal_and_changes_atc_codes(
 ) -> None:
     lab = running_lab
     codes_before = lab.status("atc18")["codes"]
-    result = lab.ctc({"cmd": "route", "action": "set", "station": 18, "entry": "01", "exit": "11"})
-    assert result["ok"] and result["result"] == "accepted", result
-    # indications back at the CTC: route locked, points detected and locked, signal 01 proceed
-    s = wait_until("signal 01 of station 18 clears at the CTC",
-                   lambda: (x := summary(lab, 18))["signals"]["01"] != "R" and x, timeout=30)  # fmt: skip
-    assert "0111" in s["routes"]
-    assert s["points"]["31"] == "normal locked"
-    # and the IXL itself agrees
-    ixl = lab.status("ixl18")
-    assert ixl["signals"]["01"] != "R"
-    # the ATC's codes for the route's track circuits changed from stop to a proceed code
-    codes_after = wait_until(
-        "ATC codes change", lambda: (c := lab.status("atc18")["codes"]) != codes_before and c
-    )
-    assert codes_after["TC1853A"][1] > 0, codes_after["TC1853A"]
-    # a conflicting route is rejected with its reason
-    conflict = lab.ctc(
-        {"cmd": "route", "action": "set", "station": 18, "entry": "01", "exit": "12"}
-    )
-    assert not conflict["ok"] and "conflict" in conflict["result"]
+    with route(lab, 18, "01", "11"):
+        # indications back at the CTC: route locked, points detected and locked, signal 01 proceed
+        s = summary(lab, 18)
+        assert "0111" in s["routes"]
+        assert s["points"]["31"] == "normal locked"
+        # and the IXL itself agrees
+        ixl = lab.status("ixl18")
+        assert ixl["signals"]["01"] != "R"
+        # the ATC's codes for the route's track circuits changed from stop to a proceed code
+        codes_after = wait_until(
+            "ATC codes change", lambda: (c := lab.status("atc18")["codes"]) != codes_before and c
+        )
+        assert codes_after["TC1853A"][1] > 0, codes_after["TC1853A"]
+        # a conflicting route is rejected with its reason
+        conflict = lab.ctc(
+            {"cmd": "route", "action": "set", "station": 18, "entry": "01", "exit": "12"}
+        )
+        assert not conflict["ok"] and "conflict" in conflict["result"]
 
 
 def test_train_releases_the_route_section_by_section(running_lab: RunningLab) -> None:
     lab = running_lab
-    wait_until("route 0111 set", lambda: "0111" in summary(lab, 18)["routes"])
-    a0, a1 = span("TC1851")
-    place(lab, (a0 + a1) / 2)  # on the approach
-    p0, _ = span("TC1853A")
-    place(lab, p0 + 20)  # the head enters the route: the signal goes back to stop
-    wait_until("signal 01 to stop once the train enters",
-               lambda: summary(lab, 18)["signals"]["01"] == "R")  # fmt: skip
-    s0, s1 = span("TC1855")
-    place(lab, s0 + 60, length=40)  # the tail left TC1853A: its section is released
-    wait_until("TC1853A released: point 31 no longer locked",
-               lambda: summary(lab, 18)["points"]["31"] == "normal")  # fmt: skip
-    assert "0111" in summary(lab, 18)["routes"] or True  # the rest of the route may still hold
-    _, o1 = span("TC1857A")
-    place(lab, o1 + 100, length=40)  # past the exit and the overlap
-    wait_until("route 0111 fully released", lambda: "0111" not in summary(lab, 18)["routes"])
-    request(lab.device("tc"), {"cmd": "remove", "train": "T1"})
-    wait_until("line clear at station 18", lambda: not summary(lab, 18)["occupied"])
+    with route(lab, 18, "01", "11"):
+        try:
+            a0, a1 = span("TC1851")
+            place(lab, (a0 + a1) / 2)  # on the approach
+            p0, _ = span("TC1853A")
+            place(lab, p0 + 20)  # the head enters the route: the signal goes back to stop
+            wait_until("signal 01 to stop once the train enters",
+                       lambda: summary(lab, 18)["signals"]["01"] == "R")  # fmt: skip
+            s0, s1 = span("TC1855")
+            place(lab, s0 + 60, length=40)  # the tail left TC1853A: its section is released
+            wait_until("TC1853A released: point 31 no longer locked",
+                       lambda: summary(lab, 18)["points"]["31"] == "normal")  # fmt: skip
+            # sectional release: the sections ahead of the train still hold the route
+            assert "0111" in summary(lab, 18)["routes"]
+            _, o1 = span("TC1857A")
+            place(lab, o1 + 100, length=40)  # past the exit and the overlap
+            wait_until("route 0111 fully released",
+                       lambda: "0111" not in summary(lab, 18)["routes"])  # fmt: skip
+        finally:
+            request(lab.device("tc"), {"cmd": "remove", "train": "T1"})
+            wait_until("line clear at station 18", lambda: not summary(lab, 18)["occupied"])
 
 
 def _ctc_view_equals_ixl(lab: RunningLab, st: int) -> bool:
@@ -104,31 +126,31 @@ def test_cutting_a_type1_link_gives_most_restrictive_codes_and_signals_to_stop(
     running_lab: RunningLab,
 ) -> None:
     lab = running_lab
-    result = lab.ctc({"cmd": "route", "action": "set", "station": 22, "entry": "01", "exit": "11"})
-    assert result["ok"], result
-    wait_until("signal 01 of station 22 clears", lambda: summary(lab, 22)["signals"]["01"] != "R")
-    stop = LINE.most_restrictive_code.code
-    tap = lab.links["st22-atc"]["tap"]
-    host, _, port = tap.rpartition(":")
-    import socket
+    with route(lab, 22, "01", "11"):
+        stop = LINE.most_restrictive_code.code
+        tap = lab.links["st22-atc"]["tap"]
+        host, _, port = tap.rpartition(":")
+        import socket
 
-    with socket.create_connection((host, int(port)), timeout=10) as s:
-        s.sendall(b"cut\n")
-        assert s.makefile().readline().startswith("ok")
-    try:
-        wait_until("IXL puts signal 01 to stop on the ATC link failure",
-                   lambda: lab.status("ixl22")["signals"]["01"] == "R", timeout=30)  # fmt: skip
-        wait_until("the CTC shows it too", lambda: summary(lab, 22)["signals"]["01"] == "R")
-        codes = wait_until(
-            "ATC sends the most restrictive code everywhere",
-            lambda: (
-                (c := lab.status("atc22")["codes"]) and all(v[0] == stop for v in c.values()) and c
-            ),
-            timeout=30,
-        )
-        assert codes
-    finally:
         with socket.create_connection((host, int(port)), timeout=10) as s:
-            s.sendall(b"restore\n")
-            s.makefile().readline()
-    wait_until("links up again", lambda: lab.status("ixl22")["links"]["atc"], timeout=30)
+            s.sendall(b"cut\n")
+            assert s.makefile().readline().startswith("ok")
+        try:
+            wait_until("IXL puts signal 01 to stop on the ATC link failure",
+                       lambda: lab.status("ixl22")["signals"]["01"] == "R", timeout=30)  # fmt: skip
+            wait_until("the CTC shows it too", lambda: summary(lab, 22)["signals"]["01"] == "R")
+            codes = wait_until(
+                "ATC sends the most restrictive code everywhere",
+                lambda: (
+                    (c := lab.status("atc22")["codes"])
+                    and all(v[0] == stop for v in c.values())
+                    and c
+                ),
+                timeout=30,
+            )
+            assert codes
+        finally:
+            with socket.create_connection((host, int(port)), timeout=10) as s:
+                s.sendall(b"restore\n")
+                s.makefile().readline()
+        wait_until("links up again", lambda: lab.status("ixl22")["links"]["atc"], timeout=30)

@@ -21,6 +21,17 @@ def run(coro: Coroutine[Any, Any, None]) -> None:
     asyncio.run(main())
 
 
+async def poll_until(predicate: Callable[[], bool], timeout: float = 10.0) -> None:
+    """Wait until `predicate()` holds, for what no client or server event announces (what the
+    proxy saw, the time on the loop)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while not predicate():
+        if loop.time() > deadline:
+            raise TimeoutError("condition not reached")
+        await asyncio.sleep(0.005)
+
+
 CUT = object()  # returned by a hook: forward half of this frame, then cut the connection
 
 Hook = Callable[[Frame], "bytes | None | object"]

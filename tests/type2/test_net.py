@@ -13,9 +13,10 @@ from ktcs_bench.type2.admission import AdmissionPolicy
 from ktcs_bench.type2.config import Type2Config
 from ktcs_bench.type2.net import CtcServer, IxlClient, StateTable
 
-from .netutil import CUT, PROFILE, Proxy, damage, run
+from .netutil import CUT, PROFILE, Proxy, damage, poll_until, run
 
 INDICATION = 0x10
+HEARTBEAT = 0x40
 FAST = dict(backoff_initial=0.02, backoff_max=0.2)
 
 
@@ -229,7 +230,7 @@ def test_seq_gap_asks_request_all_and_the_full_state_repairs_the_view() -> None:
             async with IxlClient(20, "127.0.0.1", port, app, on_event=rec, **FAST) as c:
                 await ctc.wait_until(lambda: ctc.stations[20].synced)
                 change(app, c, [1, 2, 3])
-                await asyncio.sleep(0.01)
+                await poll_until(lambda: bool(dropped))  # that frame is lost; then the next
                 change(app, c, [4])
                 await ctc.wait_until(lambda: ctc.stations[20].full_states >= 2)
                 await ctc.wait_until(lambda: ctc.stations[20].state == app.state)
@@ -253,7 +254,21 @@ def test_silent_link_goes_down_and_the_ixl_reconnects() -> None:
             app = table(50)
             async with IxlClient(20, "127.0.0.1", port, app, config=cfg, on_event=rec, **FAST) as c:
                 await ctc.wait_until(lambda: ctc.stations[20].synced)
-                await asyncio.sleep(0.3)  # idle but alive: heartbeats both ways keep it up
+                # idle but alive: heartbeats both ways keep it up. Wait for the heartbeats of
+                # twice T_MAX of idle time, each way (every timer runs on this one loop, so a
+                # T_MAX that heartbeats did not hold off would have fired before the last of them)
+                loop = asyncio.get_running_loop()
+                start, up, down = loop.time(), len(proxy.seen_up), len(proxy.seen_down)
+                beats = round(2 * cfg.t_max / cfg.heartbeat_period) + 1
+
+                def idle_span_seen() -> bool:
+                    return (
+                        sum(f.op == HEARTBEAT for f in proxy.seen_up[up:]) >= beats
+                        and sum(f.op == HEARTBEAT for f in proxy.seen_down[down:]) >= beats
+                        and loop.time() - start >= 2 * cfg.t_max
+                    )
+
+                await poll_until(idle_span_seen)
                 assert c.connections == 1 and not rec.of(ev.LinkDown)
                 proxy.frozen = True
                 await ctc.wait_until(lambda: len(rec.of(ev.LinkDown)) >= 2)
@@ -268,9 +283,6 @@ def test_silent_link_goes_down_and_the_ixl_reconnects() -> None:
                     )
                 )
             await proxy.close()
-        assert any(f.op == 0x40 for f in proxy.seen_up) and any(
-            f.op == 0x40 for f in proxy.seen_down
-        )
 
     run(main())
 
