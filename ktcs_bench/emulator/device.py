@@ -204,4 +204,5 @@ class IxlPeerDevice(Device):
             **super().status(),
             "station": self.station,
             "link": bool(self.port and self.port.up),
+            "rails": bool(self.rails and self.rails.connected),
         }

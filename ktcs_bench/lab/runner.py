@@ -16,10 +16,11 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 from ktcs_bench.capture import open_writer
 from ktcs_bench.emulator import jsonlines
-from ktcs_bench.errors import UsageError
+from ktcs_bench.errors import KtcsError, UsageError
 from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.topology import Lab, LinkSpec
 from ktcs_bench.tap import PtyTap, TcpTap
@@ -57,9 +58,13 @@ class LabRunner:
 
     # -- start -------------------------------------------------------------------------------
     def _argv(self, name: str) -> list[str]:
+        """The device's command line. A device started before (a restart) gets back the addresses
+        it had -- control port, Type II / rails port, console -- so the taps in front of it, the
+        devices that reach it and the clients that know it find it again where it was."""
         d = self.lab.devices[name]
+        before = self.children[name].ready if name in self.children else {}
         argv = emulator_argv(d.kind, "--lab", str(self.lab.file), "--name", name,
-                             "--control", f"{d.host}:0")  # fmt: skip
+                             "--control", before.get("control") or f"{d.host}:0")  # fmt: skip
         if d.station is not None:
             argv += ["--station", str(d.station)]
         if self.unpaced:
@@ -67,11 +72,13 @@ class LabRunner:
         for role, ep in self.endpoints.get(name, {}).items():
             argv += ["--link", f"{role}={ep}"]
         if d.kind == "trackcircuit":
-            argv += ["--listen", f"{d.host}:{d.options.get('port', 0)}"]
+            argv += ["--listen", before.get("listen") or f"{d.host}:{d.options.get('port', 0)}"]
         if d.kind == "ctc":
-            argv += ["--listen", f"{d.host}:{self.lab.type2_port}"]
+            argv += ["--listen", before.get("listen") or f"{d.host}:{self.lab.type2_port}"]
             if self.lab.console_port is not None and self.console:
-                argv += ["--console", f"{d.host}:{self.lab.console_port}"]
+                url = urlsplit(str(before.get("console", "")))
+                port = url.port if url.port is not None else self.lab.console_port
+                argv += ["--console", f"{d.host}:{port}"]
                 argv += [arg for lk in self.lab.links if lk.tap for arg in ("--tap", lk.name)]
         if d.kind == "train" and "train" in d.options:
             argv += ["--train", str(d.options["train"])]
@@ -154,16 +161,20 @@ class LabRunner:
                     role = lab.peer_role(lk, ixl.name)
                     self.endpoints.setdefault(peer, {})["ixl"] = ready["ptys"][role]
                     await self._start(peer)
-        ctcs = [c.name for c in lab.of_kind("ctc")]
         for d in lab.of_kind("train"):
-            ready = await self._start(d.name)
-            for ctc_name in ctcs:  # the CTC's console draws the train's speed-distance curves
-                host, _, port = self.children[ctc_name].ready["control"].rpartition(":")
-                train = str(d.options.get("train", d.name))
-                await jsonlines.request(host, int(port),
-                                        {"cmd": "add_train", "train": train, "control": ready["control"]})  # fmt: skip
+            await self._start(d.name)
+        await self._trains_to_ctc()
         await self._serve_control()
         self._write_state()
+
+    async def _trains_to_ctc(self) -> None:
+        """Tell the CTC of every train process, whose curves its console draws."""
+        for ctc in self.lab.of_kind("ctc"):
+            host, _, port = self.children[ctc.name].ready["control"].rpartition(":")
+            for d in self.lab.of_kind("train"):
+                train, ready = str(d.options.get("train", d.name)), self.children[d.name].ready
+                await jsonlines.request(host, int(port),
+                                        {"cmd": "add_train", "train": train, "control": ready["control"]})  # fmt: skip
 
     # -- control port and state file ---------------------------------------------------------------
     async def _serve_control(self) -> None:
@@ -204,7 +215,9 @@ class LabRunner:
             if cmd == "down":
                 self.stop_requested.set()
                 return {"ok": True}
-        except (KeyError, UsageError) as exc:
+        except KeyError as exc:
+            return {"ok": False, "error": f"{cmd}: missing {exc}"}
+        except (KtcsError, OSError) as exc:  # a device that does not come back, a port taken
             return {"ok": False, "error": str(exc)}
         return {"ok": False, "error": f"unknown command {cmd!r} (status, map, restart, kill, down)"}
 
@@ -216,9 +229,22 @@ class LabRunner:
         return self.children[name]
 
     async def restart(self, name: str) -> None:
+        """Stop (if it still runs) and start a device again, at the addresses it had. What cannot
+        keep its address is re-pointed: an IXL makes new ptys for its untapped Type I links, so
+        the peers on them restart on the new paths; a new CTC learns the trains again."""
         child = self._child(name)
         await asyncio.to_thread(child.stop)
-        await self._start(name)
+        ready = await self._start(name)
+        kind = self.lab.devices[name].kind
+        if kind == "ixl":
+            for lk in self.lab.links:
+                if lk.a == name and lk.type == "type1" and not lk.tap:
+                    role = self.lab.peer_role(lk, name)
+                    self.endpoints.setdefault(lk.b, {})["ixl"] = ready["ptys"][role]
+                    await asyncio.to_thread(self.children[lk.b].stop)
+                    await self._start(lk.b)
+        if kind == "ctc":
+            await self._trains_to_ctc()
         self.notices.append(f"{name} restarted")
         self._write_state()
 
