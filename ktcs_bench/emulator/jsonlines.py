@@ -12,6 +12,8 @@ import json
 from collections.abc import Awaitable, Callable
 from typing import Any
 
+from ktcs_bench.transport.tcp import open_tcp
+
 LIMIT = 1 << 20  # one line at most 1 MiB: a full status of a large station is a few kB
 
 Handler = Callable[[dict[str, Any], "Peer"], Awaitable[dict[str, Any] | None]]
@@ -78,7 +80,7 @@ async def serve(
 
 
 async def connect(host: str, port: int) -> Peer:
-    reader, writer = await asyncio.open_connection(host, port, limit=LIMIT)
+    reader, writer = await open_tcp(host, port, limit=LIMIT)
     return Peer(reader, writer)
 
 

@@ -36,6 +36,7 @@ from ktcs_bench.tap import registry
 from ktcs_bench.tap.control import HELP, Command, parse_command
 from ktcs_bench.tap.faults import Cut, Fault, FaultInjector
 from ktcs_bench.tap.recorder import Recorder
+from ktcs_bench.transport.tcp import open_tcp
 
 T = TypeVar("T")
 HISTORY = 10_000  # records kept for `records()` and `subscribe history`
@@ -610,7 +611,7 @@ class TcpTap(Tap):
             self._emit({"time": time.time(), "event": "refused", "peer": list(peer[:2])})
             return
         try:
-            b_reader, b_writer = await asyncio.wait_for(asyncio.open_connection(*self.target), 5)
+            b_reader, b_writer = await asyncio.wait_for(open_tcp(*self.target), 5)
         except (OSError, TimeoutError) as exc:
             writer.close()
             self._emit({"time": time.time(), "event": "target-failed", "error": str(exc)})
