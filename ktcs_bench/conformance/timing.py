@@ -176,6 +176,11 @@ _NAMES = (("delta_r", "ΔR", "ms"), ("ack_timeout", "ACK timeout", "ms"),
           ("heartbeat_period", "heartbeat period", "s"), ("t2_t_max", "T_MAX", "s"))  # fmt: skip
 
 
+def seconds(value: float | None) -> str:
+    """A measured time for a note: milliseconds, or "not seen"."""
+    return "not seen" if value is None else f"{value * 1000:.0f} ms"
+
+
 def mean_interval(times: list[float]) -> float | None:
     """The mean gap between successive times (None with fewer than two)."""
     return (times[-1] - times[0]) / (len(times) - 1) if len(times) >= 2 else None

@@ -11,7 +11,7 @@ import time
 
 from ktcs_bench.codec import Frame, FrameCodec
 from ktcs_bench.conformance.model import Case, CaseContext
-from ktcs_bench.conformance.timing import mean_interval
+from ktcs_bench.conformance.timing import mean_interval, seconds
 from ktcs_bench.conformance.wire import Type1Wire
 
 NAK_CRC, NAK_TIMEOUT, NAK_FORMAT = 1, 2, 3
@@ -362,20 +362,16 @@ def measure(ctx: CaseContext, limit: float) -> None:
     waiting at most `limit` s for any one timer; the figures land in `ctx.measured`."""
     m = ctx.measured
     _link_tests(ctx, 3, 3 * limit)
-    ctx.note(f"link-test period: {_seconds(m.link_test_period)}")
+    ctx.note(f"link-test period: {seconds(m.link_test_period)}")
     _time_delta_r(ctx, limit)
-    ctx.note(f"ΔR: {_seconds(m.delta_r)}")
+    ctx.note(f"ΔR: {seconds(m.delta_r)}")
     ctx.wire.settle()
     sent = _transmissions(ctx, _hold_one(ctx), limit, None, 16)
     if len(sent) > 1:
         m.retry_count = len(sent) - 1
-    ctx.note(f"ACK timeout: {_seconds(m.ack_timeout)}; retry count: {m.retry_count}")
+    ctx.note(f"ACK timeout: {seconds(m.ack_timeout)}; retry count: {m.retry_count}")
     _recover(ctx)
     ctx.wire.settle()
-
-
-def _seconds(value: float | None) -> str:
-    return "not seen" if value is None else f"{value * 1000:.0f} ms"
 
 
 TYPE1_CASES: tuple[Case, ...] = (

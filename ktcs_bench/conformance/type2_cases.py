@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 from ktcs_bench.codec import Frame, FrameCodec
 from ktcs_bench.conformance.model import Case, CaseContext, NotApplicable
-from ktcs_bench.conformance.timing import mean_interval
+from ktcs_bench.conformance.timing import mean_interval, seconds
 from ktcs_bench.conformance.wire import Type2Wire
 
 NAK_CRC, NAK_FORMAT, NAK_UNKNOWN = 1, 3, 4
@@ -322,9 +322,11 @@ def measure(ctx: CaseContext, limit: float) -> None:
     either; the figures land in `ctx.measured`."""
     m = ctx.measured
     _heartbeats(ctx, 3, 2 * limit)
-    ctx.note(f"heartbeat period: {m.heartbeat_period}")
+    ctx.note(f"heartbeat period: {seconds(m.heartbeat_period)}")
+    for w in ctx.opened:  # one connection at a time: a CTC refuses a second for the station
+        w.close()
     _time_t_max(ctx, limit)
-    ctx.note(f"T_MAX: {m.t2_t_max}")
+    ctx.note(f"T_MAX: {seconds(m.t2_t_max)}")
 
 
 def refused_station(ctx: CaseContext) -> None:

@@ -134,3 +134,20 @@ def test_timings_auto_measures_the_peer(spawn: Callable[..., Proc], tmp_path: Pa
     assert props["timings"] == "auto" and props["measured.retry_count"] == "3"
     # the cases were judged by the measured figures, not the assumed 0.24 s
     assert abs(float(props["delta_r"]) - delta_r) < 0.2
+
+
+def test_timings_auto_measures_a_ctc(spawn: Callable[..., Proc]) -> None:
+    """Type II: the heartbeat period and T_MAX of our CTC (1 s, 3 s), measured first."""
+    ctc = spawn("emulator", "ctc", "--listen", "127.0.0.1:0")
+    t2 = get_profile("ktcs-type2")
+    suite = run_suite("ctc", f"tcp://{ctc.ready['listen']}", t2, SuiteTiming.resolve(t2),
+                      cases=["t2-heartbeat"], station=20, auto=True)  # fmt: skip
+    measure, heartbeat = suite.results
+    assert measure.case.name == "measure-timings" and measure.verdict is Verdict.PASS, (
+        measure.evidence.checks
+    )
+    assert heartbeat.verdict is Verdict.PASS
+    m = suite.measured
+    assert m.heartbeat_period is not None and 0.95 <= m.heartbeat_period <= 1.0 + 0.75
+    assert m.t2_t_max is not None and 0.95 * 3.0 <= m.t2_t_max <= 3.0 + 0.75
+    assert suite.timing.t2_t_max == pytest.approx(m.t2_t_max, abs=0.5)
