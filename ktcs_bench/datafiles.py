@@ -21,8 +21,37 @@ def data_dir(name: str) -> Path:
     raise ConfigError(name, "", "shipped data folder not found (broken installation?)")
 
 
+def _unique_key_loader() -> type:
+    """A SafeLoader whose mappings refuse a key given twice (PyYAML keeps the last silently)."""
+    import yaml
+
+    class UniqueKeyLoader(yaml.SafeLoader):
+        def construct_mapping(
+            self, node: yaml.MappingNode, deep: bool = False
+        ) -> dict[object, object]:
+            first: dict[object, yaml.Node] = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # `<<: *anchor` merges; what it brings in may be overridden
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    earlier = first.setdefault(key, key_node)
+                except TypeError:
+                    continue  # an unhashable key: construct_mapping says so below
+                if earlier is not key_node:
+                    raise yaml.constructor.ConstructorError(
+                        None, None,
+                        f"duplicate key {key!r} (first on line {earlier.start_mark.line + 1})",
+                        key_node.start_mark,
+                    )  # fmt: skip
+            return super().construct_mapping(node, deep)
+
+    return UniqueKeyLoader
+
+
 def load_yaml(path: str | Path) -> object:
-    """Parse one YAML file; a syntax error becomes a ConfigError naming file, line and column."""
+    """Parse one YAML file: a syntax error, or a mapping key given twice, becomes a ConfigError
+    naming the file, the line and column, and the problem."""
     import yaml
 
     p = Path(path)
@@ -31,7 +60,7 @@ def load_yaml(path: str | Path) -> object:
     except OSError as exc:
         raise ConfigError(p, "", f"cannot read: {exc.strerror or exc}") from None
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_unique_key_loader())  # noqa: S506 -- a SafeLoader
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         place = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""

@@ -1,13 +1,18 @@
-"""Small pieces every subcommand shares: colour on a terminal, reading hex input, JSON lines."""
+"""Small pieces every subcommand shares: colour on a terminal, the argument types of durations
+and ports, reading hex input, JSON lines."""
 
 from __future__ import annotations
 
+import argparse
 import json
+import math
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
+from ktcs_bench.emulator.endpoints import check_port, parse_host_port
 from ktcs_bench.errors import UsageError
 
 
@@ -16,6 +21,43 @@ def use_colour(stream: TextIO, flag: bool | None = None) -> bool:
     if flag is not None:
         return flag
     return stream.isatty() and "NO_COLOR" not in os.environ
+
+
+def duration(text: str) -> float:
+    """The argparse type of every option that takes seconds: a positive, finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(
+            f"a duration is a positive number of seconds, not {text!r}"
+        )
+    return value
+
+
+def port(any_free: bool = False) -> Callable[[str], int]:
+    """The argparse type of a port option: 1..65535 (`any_free`: 0 too, any free port)."""
+
+    def parse(text: str) -> int:
+        try:
+            return check_port(text, any_free=any_free)
+        except UsageError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return parse
+
+
+def host_port(any_free: bool = False) -> Callable[[str], tuple[str, int]]:
+    """The argparse type of a HOST:PORT option -> (host, port); `any_free`: port 0 allowed."""
+
+    def parse(text: str) -> tuple[str, int]:
+        try:
+            return parse_host_port(text, any_free=any_free)
+        except UsageError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return parse
 
 
 def read_text_inputs(inputs: list[str]) -> str:

@@ -7,6 +7,7 @@ import ssl
 import sys
 from pathlib import Path
 
+from ktcs_bench.cli._common import duration, use_colour
 from ktcs_bench.errors import UsageError
 
 HELP = "run the protocol conformance suite against a device (ours or a real one)"
@@ -68,15 +69,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     g.add_argument("--unpaced", action="store_true", help="the device does not pace its line "
                    "(an emulator run with --unpaced): wire times count as 0")  # fmt: skip
     g.add_argument("--longest-frame", type=int, help="DATA bytes of the longest frame (sizes ΔR)")
-    g.add_argument("--delta-r", type=float, metavar="S", help="ΔR, the frame timeout")
-    g.add_argument("--ack-timeout", type=float, metavar="S", help="the ACK timeout")
-    g.add_argument("--heartbeat-period", "--link-test-period", type=float, metavar="S",
+    g.add_argument("--delta-r", type=duration, metavar="S", help="ΔR, the frame timeout")
+    g.add_argument("--ack-timeout", type=duration, metavar="S", help="the ACK timeout")
+    g.add_argument("--heartbeat-period", "--link-test-period", type=duration, metavar="S",
                    help="Type II heartbeat / Type I link-test period (1 s)")  # fmt: skip
     g.add_argument(
-        "--t-max", type=float, metavar="S", help="T_MAX: silence before the link is down"
+        "--t-max", type=duration, metavar="S", help="T_MAX: silence before the link is down"
     )
     g.add_argument("--retry-count", type=int, help="retransmissions before communication error (3)")
-    g.add_argument("--tolerance", type=float, default=0.75, metavar="S",
+    g.add_argument("--tolerance", type=duration, default=0.75, metavar="S",
                    help="how late a timer may fire and still pass (default 0.75 s)")  # fmt: skip
     t = p.add_argument_group("TLS (Type II, profile type2-tls)")
     t.add_argument("--tls-cert", help="the suite's certificate (PEM)")
@@ -143,7 +144,6 @@ def _list_faults() -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ktcs_bench.cli._common import use_colour
     from ktcs_bench.codec.profile import get_profile
     from ktcs_bench.conformance import report
     from ktcs_bench.conformance.model import CaseResult

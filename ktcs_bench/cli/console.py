@@ -8,6 +8,8 @@ import contextlib
 import signal
 from pathlib import Path
 
+from ktcs_bench.cli._common import duration, port
+
 HELP = "run a CTC with its web operator console (route setting, link monitor, speed-distance)"
 EPILOG = """\
 examples:
@@ -27,14 +29,18 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--host", default="127.0.0.1", help="address of both servers (127.0.0.1)")
-    p.add_argument("--port", type=int, default=0, help="console HTTP port (0: any free port)")
-    p.add_argument("--ctc-port", type=int, default=0, help="Type II port (0: any free port)")
+    p.add_argument(
+        "--port", type=port(any_free=True), default=0, help="console HTTP port (0: any free port)"
+    )
+    p.add_argument(
+        "--ctc-port", type=port(any_free=True), default=0, help="Type II port (0: any free port)"
+    )
     p.add_argument("--line", type=Path, help="line file (default: the reference line)")
     p.add_argument("--tap", action="append", default=[], help="tap name or HOST:PORT (repeat)")
     p.add_argument(
         "--demo-ixls", action="store_true", help="run each station's IXL + trackside in-process"
     )
-    p.add_argument("--throw-time", type=float, help="point throw time for --demo-ixls, s")
+    p.add_argument("--throw-time", type=duration, help="point throw time for --demo-ixls, s")
     p.set_defaults(handler=_run)
 
 

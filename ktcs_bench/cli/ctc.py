@@ -11,7 +11,7 @@ import sys
 import time
 from typing import Any
 
-from ktcs_bench.cli._common import use_colour
+from ktcs_bench.cli._common import host_port, use_colour
 from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import PeerError, UsageError
 
@@ -45,7 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )  # fmt: skip
     p.add_argument("command", nargs="*", help="one command (else: interactive, or --script)")
     p.add_argument("--lab", default="reference", help="the running lab whose CTC to use")
-    p.add_argument("--address", help="HOST:PORT of a CTC control port (instead of --lab)")
+    p.add_argument(
+        "--address", type=host_port(), help="HOST:PORT of a CTC control port (instead of --lab)"
+    )
     p.add_argument("--script", help="a file of commands, one a line (# comments)")
     p.add_argument("--json", action="store_true", help="results as JSON lines")
     p.set_defaults(handler=run)
@@ -85,8 +87,7 @@ def parse(words: list[str]) -> dict[str, Any]:
 
 def _address(args: argparse.Namespace) -> tuple[str, int]:
     if args.address:
-        host, _, port = args.address.rpartition(":")
-        return host or "127.0.0.1", int(port)
+        return args.address  # type: ignore[no-any-return]
     from ktcs_bench.lab.runner import state_file
 
     path = state_file(args.lab)

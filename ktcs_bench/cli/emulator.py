@@ -9,6 +9,7 @@ import logging
 import ssl
 import sys
 
+from ktcs_bench.cli._common import host_port
 from ktcs_bench.emulator.endpoints import Endpoint, parse_endpoint, parse_links
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.topology import ROLE, load_lab, resolve_lab_path
@@ -46,14 +47,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--station", type=int, help="station number (ixl, atc, trackside)")
     p.add_argument("--name", help="device name (default: KIND + station)")
     p.add_argument("--link", action="append", default=[], metavar="PEER=ENDPOINT")
-    p.add_argument("--listen", help="HOST:PORT to serve (ctc: Type II; trackcircuit: the rails)")
-    p.add_argument("--control", default="127.0.0.1:0", help="HOST:PORT of the JSON control port")
+    p.add_argument("--listen", type=host_port(any_free=True),
+                   help="HOST:PORT to serve (ctc: Type II; trackcircuit: the rails)")  # fmt: skip
+    p.add_argument("--control", type=host_port(any_free=True), default="127.0.0.1:0",
+                   help="HOST:PORT of the JSON control port")  # fmt: skip
     p.add_argument(
         "--mode", choices=("center", "local"), help="ixl: start mode (default: the lab's)"
     )
     p.add_argument("--unpaced", action="store_true", help="Type I: no line-rate pacing")
     p.add_argument("--train", help="train: the train id / scenario train to run")
-    p.add_argument("--console", metavar="HOST:PORT", help="ctc: serve the web console here")
+    p.add_argument("--console", type=host_port(any_free=True), metavar="HOST:PORT",
+                   help="ctc: serve the web console here")  # fmt: skip
     p.add_argument("--tap", action="append", default=[], help="ctc: a tap the console may monitor")
     p.add_argument(
         "--fault", action="append", default=[], metavar="VARIANT",
@@ -73,13 +77,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--tls-server-name", help="ixl: the name (or IP) in the CTC's certificate")
     p.add_argument("-v", "--verbose", action="store_true", help="log every event to stderr")
     p.set_defaults(handler=run)
-
-
-def _hostport(text: str, what: str) -> tuple[str, int]:
-    host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit():
-        raise UsageError(f"{what}: expected HOST:PORT, not {text!r}")
-    return host or "127.0.0.1", int(port)
 
 
 def _roles(links: dict[str, Endpoint], lab_devices: dict[str, str]) -> dict[str, Endpoint]:
@@ -127,7 +124,7 @@ def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     lab = load_lab(resolve_lab_path(args.lab))
     line = lab.load_line()
     links = _roles(parse_links(args.link), {d.name: d.kind for d in lab.devices.values()})
-    control = _hostport(args.control, "--control")
+    control = args.control
     kind = args.kind
     from ktcs_bench.emulator import variants
 
@@ -167,15 +164,12 @@ def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     if kind == "trackcircuit":
         from ktcs_bench.emulator.trackcircuit import TrackCircuitDevice
 
-        return TrackCircuitDevice(
-            name, line, _hostport(args.listen or "127.0.0.1:0", "--listen"), control
-        )
+        return TrackCircuitDevice(name, line, args.listen or ("127.0.0.1", 0), control)
     if kind == "ctc":
         from ktcs_bench.emulator.ctc import CtcDevice
 
-        listen = _hostport(args.listen or f"127.0.0.1:{lab.type2_port}", "--listen")
-        console = _hostport(args.console, "--console") if args.console else None
-        return CtcDevice(name, line, lab.stations, listen, control=control, console=console,
+        listen = args.listen or ("127.0.0.1", lab.type2_port)
+        return CtcDevice(name, line, lab.stations, listen, control=control, console=args.console,
                          taps=args.tap, faults=faults, allowed_sources=args.allow_source or None,
                          ssl=tls_context(args, server=True))  # fmt: skip
     if kind == "train":

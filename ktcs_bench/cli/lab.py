@@ -9,7 +9,7 @@ import signal
 import sys
 from typing import Any
 
-from ktcs_bench.cli._common import use_colour
+from ktcs_bench.cli._common import duration, use_colour
 from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
@@ -34,12 +34,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     lsub = p.add_subparsers(dest="lab_command", metavar="ACTION", required=True)
     up = lsub.add_parser("up", help="start the lab and show its live status (Ctrl-C stops it)")
     up.add_argument("lab", nargs="?", help="lab file or shipped lab name (default: reference)")
-    up.add_argument("--for", dest="duration", type=float, help="stop after this many seconds")
+    up.add_argument("--for", dest="duration", type=duration, help="stop after this many seconds")
     up.add_argument("--unpaced", action="store_true", help="Type I without line-rate pacing")
     up.add_argument(
         "--json", action="store_true", help="print the link map and status as JSON lines"
     )
-    up.add_argument("--interval", type=float, default=1.0, help="status refresh period (s)")
+    up.add_argument("--interval", type=duration, default=1.0, help="status refresh period (s)")
     for name, text in (("down", "stop a running lab"), ("status", "show a running lab's status"),
                        ("map", "show a running lab's link map")):  # fmt: skip
         q = lsub.add_parser(name, help=text)

@@ -16,11 +16,12 @@ import serial
 from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
 from ktcs_bench.capture.arq import ArqTracker
 from ktcs_bench.charts.model import CodeChart, load_chart
-from ktcs_bench.cli._common import print_json_line, use_colour
+from ktcs_bench.cli._common import duration, print_json_line, use_colour
 from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.emulator.endpoints import parse_endpoint
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap import TapClient
 from ktcs_bench.tap.recorder import Recorder
@@ -69,7 +70,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="also record to CAPTURE.hex or CAPTURE.pcapng (repeatable)")  # fmt: skip
     p.add_argument("--history", action="store_true", help="first show what the tap recorded before")
     p.add_argument("--count", type=int, help="stop after this many frames")
-    p.add_argument("--timeout", type=float, help="stop after this many seconds")
+    p.add_argument("--timeout", type=duration, help="stop after this many seconds")
     p.add_argument("--baud", type=int, default=9600, help="serial endpoint baud rate (9600)")
     colour = p.add_mutually_exclusive_group()
     colour.add_argument("--color", dest="colour", action="store_const", const=True, default=None)
@@ -178,10 +179,10 @@ def _stream_records(
     port: serial.Serial | None = None
     try:
         if source.startswith("tcp://"):
-            host, _, p = source[6:].rpartition(":")
+            ep = parse_endpoint(source)
             try:
-                sock = socket.create_connection((host or "127.0.0.1", int(p)), timeout=5)
-            except (OSError, ValueError) as exc:
+                sock = socket.create_connection((ep.host, ep.port), timeout=5)
+            except OSError as exc:
                 raise PeerError(f"cannot connect to {source}: {exc}") from None
             sock.settimeout(0.05)
         else:

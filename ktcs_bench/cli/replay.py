@@ -23,10 +23,11 @@ from ktcs_bench.capture import (
     reverse_direction,
 )
 from ktcs_bench.charts.model import load_chart
-from ktcs_bench.cli._common import use_colour
+from ktcs_bench.cli._common import duration, use_colour
 from ktcs_bench.cli.monitor import FramePrinter
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.emulator.endpoints import parse_endpoint
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap import TapClient
 from ktcs_bench.tap.recorder import Recorder
@@ -77,7 +78,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--send", metavar="DIR", help="which direction of FILE to send (a>b, tx, ...)")
     p.add_argument("--timing", choices=("original", "line", "step"), default="line")
     p.add_argument("--baud", type=int, help="line rate for --timing line and serial ports (9600)")
-    p.add_argument("--wait", type=float, default=1.0,
+    p.add_argument("--wait", type=duration, default=1.0,
                    help="seconds of quiet that end the replay after the last frame (1.0); "
                    "also the step timeout off a terminal")  # fmt: skip
     p.add_argument("--record", action="append", default=[], metavar="FILE",
@@ -128,10 +129,10 @@ class StreamTarget(Target):
         self._recorder = Recorder(profile)
         self._reply_dir = reply_dir
         if spec.startswith("tcp://"):
-            host, _, port = spec[6:].rpartition(":")
+            ep = parse_endpoint(spec)
             try:
-                self._sock = socket.create_connection((host or "127.0.0.1", int(port)), timeout=5)
-            except (OSError, ValueError) as exc:
+                self._sock = socket.create_connection((ep.host, ep.port), timeout=5)
+            except OSError as exc:
                 raise PeerError(f"cannot connect to {spec}: {exc}") from None
             self._sock.settimeout(0.05)
         else:

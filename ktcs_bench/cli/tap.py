@@ -40,8 +40,10 @@ control commands (TAP is a name given with --name, HOST:PORT of the control port
 )
 
 
-def _address(text: str, what: str) -> tuple[str, int]:
-    addr = parse_tap_address(text.removeprefix("tcp://").removeprefix("listen://"))
+def _address(text: str, what: str, any_free: bool = False) -> tuple[str, int]:
+    addr = parse_tap_address(
+        text.removeprefix("tcp://").removeprefix("listen://"), what, any_free=any_free
+    )
     if addr is None:
         raise UsageError(f"{what} must be HOST:PORT or PORT, not {text!r}")
     return addr
@@ -125,7 +127,7 @@ def _print_info(tap: Tap, as_json: bool) -> None:
 
 def run_tap(args: argparse.Namespace) -> int:
     names = _names(args.names)
-    control = _address(args.control, "--control")
+    control = _address(args.control, "--control", any_free=True)
     common: dict[str, Any] = {"names": names, "seed": args.seed, "control": control,
                               "name": args.name}  # fmt: skip
     profile = get_profile(args.profile or ("ktcs-type1" if args.pty else "ktcs-type2"))
@@ -137,7 +139,11 @@ def run_tap(args: argparse.Namespace) -> int:
     if args.pty:
         tap = PtyTap(**common)
     else:
-        tap = TcpTap(_address(args.tcp[0], "LISTEN"), _address(args.tcp[1], "TARGET"), **common)
+        tap = TcpTap(
+            _address(args.tcp[0], "LISTEN", any_free=True),
+            _address(args.tcp[1], "TARGET"),
+            **common,
+        )
     for path in args.write:
         tap._writers.append(open_writer(path, link=tap.profile.protocol, profile=tap.profile.name))
 

@@ -3,13 +3,48 @@
 Type I: a device path or any pyserial URL (`/dev/ttyUSB0`, `loop://`, `socket://h:p`,
 `rfc2217://h:p`), or `pty` (make a pty pair here and print the path to give the peer).
 TCP: `tcp://HOST:PORT` (connect) or `listen://HOST:PORT` (serve).
+
+Every port a user gives goes through `check_port`: 1..65535, and 0 ("any free port") only where
+something is served. A port out of range is a UsageError; it never reaches the socket layer,
+which would raise OverflowError on bind and wrap it modulo 65536 on connect.
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from ktcs_bench.errors import UsageError
+
+PORT_MAX = 65535
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+
+
+def check_port(value: object, what: str = "", *, any_free: bool = False) -> int:
+    """`value` (an int or its digits) as a TCP port number, or a UsageError naming `what`.
+    `any_free`: 0 is allowed too (a server binds any free port)."""
+    low = 0 if any_free else 1
+    free = " (0: any free port)" if any_free else ""
+    text = str(value).strip()
+    number = isinstance(value, int) or (isinstance(value, str) and _INTEGER.fullmatch(text))
+    if isinstance(value, bool) or not number:
+        problem = f"the port must be a number {low}..{PORT_MAX}{free}, not {text!r}"
+    elif not low <= int(text) <= PORT_MAX:
+        problem = f"port {int(text)} is out of range {low}..{PORT_MAX}{free}"
+    else:
+        return int(text)
+    raise UsageError(f"{what}: {problem}" if what else problem)
+
+
+def parse_host_port(
+    text: str, what: str = "", *, any_free: bool = False, default_host: str = "127.0.0.1"
+) -> tuple[str, int]:
+    """`HOST:PORT`, `[V6]:PORT` or `:PORT` -> (host, port), the port range-checked."""
+    host, sep, port = text.strip().rpartition(":")
+    if not sep:
+        problem = f"expected HOST:PORT, not {text!r}"
+        raise UsageError(f"{what}: {problem}" if what else problem)
+    return host.strip("[]") or default_host, check_port(port, what, any_free=any_free)
 
 
 @dataclass(frozen=True, slots=True)
@@ -33,10 +68,11 @@ def parse_endpoint(text: str) -> Endpoint:
         return Endpoint("pty", "")
     for scheme in ("tcp", "listen"):
         if text.startswith(f"{scheme}://"):
-            host, sep, port = text[len(scheme) + 3 :].rpartition(":")
-            if not sep or not port.isdigit() or not host:
+            rest = text[len(scheme) + 3 :]
+            if ":" not in rest or rest.startswith(":"):
                 raise UsageError(f"endpoint {text!r}: expected {scheme}://HOST:PORT")
-            return Endpoint(scheme, text, host.strip("[]"), int(port))
+            host, port = parse_host_port(rest, f"endpoint {text}", any_free=scheme == "listen")
+            return Endpoint(scheme, text, host, port)
     return Endpoint("serial", text)
 
 

@@ -9,7 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench.datafiles import data_dir, load_yaml
-from ktcs_bench.errors import ConfigError
+from ktcs_bench.emulator.endpoints import check_port
+from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
 
@@ -94,6 +95,14 @@ def load_lab(path: str | Path | None = None) -> Lab:
     def fail(place: str, problem: str) -> ConfigError:
         return ConfigError(file, place, problem)
 
+    def port(section: dict[str, Any], place: str) -> int | None:
+        """A port the lab serves on: 0..65535 (0: any free port), or None when not given."""
+        value = section.get("port")
+        try:
+            return None if value is None else check_port(value, any_free=True)
+        except UsageError as exc:
+            raise fail(place, str(exc)) from None
+
     if not isinstance(raw, dict):
         raise fail("", "a lab file is a mapping (lab, line, devices, links)")
     for key in ("lab", "line", "devices", "links"):
@@ -120,6 +129,8 @@ def load_lab(path: str | Path | None = None) -> Lab:
         if not isinstance(host, str):
             raise fail(f"{place}.host", "must be an address")
         options = {k: v for k, v in spec.items() if k not in ("kind", "station", "host")}
+        if "port" in options:
+            options["port"] = port(spec, f"{place}.port")
         devices[name] = DeviceSpec(name, kind, station, host, options)
     for kind in ("ctc", "trackcircuit"):
         count = sum(1 for d in devices.values() if d.kind == kind)
@@ -177,8 +188,8 @@ def load_lab(path: str | Path | None = None) -> Lab:
         line_rate=t1.get("line_rate", 9600.0),
         longest_frame_data=t1.get("longest_frame_data", 132),
         type2_profile=str(t2.get("profile", "ktcs-type2")),
-        type2_port=int(t2.get("port", 0)),
-        console_port=console.get("port"),
+        type2_port=port(t2, "type2.port") or 0,
+        console_port=port(console, "console.port"),
         ixl_mode=mode,
     )
     line = lab.load_line()

@@ -15,6 +15,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench.emulator.endpoints import check_port
 from ktcs_bench.errors import UsageError
 
 _ADDRESS = re.compile(r"^(?:tap://)?(?:(?P<host>[\w.:-]+|\[[0-9a-fA-F:]+\]):)?(?P<port>\d{1,5})$")
@@ -61,12 +62,16 @@ def known_taps() -> list[dict[str, Any]]:
     return out
 
 
-def parse_tap_address(spec: str) -> tuple[str, int] | None:
+def parse_tap_address(
+    spec: str, what: str = "tap address", *, any_free: bool = False
+) -> tuple[str, int] | None:
+    """`[tap://][HOST:]PORT` -> (host, port), the port range-checked; None if `spec` is no address
+    (a tap name)."""
     m = _ADDRESS.match(spec)
     if not m:
         return None
     host = (m.group("host") or "127.0.0.1").strip("[]")
-    return host, int(m.group("port"))
+    return host, check_port(m.group("port"), f"{what} {spec}", any_free=any_free)
 
 
 def resolve_tap(spec: str) -> tuple[str, int]:
