@@ -17,10 +17,12 @@ from ktcs_bench.errors import UsageError
 
 
 def use_colour(stream: TextIO, flag: bool | None = None) -> bool:
-    """Colour where a person watches: a tty, not NO_COLOR, unless forced either way."""
+    """Colour where a person watches: `--colour`/`--no-colour` if given, else a tty and no
+    NO_COLOR in the environment (https://no-color.org: set and not empty). `main` decides once,
+    for every command, and hands the answer over as `args.colour`."""
     if flag is not None:
         return flag
-    return stream.isatty() and "NO_COLOR" not in os.environ
+    return stream.isatty() and not os.environ.get("NO_COLOR")
 
 
 def duration(text: str) -> float:

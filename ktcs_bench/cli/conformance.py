@@ -7,7 +7,7 @@ import ssl
 import sys
 from pathlib import Path
 
-from ktcs_bench.cli._common import duration, use_colour
+from ktcs_bench.cli._common import duration
 from ktcs_bench.errors import UsageError
 
 HELP = "run the protocol conformance suite against a device (ours or a real one)"
@@ -86,7 +86,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     t.add_argument("--tls-server-name", help="--role ctc: the name in the CTC's certificate")
     p.add_argument("--list", action="store_true", help="list the cases and exit")
     p.add_argument("--list-faults", action="store_true", help="list the emulator fault variants")
-    p.add_argument("--colour", action=argparse.BooleanOptionalAction, default=None)
     p.add_argument("-v", "--verbose", action="store_true", help="show every check of every case")
     p.set_defaults(handler=run)
 
@@ -171,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
         heartbeat_period=args.heartbeat_period, t_max=args.t_max, retry_count=args.retry_count,
         tolerance=args.tolerance,
     )  # fmt: skip
-    colour = use_colour(sys.stdout, args.colour)
+    colour: bool = args.colour
     live = not args.json
     if live:
         head = SuiteResult(args.role, args.target, protocol, profile.name, timing,

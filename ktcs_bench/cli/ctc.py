@@ -7,11 +7,10 @@ import argparse
 import asyncio
 import json
 import shlex
-import sys
 import time
 from typing import Any
 
-from ktcs_bench.cli._common import host_port, use_colour
+from ktcs_bench.cli._common import host_port
 from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import PeerError, UsageError
 
@@ -116,7 +115,7 @@ def show_text(answer: dict[str, Any]) -> str:
 
 async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -> int:
     host, port = _address(args)
-    colour = use_colour(sys.stdout)
+    colour: bool = args.colour
     failed = False
 
     async def one(words: list[str]) -> None:

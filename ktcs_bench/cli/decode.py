@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 from ktcs_bench.charts.model import CodeChart, load_chart
-from ktcs_bench.cli._common import print_json_line, read_text_inputs, use_colour
+from ktcs_bench.cli._common import print_json_line, read_text_inputs
 from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.hextext import HexText, parse_hex_text
 from ktcs_bench.codec.profile import FrameProfile, get_profile, profile_names
@@ -55,9 +54,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )  # fmt: skip
     p.add_argument("--chart", help="code chart YAML: show code names for items and statuses")
     p.add_argument("--json", action="store_true", help="one JSON object per frame (SPEC §7 keys)")
-    colour = p.add_mutually_exclusive_group()
-    colour.add_argument("--color", dest="colour", action="store_const", const=True, default=None)
-    colour.add_argument("--no-color", dest="colour", action="store_const", const=False)
     p.set_defaults(handler=run)
 
 
@@ -90,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     if not data:
         raise UsageError("no hex bytes found in the input")
     chart: CodeChart | None = load_chart(args.chart) if args.chart else None
-    colour = use_colour(sys.stdout, args.colour)
+    colour: bool = args.colour
     if args.profile == "auto":
         profile, records, scores = choose_profile(data, args.protocol)
         if not args.json:

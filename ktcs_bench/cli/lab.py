@@ -9,7 +9,7 @@ import signal
 import sys
 from typing import Any
 
-from ktcs_bench.cli._common import duration, use_colour
+from ktcs_bench.cli._common import duration
 from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             from ktcs_bench.lab.view import link_map_text
 
-            print(link_map_text(links, use_colour(sys.stdout)))
+            print(link_map_text(links, args.colour))
         return 0
     status = _request(lab_name, {"cmd": "status"})["status"]
     if args.json:
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         from ktcs_bench.lab.view import station_lines
 
-        print("\n".join(station_lines(status, use_colour(sys.stdout))))
+        print("\n".join(station_lines(status, args.colour)))
     return 0
 
 
@@ -108,7 +108,7 @@ def _up(args: argparse.Namespace) -> int:
 
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
     lab = load_lab(resolve_lab_path(args.lab))
-    colour = use_colour(sys.stdout)
+    colour = args.colour
     runner = LabRunner(lab, unpaced=args.unpaced)
 
     async def main() -> int:

@@ -9,6 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from ktcs_bench import __version__
+from ktcs_bench.cli._common import use_colour
 from ktcs_bench.errors import ConfigError, KtcsError, PeerError, UsageError
 
 EXIT_OK = 0
@@ -36,9 +37,30 @@ examples:
   ktcs-bench scenario run emulators/scenarios/seed001_follower.yaml
   ktcs-bench dissector --install                     # Wireshark shows ktcs1/ktcs2 in captures
 
+colour: on a terminal, unless NO_COLOR is set; --colour / --no-colour (any command) decide.
+
 exit codes: 0 ok, 1 a check failed (bad CRC, failed case), 2 usage/config error,
             3 peer or I/O failure, 130 interrupted.
 """
+
+
+def _add_colour_option(parser: argparse.ArgumentParser, top: bool) -> None:
+    """`--colour/--no-colour` (and, unlisted, `--color/--no-color`) on `parser` and every
+    subcommand under it. Below the top an option given overrides; unset, it leaves the top's value."""
+    parser.add_argument(
+        "--colour", dest="colour", action=argparse.BooleanOptionalAction,
+        default=None if top else argparse.SUPPRESS,
+        help="colour the output or not (default: on a terminal, unless NO_COLOR is set)",
+    )  # fmt: skip
+    parser.add_argument("--color", dest="colour", action=argparse.BooleanOptionalAction,
+                        default=argparse.SUPPRESS, help=argparse.SUPPRESS)  # fmt: skip
+    seen: set[int] = set()
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                if id(child) not in seen:  # aliases name the same parser
+                    seen.add(id(child))
+                    _add_colour_option(child, top=False)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -59,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
         register = getattr(module, "register", None)
         if register is not None:
             register(sub)
+    _add_colour_option(parser, top=True)
     return parser
 
 
@@ -69,6 +92,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if handler is None:
         parser.print_help()
         return EXIT_USAGE
+    args.colour = use_colour(sys.stdout, args.colour)  # decided once, for every command
     try:
         return int(handler(args))
     except KeyboardInterrupt:

@@ -16,7 +16,7 @@ import serial
 from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
 from ktcs_bench.capture.arq import ArqTracker
 from ktcs_bench.charts.model import CodeChart, load_chart
-from ktcs_bench.cli._common import duration, print_json_line, use_colour
+from ktcs_bench.cli._common import duration, print_json_line
 from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
@@ -72,9 +72,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--count", type=int, help="stop after this many frames")
     p.add_argument("--timeout", type=duration, help="stop after this many seconds")
     p.add_argument("--baud", type=int, default=9600, help="serial endpoint baud rate (9600)")
-    colour = p.add_mutually_exclusive_group()
-    colour.add_argument("--color", dest="colour", action="store_const", const=True, default=None)
-    colour.add_argument("--no-color", dest="colour", action="store_const", const=False)
     p.set_defaults(handler=run)
 
 
@@ -217,7 +214,7 @@ def _stream_records(
 
 def run(args: argparse.Namespace) -> int:
     chart = load_chart(args.chart) if args.chart else None
-    colour = use_colour(sys.stdout, args.colour)
+    colour: bool = args.colour
     deadline = None if args.timeout is None else time.monotonic() + args.timeout
     source: str = args.source
     items: Iterator[CaptureRecord | dict[str, Any]]

@@ -23,7 +23,7 @@ from ktcs_bench.capture import (
     reverse_direction,
 )
 from ktcs_bench.charts.model import load_chart
-from ktcs_bench.cli._common import duration, use_colour
+from ktcs_bench.cli._common import duration
 from ktcs_bench.cli.monitor import FramePrinter
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.stream import StreamDecoder
@@ -90,9 +90,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--json", action="store_true", help="JSON lines (SPEC §7 keys + time, direction)"
     )
     p.add_argument("--quiet", action="store_true", help="do not print the frames")
-    colour = p.add_mutually_exclusive_group()
-    colour.add_argument("--color", dest="colour", action="store_const", const=True, default=None)
-    colour.add_argument("--no-color", dest="colour", action="store_const", const=False)
     p.set_defaults(handler=run)
 
 
@@ -321,7 +318,7 @@ def run(args: argparse.Namespace) -> int:
         profile = _choose_profile(args, capture, header)
         printer = FramePrinter(
             profile, chart=load_chart(args.chart) if args.chart else None,
-            colour=use_colour(sys.stdout, args.colour), as_json=args.json,
+            colour=args.colour, as_json=args.json,
         )  # fmt: skip
         writers = [open_writer(p, link=profile.protocol, profile=profile.name) for p in args.record]
         replies: list[CaptureRecord] = []

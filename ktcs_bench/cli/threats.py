@@ -10,7 +10,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.cli._common import use_colour
 from ktcs_bench.errors import UsageError
 
 HELP = "inject the EN 50159 threats into running links through their taps; report the defences"
@@ -62,8 +61,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--markdown", metavar="FILE", help="also write the Markdown table here")
     p.add_argument("--junit", metavar="FILE", help="also write a JUnit XML report (a CI reads it)")
-    p.add_argument("--colour", action=argparse.BooleanOptionalAction, default=None,
-                   help="colour the summary (default: on a terminal)")  # fmt: skip
     p.set_defaults(handler=run)
 
 
@@ -91,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     unknown = [t for t in args.threat if t not in THREATS]
     if unknown:
         raise UsageError(f"unknown threat(s) {', '.join(unknown)} (known: {', '.join(THREATS)})")
-    colour = use_colour(sys.stdout, args.colour)
+    colour: bool = args.colour
 
     def progress(text: str) -> None:
         if not args.json and sys.stderr.isatty():

@@ -3,22 +3,62 @@
 from __future__ import annotations
 
 import os
+import select
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from ktcs_bench.datafiles import data_dir
 
+CLI = [sys.executable, "-m", "ktcs_bench.cli.main"]
+
 
 def cli(
-    *args: str, env: dict[str, str] | None = None, timeout: float = 60
+    *args: str, env: dict[str, str] | None = None, timeout: float = 120
 ) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "ktcs_bench.cli.main", *args], capture_output=True, text=True,
-        timeout=timeout, env={**os.environ, **(env or {})},
+        [*CLI, *args], capture_output=True, text=True, timeout=timeout,
+        env={**os.environ, **(env or {})},
     )  # fmt: skip
+
+
+def cli_on_tty(*args: str, env: dict[str, str], timeout: float = 120) -> tuple[int, str]:
+    """The command with its stdout on a real terminal (a pty), as a person runs it: (exit code,
+    what the terminal got). `env` replaces NO_COLOR handling of the caller's environment."""
+    master, slave = os.openpty()
+    base = {k: v for k, v in os.environ.items() if k != "NO_COLOR"}
+    try:
+        proc = subprocess.Popen(
+            [*CLI, *args], stdout=slave, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL,
+            env={**base, **env},
+        )  # fmt: skip
+        os.close(slave)
+        slave = -1
+        out = bytearray()
+        deadline = time.monotonic() + timeout
+        while True:
+            if time.monotonic() > deadline:
+                proc.kill()
+                proc.wait()
+                raise AssertionError(f"{args} did not end within {timeout} s")
+            if not select.select([master], [], [], 0.2)[0]:
+                continue
+            try:
+                chunk = os.read(master, 65536)
+            except OSError:  # EIO: the child closed the terminal
+                break
+            if not chunk:
+                break
+            out += chunk
+        proc.communicate(timeout=timeout)
+        return proc.returncode, out.decode("utf-8", errors="replace")
+    finally:
+        if slave >= 0:
+            os.close(slave)
+        os.close(master)
 
 
 @pytest.fixture
