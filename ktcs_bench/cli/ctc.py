@@ -103,13 +103,18 @@ def _address(args: argparse.Namespace) -> tuple[str, int]:
 
 
 def show_text(answer: dict[str, Any]) -> str:
+    """One station as the CTC sees it; what it does not know (link down, no full state yet) reads
+    "unknown", never the last indications."""
     s = answer["summary"]
+    known = s.get("known", True)
+    none = "-" if known else "unknown"
     lines = [f"station {s['station']}: {s['mode']} mode, link {s['link']}"
-             + (" (center requested)" if s.get("center_requested") else "")]  # fmt: skip
-    lines.append("  routes   " + (", ".join(s["routes"]) or "-"))
+             + (" (center requested)" if s.get("center_requested") else "")
+             + ("" if known else " (indications unknown until the IXL sends its full state)")]  # fmt: skip
+    lines.append("  routes   " + (", ".join(s["routes"]) or none))
     lines.append("  points   " + " ".join(f"{k}:{v}" for k, v in s["points"].items()))
     lines.append("  signals  " + " ".join(f"{k}:{v}" for k, v in s["signals"].items()))
-    lines.append("  occupied " + (" ".join(s["occupied"]) or "-"))
+    lines.append("  occupied " + (" ".join(s["occupied"]) or none))
     return "\n".join(lines)
 
 
@@ -140,9 +145,8 @@ async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -
                 print(show_text({"summary": st}))
         elif obj["cmd"] == "log":
             for e in answer.get("log", []):
-                print(
-                    f"{time.strftime('%H:%M:%S', time.localtime(e['time']))} {e['command']} -> {e.get('result')}"
-                )
+                at = time.strftime("%H:%M:%S", time.localtime(e["time"]))
+                print(f"{at} {e['command']} -> {e.get('result', 'no result yet')}")
         else:
             text = (
                 answer.get("result")

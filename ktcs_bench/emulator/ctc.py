@@ -23,12 +23,31 @@ from ktcs_bench.type2.net import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")
 CONTROL_TIMEOUT = 10.0
+UNKNOWN = "unknown"  # an indication the CTC does not know now (link down, no full state yet)
 
 
 def _signal(name: str) -> str:
     """Operators write S1, S01 or 01; station data names signals "01"."""
     s = name.strip().upper().lstrip("S")
     return s.zfill(2) if s.isdigit() else s
+
+
+def command_words(obj: dict[str, Any]) -> str:
+    """An operator command as the operator types it to `ktcs-bench ctc` ("route set 18 01 11"),
+    for the command log; a command of another shape as its keys and values."""
+    cmd, st = str(obj.get("cmd", "?")), obj.get("station", "?")
+    if cmd == "route":
+        entry, exit_ = _signal(str(obj.get("entry", "?"))), _signal(str(obj.get("exit", "?")))
+        return f"route {obj.get('action', 'set')} {st} {entry} {exit_}"
+    if cmd == "point":
+        return f"point {obj.get('position', '?')} {st} {obj.get('point', '?')}"
+    if cmd == "signal":
+        return f"signal {obj.get('action', 'stop')} {st} {_signal(str(obj.get('signal', '?')))}"
+    if cmd == "mode":
+        return f"mode {obj.get('mode', '?')} {st}"
+    if cmd == "control":
+        return f"control {st} {obj.get('code', '?')} {obj.get('value', 1)}"
+    return " ".join([cmd, *(f"{k}={v}" for k, v in obj.items() if k != "cmd")])
 
 
 class CtcDevice(Device):
@@ -77,10 +96,28 @@ class CtcDevice(Device):
         return {chart.name_of(code) or str(code): v for code, v in view.state.items()}
 
     def summary(self, st: int) -> dict[str, Any]:
-        """Mode, routes, points, signals, occupancy and link of one station, from its indications."""
-        state = self.named(st)
+        """Mode, routes, points, signals, occupancy and link of one station, from its indications.
+
+        The CTC knows them only while the link is up and has brought a full state: otherwise
+        (`known` false) mode, points and signals read "unknown" and no route or occupied track
+        circuit is listed -- never the last ones seen, which may no longer hold."""
         view = self.server.stations.get(st)
         station = self.line.station(st)
+        known = bool(view is not None and view.connected and view.synced)
+        if not known:
+            return {
+                "station": st,
+                "link": "up" if view is not None and view.connected else "down",
+                "synced": False,
+                "known": False,
+                "mode": UNKNOWN,
+                "center_requested": False,
+                "routes": [],
+                "points": {p.name: UNKNOWN for p in station.points},
+                "signals": {s.name: UNKNOWN for s in station.lamp_signals},
+                "occupied": [],
+            }
+        state = self.named(st)
         on = [k for k, v in state.items() if v]
         points = {}
         for p in station.points:
@@ -97,8 +134,9 @@ class CtcDevice(Device):
             signals[s.name] = shown[0] if shown else "?"
         return {
             "station": st,
-            "link": "up" if view is not None and view.connected else "down",
-            "synced": bool(view is not None and view.synced),
+            "link": "up",
+            "synced": True,
+            "known": True,
             "mode": "center" if state.get(n.ctc(st)) else "local" if state.get(n.loc(st)) else "?",
             "center_requested": bool(state.get(n.cmr(st))),
             "routes": sorted(r.name for r in station.routes if state.get(n.rsi(st, r.name))),
@@ -162,14 +200,14 @@ class CtcDevice(Device):
         return await super().command(obj)
 
     async def operate(self, obj: dict[str, Any]) -> dict[str, Any]:
-        entry: dict[str, Any] = {"time": time.time(), "command": obj}
+        entry: dict[str, Any] = {"time": time.time(), "command": command_words(obj)}
         self.command_log.append(entry)
         try:
             st, code_name, value = self.control_name(obj)
             code = self.ctl[st].number_of(code_name)
         except (KeyError, ValueError) as exc:
             entry["result"] = f"refused by the CTC: {exc}"
-            log.warning("command %s refused: %s", obj, exc)
+            log.warning("command %s refused: %s", entry["command"], exc)
             return {"ok": False, "error": str(exc).strip("'\"")}
         view = self.server.stations.get(st)
         if view is None or not view.connected:

@@ -38,13 +38,14 @@ def station_lines(status: dict[str, Any], colour: bool) -> list[str]:
                             for k, up in links.items() if k != "ctc" or True)  # fmt: skip
         mode = s.get("mode", "?")
         mode_txt = _c(mode, CYAN if mode == "center" else YELLOW, colour)
-        routes = ", ".join(s.get("routes", [])) or "-"
+        none = "-" if s.get("known", True) else "unknown"  # the CTC does not know them now
+        routes = ", ".join(s.get("routes", [])) or none
         points = " ".join(f"{p}:{pos[0].upper() if pos else '?'}{'L' if 'locked' in pos else ''}"
                           for p, pos in s.get("points", {}).items())  # fmt: skip
         signals = " ".join(
             _c(f"{n}:{a}", ASPECT.get(a, ""), colour) for n, a in s.get("signals", {}).items()
         )
-        occ = " ".join(s.get("occupied", [])) or "-"
+        occ = " ".join(s.get("occupied", [])) or none
         out.append(f"{_c(f'st{st}', BOLD, colour)} {mode_txt:<8} links {link_txt}")
         out.append(f"    routes {routes}   points {points}")
         out.append(f"    signals {signals}")
