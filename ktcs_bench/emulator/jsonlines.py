@@ -71,6 +71,11 @@ async def serve(
                 await writer.drain()
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
+        except asyncio.CancelledError:
+            # the process is shutting down and asyncio.run cancels what is left: the connection
+            # ends here, quietly (Python 3.11's stream server logs a cancelled one as an error
+            # with a CancelledError traceback)
+            pass
         finally:
             if on_close is not None:
                 on_close(peer)
