@@ -36,7 +36,7 @@ from ktcs_bench.train.curves import (
 )
 from ktcs_bench.train.deceleration import GradientProfile, SafeDeceleration, StepFunction
 from ktcs_bench.train.dynamics import TrainParams
-from ktcs_bench.train.endpoint import CycleInputs, LineData, TrainConfig, TrainEndpoint
+from ktcs_bench.train.endpoint import LineData, TrainConfig, TrainEndpoint
 from ktcs_bench.train.mrsp import Restriction, build_mrsp
 from ktcs_bench.train.units import kmh
 
@@ -130,10 +130,9 @@ def bench_cycle_update(repeats: int) -> str:
     _, restr, gradient = _line()
     line = LineData(LENGTH, [i * 100.0 for i in range(151)], gradient, restr)
     ep = TrainEndpoint(TrainConfig("T", TrainParams(), start=500.0), line)
-    inputs = CycleInputs()
 
     def work(i: int) -> object:
-        ep._rebuild(9000.0 + 0.83 * i, inputs)
+        ep._rebuild(9000.0 + 0.83 * i, None)
         return ep.limits
 
     work(0)

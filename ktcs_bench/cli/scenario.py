@@ -16,8 +16,8 @@ EPILOG = """\
 example:
   ktcs-bench scenario run emulators/scenarios/seed001_follower.yaml --out /tmp/report
 
-writes speed_distance.png, time_distance.png, events.log and summary.json into --out
-(default: ./scenario-report/<scenario name>). Exit codes: 0 all assertions pass, 1 an assertion
+writes speed_distance.png and time_distance.png, each with the data it draws as .csv beside
+it, events.log and summary.json into --out (default: ./scenario-report/<scenario name>). Exit codes: 0 all assertions pass, 1 an assertion
 failed, 2 bad scenario file.
 """
 

@@ -2,9 +2,9 @@
 
 `TrainSource` is what the console asks: which trains there are, and for one train its curves
 (MRSP, EBI, SBI, permitted) over a window around it plus its actual point (front, speed).
-`EndpointTrains` computes that from in-process `TrainEndpoint` objects with the same curve code
-the onboard supervision uses (`train.curves.curves_on_grid`); a process adapter for remote trains
-only has to implement the two methods. Speeds are km/h here (for display), positions metres.
+`EndpointTrains` computes that from in-process `TrainEndpoint` objects: the curves of the EBD the
+onboard supervision reads (`TrainEndpoint.curve_set`, every target it supervises, kTCS codes
+included); a process adapter for remote trains only has to implement the two methods. Speeds are km/h here (for display), positions metres.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ktcs_bench.train.curves import Target, TargetKind, curves_on_grid
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.train.units import to_kmh
 
@@ -64,8 +63,7 @@ def _clean(values: np.ndarray[Any, Any]) -> list[float | None]:
 
 def endpoint_speed_distance(train_id: str, ep: TrainEndpoint) -> SpeedDistance:
     """Curves of `ep` as they stand after its last cycle, sampled around its front."""
-    targets = [*ep.mrsp.targets(), Target(ep.target_point, 0.0, TargetKind.STOP)]
-    cs = curves_on_grid(ep.grid, targets, ep.limits.mrsp, ep.times, ep.v_cap)
+    cs = ep.curve_set()
     front = ep.position.max_safe_front
     lo = max(float(cs.x[0]), front - BEHIND_M)
     hi = min(float(cs.x[-1]), max(front + AHEAD_MIN_M, ep.target_point + 100.0))

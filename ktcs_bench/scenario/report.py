@@ -1,18 +1,45 @@
-"""The scenario report: speed–distance and time–distance plots (PNG), event log, JSON summary.
+"""The scenario report: speed–distance and time–distance plots (PNG) with the data behind each plot
+(CSV beside it), the event log and a JSON summary.
 
 Owns turning a finished run into files. matplotlib runs on the Agg backend (no display needed).
-Speeds are drawn in km/h, the only place besides the YAML where km/h appears.
+Speeds are drawn in km/h, the only place besides the YAML where km/h appears. Each plot's numbers
+are formed once (`speed_distance_rows`, `time_distance_rows`) and both drawn and written, so the
+CSV holds exactly what the plot shows:
+
+* ``speed_distance.csv`` — one row per train and cycle: time, true front, speed (the "actual"
+  line); every few cycles also the supervision limits at the max-safe front where they were
+  sampled (MRSP, EBI, SBI, warning, permitted; empty between samples; `NO_LIMIT_KMH` where a
+  curve sets no limit there);
+* ``time_distance.csv`` — one row per train and cycle: time, front, rear;
+  ``time_distance_marks.csv`` — the protection zones and station stop marks drawn behind them.
 """
 
 from __future__ import annotations
 
+import csv
 import json
+import math
 from pathlib import Path
 from typing import Any
 
 from ktcs_bench.scenario.assertions import Outcome
 from ktcs_bench.scenario.runner import RunResult
 from ktcs_bench.train.units import to_kmh
+
+NO_LIMIT_KMH = 400.0
+"""A curve that limits nothing at a place (no target within reach) is drawn, and written, here."""
+LIMITS = ("mrsp", "ebi", "sbi", "warning", "permitted")
+"""The supervision limits the speed–distance plot draws, in the order of the curves."""
+SPEED_DISTANCE_COLUMNS = (
+    "train",
+    "t_s",
+    "front_m",
+    "speed_kmh",
+    "safe_front_m",
+    *(f"{name}_kmh" for name in LIMITS),
+)
+TIME_DISTANCE_COLUMNS = ("train", "t_s", "front_m", "rear_m")
+MARK_COLUMNS = ("kind", "name", "from_m", "to_m", "active_from_s", "active_until_s")
 
 
 def summary(
@@ -51,6 +78,71 @@ def summary(
     return out
 
 
+def _kmh(v: float) -> float:
+    return min(to_kmh(v), NO_LIMIT_KMH) if not math.isnan(v) else NO_LIMIT_KMH
+
+
+def speed_distance_rows(result: RunResult) -> list[dict[str, Any]]:
+    """The speed–distance plot's numbers (`SPEED_DISTANCE_COLUMNS`), km/h; None: not sampled."""
+    rows: list[dict[str, Any]] = []
+    for tid, tr in result.traces.items():
+        sampled = dict(zip(tr.limits_row, range(len(tr.limits_row)), strict=True))
+        for i, (t, x, v) in enumerate(zip(tr.t, tr.head, tr.speed, strict=True)):
+            row: dict[str, Any] = {"train": tid, "t_s": t, "front_m": x, "speed_kmh": to_kmh(v)}
+            k = sampled.get(i)
+            row["safe_front_m"] = None if k is None else tr.limits_x[k]
+            for name in LIMITS:
+                values = tr.limits.get(name)
+                row[f"{name}_kmh"] = None if k is None or values is None else _kmh(values[k])
+            rows.append(row)
+    return rows
+
+
+def time_distance_rows(result: RunResult) -> list[dict[str, Any]]:
+    """The time–distance plot's numbers (`TIME_DISTANCE_COLUMNS`)."""
+    return [
+        {"train": tid, "t_s": t, "front_m": head, "rear_m": tail}
+        for tid, tr in result.traces.items()
+        for t, head, tail in zip(tr.t, tr.head, tr.tail, strict=True)
+    ]
+
+
+def mark_rows(result: RunResult) -> list[dict[str, Any]]:
+    """What the time–distance plot draws behind the trains (`MARK_COLUMNS`)."""
+    scn = result.scenario
+    rows: list[dict[str, Any]] = [
+        {
+            "kind": "protection_zone",
+            "name": f"zone{i + 1}",
+            "from_m": z.start,
+            "to_m": z.end,
+            "active_from_s": z.active_from,
+            "active_until_s": z.active_until,
+        }
+        for i, z in enumerate(scn.zones)
+    ]
+    rows += [
+        {"kind": "stop_mark", "name": st.name, "from_m": st.stop_mark, "to_m": st.stop_mark}
+        for st in scn.line.stations
+    ]
+    return rows
+
+
+def _write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
+    with path.open("w", encoding="utf-8", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=columns, extrasaction="raise")
+        w.writeheader()
+        for row in rows:
+            w.writerow(
+                {
+                    c: ("" if row.get(c) is None else round(row[c], 4))
+                    if not isinstance(row.get(c), str)
+                    else row[c]
+                    for c in columns
+                }
+            )
+
+
 def write_report(
     result: RunResult, outcomes: list[Outcome], out_dir: Path, wall_s: float | None = None
 ) -> dict[str, Path]:
@@ -62,28 +154,34 @@ def write_report(
     out_dir.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
     # speed–distance, one panel per train
+    sd = speed_distance_rows(result)
     n = len(result.traces)
     fig, axes = plt.subplots(n, 1, figsize=(11, 3.6 * n), squeeze=False)
-    for ax, (tid, tr) in zip(axes[:, 0], result.traces.items(), strict=True):
-        lx = tr.limits_x
-        styles = {
-            "mrsp": ("MRSP", "k", "--"),
-            "ebi": ("EBI", "r", "-"),
-            "sbi": ("SBI", "orange", "-"),
-            "warning": ("warning", "gold", "-"),
-            "permitted": ("permitted", "g", "-"),
-        }
+    styles = {
+        "mrsp": ("MRSP", "k", "--"),
+        "ebi": ("EBI", "r", "-"),
+        "sbi": ("SBI", "orange", "-"),
+        "warning": ("warning", "gold", "-"),
+        "permitted": ("permitted", "g", "-"),
+    }
+    for ax, tid in zip(axes[:, 0], result.traces, strict=True):
+        rows = [r for r in sd if r["train"] == tid]
+        samples = [r for r in rows if r["safe_front_m"] is not None]
         for key, (label, colour, ls) in styles.items():
-            ys = [min(to_kmh(v), 400.0) for v in tr.limits.get(key, [])]
-            if ys:
-                ax.plot(lx, ys, color=colour, ls=ls, lw=1.2, label=label)
-        ax.plot(tr.head, [to_kmh(v) for v in tr.speed], color="b", lw=1.6, label="actual")
+            ax.plot(
+                [r["safe_front_m"] for r in samples],
+                [r[f"{key}_kmh"] for r in samples],
+                color=colour,
+                ls=ls,
+                lw=1.2,
+                label=label,
+            )
+        actual = [r["speed_kmh"] for r in rows]
+        ax.plot([r["front_m"] for r in rows], actual, color="b", lw=1.6, label="actual")
         ax.set_title(f"{result.scenario.name}: train {tid} — speed vs distance")
         ax.set_xlabel("front position (m)")
         ax.set_ylabel("speed (km/h)")
-        top = max(
-            [to_kmh(max(tr.speed, default=0.0))] + [to_kmh(v) for v in tr.limits.get("mrsp", [0.0])]
-        )
+        top = max([max(actual, default=0.0)] + [r["mrsp_kmh"] for r in samples])
         ax.set_ylim(0, top * 1.25 + 5)
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8, ncol=3)
@@ -91,15 +189,25 @@ def write_report(
     paths["speed_distance"] = out_dir / "speed_distance.png"
     fig.savefig(paths["speed_distance"], dpi=110)
     plt.close(fig)
+    paths["speed_distance_csv"] = out_dir / "speed_distance.csv"
+    _write_csv(paths["speed_distance_csv"], SPEED_DISTANCE_COLUMNS, sd)
     # time–distance
+    td = time_distance_rows(result)
+    marks = mark_rows(result)
     fig, ax = plt.subplots(figsize=(11, 5))
-    for tid, tr in result.traces.items():
-        line = ax.plot(tr.t, tr.head, lw=1.4, label=f"{tid} front")
-        ax.fill_between(tr.t, tr.tail, tr.head, color=line[0].get_color(), alpha=0.25)
-    for z in result.scenario.zones:
-        ax.axhspan(z.start, z.end, color="r", alpha=0.12, label="protection zone")
-    for st in result.scenario.line.stations:
-        ax.axhline(st.stop_mark, color="grey", lw=0.6, ls=":")
+    for tid in result.traces:
+        rows = [r for r in td if r["train"] == tid]
+        t = [r["t_s"] for r in rows]
+        line = ax.plot(t, [r["front_m"] for r in rows], lw=1.4, label=f"{tid} front")
+        ax.fill_between(
+            t, [r["rear_m"] for r in rows], [r["front_m"] for r in rows],
+            color=line[0].get_color(), alpha=0.25,
+        )  # fmt: skip
+    for m in marks:
+        if m["kind"] == "protection_zone":
+            ax.axhspan(m["from_m"], m["to_m"], color="r", alpha=0.12, label="protection zone")
+        else:
+            ax.axhline(m["from_m"], color="grey", lw=0.6, ls=":")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("position (m)")
     ax.set_title(f"{result.scenario.name}: time–distance")
@@ -109,6 +217,10 @@ def write_report(
     paths["time_distance"] = out_dir / "time_distance.png"
     fig.savefig(paths["time_distance"], dpi=110)
     plt.close(fig)
+    paths["time_distance_csv"] = out_dir / "time_distance.csv"
+    _write_csv(paths["time_distance_csv"], TIME_DISTANCE_COLUMNS, td)
+    paths["time_distance_marks_csv"] = out_dir / "time_distance_marks.csv"
+    _write_csv(paths["time_distance_marks_csv"], MARK_COLUMNS, marks)
     paths["events"] = out_dir / "events.log"
     with paths["events"].open("w", encoding="utf-8") as fh:
         for e in result.events:

@@ -36,6 +36,9 @@ class Trace:
     ebd_at_head: list[float] = field(default_factory=list)
     """EBD speed at the true front each cycle (for the 'never exceeds EBD' check)."""
     limits_x: list[float] = field(default_factory=list)
+    """Where the supervision limits were sampled (the max-safe front), every few cycles."""
+    limits_row: list[int] = field(default_factory=list)
+    """The trace row (cycle) of each sample."""
     limits: dict[str, list[float]] = field(default_factory=dict)
 
 
@@ -118,6 +121,7 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
             tr.ebd_at_head.append(t.limits.ebd_at(x))
             if record_limits:
                 tr.limits_x.append(out.position.max_safe_front)
+                tr.limits_row.append(len(tr.t) - 1)
                 for name, v in t.limit_speeds().items():
                     tr.limits.setdefault(name, []).append(v)
         if rm is not None and len(rm.events) > rm_seen:

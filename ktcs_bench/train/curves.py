@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -86,6 +87,16 @@ class Target:
         if self.kind is TargetKind.SPEED:
             return self.speed + fixed.dv_ebi(self.speed)
         return self.speed
+
+
+def hold_speeds(target: Target, fixed: FixedValues) -> tuple[float, float, float, float, float]:
+    """What each curve (EBI, SBI, warning, permitted, indication) reads at and beyond a target,
+    looking ahead from before it: the new MRSP's ceiling for that curve — V + dV_ebi (the EBD's
+    foot), V + dV_sbi, V + dV_warning, V, V — or 0 for a stop target."""
+    if target.kind is TargetKind.STOP:
+        return (0.0, 0.0, 0.0, 0.0, 0.0)
+    v = target.speed
+    return (v + fixed.dv_ebi(v), v + fixed.dv_sbi(v), v + fixed.dv_warning(v), v, v)
 
 
 @dataclass(frozen=True)
@@ -397,7 +408,7 @@ def ebd_on_grid(
     return out
 
 
-def _ebd_envelope(
+def ebd_envelope(
     grid: Grid, targets: list[Target], fixed: FixedValues, v_cap: float
 ) -> tuple[FloatArray, list[int]]:
     """The minimum EBD over every target, and the grid indices where it jumps.
@@ -506,7 +517,7 @@ def _ebd_envelope(
 def _ebd_envelope_walk(
     grid: Grid, targets: list[Target], fixed: FixedValues, v_cap: float
 ) -> tuple[FloatArray, list[int]]:
-    """`_ebd_envelope` target by target (for gradients steeper than the brake)."""
+    """`ebd_envelope` target by target (for gradients steeper than the brake)."""
     n = len(grid.x)
     out = np.full(n, np.inf)
     stop_k = n
@@ -530,7 +541,7 @@ def ebd_min_on_grid(
     grid: Grid, targets: list[Target], fixed: FixedValues, v_cap: float
 ) -> FloatArray:
     """The supervised EBD: the minimum over every target ahead (not only the next one)."""
-    return _ebd_envelope(grid, targets, fixed, v_cap)[0]
+    return ebd_envelope(grid, targets, fixed, v_cap)[0]
 
 
 @dataclass(frozen=True)
@@ -644,13 +655,65 @@ def curves_on_grid(
     The EBD is the minimum over every target; the other curves are that envelope shifted by
     v·(T_be + lead) (`_EnvelopeShift`), each capped by its ceiling V_MRSP + dV.
     """
-    ebd, breaks = _ebd_envelope(grid, targets, times.fixed, v_cap)
-    shift = _EnvelopeShift(grid.x, ebd, breaks)
-    curves = [shift(t) for t in _leads(times)]
-    for curve, ceiling in zip(curves, _ceilings(mrsp, times.fixed), strict=True):
+    ebd, breaks = ebd_envelope(grid, targets, times.fixed, v_cap)
+    return curves_from_envelope(grid.x, ebd, breaks, targets, mrsp, times)
+
+
+def curves_from_envelope(
+    x: FloatArray,
+    ebd: FloatArray,
+    breaks: list[int],
+    targets: Sequence[Target],
+    mrsp: FloatArray,
+    times: CurveTimes,
+) -> CurveSet:
+    """The curve set of an EBD envelope already built on grid `x` from `targets` (`breaks`: the
+    grid indices where it jumps, `ebd_envelope`): each curve the envelope shifted by
+    v·(T_be + lead), no higher than each target's hold for it beyond the target
+    (`_hold_at_targets`), capped by its ceiling."""
+    shift = _EnvelopeShift(x, ebd, breaks)
+    leads = _leads(times)
+    curves = [shift(t) for t in leads]
+    ceilings = _ceilings(mrsp, times.fixed)
+    tops = [float(c.max()) if len(c) else 0.0 for c in ceilings]
+    _hold_at_targets(x, ebd, curves, tops, leads, targets, times.fixed)
+    for curve, ceiling in zip(curves, ceilings, strict=True):
         np.minimum(curve, ceiling, out=curve)
     ebi, sbi, warn, perm, ind = curves
-    return CurveSet(grid.x, mrsp, ebd, ebi, sbi, warn, perm, ind)
+    return CurveSet(x, mrsp, ebd, ebi, sbi, warn, perm, ind)
+
+
+def _hold_at_targets(
+    x: FloatArray,
+    ebd: FloatArray,
+    curves: list[FloatArray],
+    tops: list[float],
+    leads: list[float],
+    targets: Sequence[Target],
+    fixed: FixedValues,
+    start: int = 0,
+) -> None:
+    """Beyond a target each curve reads the target's hold for it (`hold_speeds`), so at s
+    before the target a curve with total lead T is no higher than max(hold, (L − s)/T): any
+    faster and its look-ahead passes L. Applied in place from node `start` on, where it can
+    bind: a shifted curve whose look-ahead passes L is already no higher than the EBD there
+    (at most `ebd` at the last node before L), nor than its top speed `tops`."""
+    n = len(x)
+    for t in targets:
+        loc = t.location
+        if not math.isfinite(loc):
+            continue
+        hi = int(x.searchsorted(loc, side="left"))  # nodes before the target
+        k = int(x.searchsorted(loc, side="right"))
+        left = float(ebd[k - 1]) if 0 < k <= n else math.inf
+        for curve, top, lead, hold in zip(curves, tops, leads, hold_speeds(t, fixed), strict=True):
+            reach = min(top, left)
+            if lead <= 0.0 or hold >= reach:
+                continue
+            lo = max(int(x.searchsorted(loc - reach * lead, side="left")), start)
+            if hi > lo:
+                seg = curve[lo:hi]
+                np.minimum(seg, np.maximum((loc - x[lo:hi]) / lead, hold), out=seg)
 
 
 class CurveBuilder:
@@ -674,11 +737,16 @@ class CurveBuilder:
         v_cap: float,
     ) -> None:
         self.grid, self.mrsp, self.times, self.v_cap = grid, mrsp, times, v_cap
-        self._static, self._breaks = _ebd_envelope(grid, static_targets, times.fixed, v_cap)
+        self._targets = list(static_targets)
+        self._static, self._breaks = ebd_envelope(grid, static_targets, times.fixed, v_cap)
         self._leads = _leads(times)
         self._ceilings = _ceilings(mrsp, times.fixed)
+        self._tops = [float(c.max()) if len(c) else 0.0 for c in self._ceilings]
         shift = _EnvelopeShift(grid.x, self._static, self._breaks)
         self._curves = [shift(t) for t in self._leads]
+        _hold_at_targets(
+            grid.x, self._static, self._curves, self._tops, self._leads, static_targets, times.fixed
+        )
         for curve, ceiling in zip(self._curves, self._ceilings, strict=True):
             np.minimum(curve, ceiling, out=curve)
         step = float(grid.x[1] - grid.x[0]) if len(grid.x) > 1 else 1.0
@@ -699,11 +767,14 @@ class CurveBuilder:
         w = max(min(lo, k) - self._reach, 0)
         shift = _EnvelopeShift(x[w:], ebd[w:], [b - w for b in breaks if b > w])
         curves = []
-        for cached, lead, ceiling in zip(self._curves, self._leads, self._ceilings, strict=True):
+        for cached, lead in zip(self._curves, self._leads, strict=True):
             curve = cached.copy()
-            part = shift(lead)
-            np.minimum(part, ceiling[w:], out=curve[w:])
+            curve[w:] = shift(lead)
             curves.append(curve)
+        targets = [t for t in self._targets if t.location > x[w]] + [Target(stop)]
+        _hold_at_targets(x, ebd, curves, self._tops, self._leads, targets, self.times.fixed, w)
+        for curve, ceiling in zip(curves, self._ceilings, strict=True):
+            np.minimum(curve[w:], ceiling[w:], out=curve[w:])
         ebi, sbi, warn, perm, ind = curves
         return CurveSet(x, self.mrsp, ebd, ebi, sbi, warn, perm, ind)
 

@@ -18,19 +18,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from ktcs_bench.train.ato import AtoController, AtoInputs, AtoState, AtoStateMachine
 from ktcs_bench.train.curves import (
+    CurveSet,
     CurveTimes,
     Grid,
     Target,
     TargetKind,
-    ebd_min_on_grid,
+    curves_from_envelope,
+    ebd_envelope,
     ebd_segment,
 )
 from ktcs_bench.train.deceleration import (
+    FloatArray,
     GradientProfile,
     RotatingMass,
     SafeDeceleration,
@@ -39,7 +43,16 @@ from ktcs_bench.train.deceleration import (
 from ktcs_bench.train.dynamics import Command, TrainDynamics, TrainParams, TrainState
 from ktcs_bench.train.mrsp import Restriction, SpeedProfile, build_mrsp
 from ktcs_bench.train.position import Position, PositionEstimator
-from ktcs_bench.train.supervision import Status, SupervisionLimits, Supervisor, Verdict
+from ktcs_bench.train.supervision import (
+    EBI,
+    PERMITTED,
+    SBI,
+    WARNING,
+    Status,
+    SupervisionLimits,
+    Supervisor,
+    Verdict,
+)
 from ktcs_bench.train.t2t import T2TMessage, leader_of, target_from_leader
 from ktcs_bench.train.units import kmh
 
@@ -58,6 +71,17 @@ class TrackCode:
     gradient: float = 0.0
     target_point: float = math.inf
     """Absolute location of the stop point the code's target distance designates, m."""
+
+
+class _Layer(NamedTuple):
+    """One moving target's EBD laid over the static one: its values on grid nodes [lo, k)."""
+
+    lo: int
+    k: int
+    vals: FloatArray
+    target: Target
+    stop: bool
+    """A stop target: the EBD is 0 from node k on."""
 
 
 @dataclass(frozen=True)
@@ -156,18 +180,25 @@ class TrainEndpoint:
         self.mrsp: SpeedProfile = build_mrsp(
             line.restrictions, p.max_speed, p.length, "full_supervision", 0.0, line.length
         )
-        self._static_ebd = ebd_min_on_grid(
-            self.grid, self.mrsp.targets(), self.times.fixed, self.v_cap
+        fixed = self.times.fixed
+        self._static_targets = self.mrsp.targets()
+        self._static_ebd, self._static_breaks = ebd_envelope(
+            self.grid, self._static_targets, fixed, self.v_cap
         )
         self._mrsp_grid = self.mrsp.on_grid(self.grid.x)
-        # the supervised EBD = static EBD with the moving stop target's curve laid over it in
-        # place: [0, lo) static, [lo, k) min(static, stop curve), [k, n) 0 (past the target)
+        # the supervised EBD = static EBD with the moving targets' curves (stop target, kTCS
+        # code) laid over it in place: [0, lo) static, [lo, zero) min(static, layers), [zero, n)
+        # 0 (past the nearest stop)
         n = len(self.grid.x)
         self._ebd = self._static_ebd.copy()
+        self._lo, self._zero = n, n
         self._stop: float | None = None
-        self._stop_lo, self._stop_k = n, n
-        self._code_speed: float | None = None
-        self.limits = SupervisionLimits(self.grid.x, self._ebd, self._mrsp_grid)
+        self._stop_layer: _Layer | None = None
+        self._code: TrackCode | None = None
+        self._code_layers: list[_Layer] = []
+        self.limits = SupervisionLimits(
+            self.grid.x, self._ebd, self._mrsp_grid, tuple(self._static_targets), fixed
+        )
         self.ato_sm = AtoStateMachine()
         self.ato_ctl = AtoController(p.service_decel, p.max_traction)
         self.target_point = line.length
@@ -176,9 +207,6 @@ class TrainEndpoint:
         self._eb_seen = False
         self._next_station = 0
         self._dwell_until = cfg.depart_at
-        self._last_code: TrackCode | None = None
-        self._ktcs_ceiling = p.max_speed
-        self.last_limits_kind = cfg.mode
 
     # ------------------------------------------------------------------ the cycle
 
@@ -187,11 +215,11 @@ class TrainEndpoint:
         s = self.dynamics.state
         events: list[Event] = []
         pos = self.position
-        # 1. target point and curves
-        target = self._target_point(pos, inputs)
-        if target != self.target_point:
-            self.target_point = target
-        self._rebuild(target, inputs)
+        # 1. target points and curves
+        stop = self._target_point(pos, inputs)
+        code = inputs.code if cfg.mode == "ktcs" else None
+        self.target_point = stop
+        self._rebuild(stop, code)
         # 2. supervision at the max-safe front
         verdict = self.supervisor.check(
             self.limits, pos.max_safe_front, s.speed, max(s.acceleration, 0.0)
@@ -264,34 +292,58 @@ class TrainEndpoint:
             target = min(target, inputs.code.target_point)
         return target
 
-    def _rebuild(self, target: float, inputs: CycleInputs) -> None:
-        """Curves of this cycle: cached MRSP targets + the moving stop target (+ kTCS code).
+    def _rebuild(self, stop: float, code: TrackCode | None) -> None:
+        """Curves of this cycle: the cached static EBD with the moving layers laid over it —
+        the stop target at `stop` and, in kTCS mode, the code's targets.
 
-        Only what moved is recomputed: the stop target's curve on its window (a few hundred
-        nodes), and the nodes it no longer covers are restored from the static EBD.
+        Only what moved is recomputed: a layer's curve on its window (a few hundred nodes); the
+        nodes no layer covers any more are restored from the static EBD.
         """
-        if target != self._stop:
-            self._stop = target
-            stop = Target(target, 0.0, TargetKind.STOP)
-            lo, k, vals = ebd_segment(self.grid, stop, self.times.fixed, self.v_cap)
-            ebd, static = self._ebd, self._static_ebd
-            old_lo, old_k = self._stop_lo, self._stop_k
-            if old_lo < lo:  # uncovered by the new window: static again
-                ebd[old_lo:lo] = static[old_lo:lo]
-            np.minimum(static[lo:k], vals, out=ebd[lo:k])
-            if k < old_k:
-                ebd[k:old_k] = 0.0
-            self._stop_lo, self._stop_k = min(lo, k), k
-        if self.cfg.mode == "ktcs" and inputs.code is not None:
-            code = inputs.code
-            if code != self._last_code:
-                self._last_code = code
-            if code.speed != self._code_speed:
-                self._code_speed = code.speed
-                self.limits.mrsp = np.minimum(self._mrsp_grid, code.speed)
-        elif self._code_speed is not None:
-            self._code_speed = None
-            self.limits.mrsp = self._mrsp_grid
+        if stop == self._stop and code == self._code:
+            return
+        if code != self._code:
+            self._read_code(code)
+        if stop != self._stop or self._stop_layer is None:
+            self._stop = stop
+            self._stop_layer = self._layer(self.grid, Target(stop))
+        first, rest = self._stop_layer, self._code_layers
+        ebd, static = self._ebd, self._static_ebd
+        zero, lo = first.k, first.lo
+        for ly in rest:
+            if ly.stop and ly.k < zero:
+                zero = ly.k
+            if ly.lo < lo:
+                lo = ly.lo
+        lo = min(lo, zero)
+        a = min(lo, self._lo)
+        # the stop layer's window is set from the static EBD in one pass, the rest restored
+        f_lo, f_hi = min(first.lo, zero), min(first.k, zero)
+        ebd[a:f_lo] = static[a:f_lo]
+        ebd[f_hi:zero] = static[f_hi:zero]
+        np.minimum(static[f_lo:f_hi], first.vals[: f_hi - f_lo], out=ebd[f_lo:f_hi])
+        for ly in rest:
+            hi = min(ly.k, zero)
+            if hi > ly.lo:
+                seg = ebd[ly.lo : hi]
+                np.minimum(seg, ly.vals[: hi - ly.lo], out=seg)
+        if zero < self._zero:
+            ebd[zero : self._zero] = 0.0
+        self._lo, self._zero = lo, zero
+        self.limits.set_moving([first.target, *(ly.target for ly in rest)])
+
+    def _layers(self) -> list[_Layer]:
+        stop = [] if self._stop_layer is None else [self._stop_layer]
+        return [*stop, *self._code_layers]
+
+    def _layer(self, grid: Grid, target: Target) -> _Layer:
+        lo, k, vals = ebd_segment(grid, target, self.times.fixed, self.v_cap)
+        return _Layer(lo, k, vals, target, target.kind is TargetKind.STOP)
+
+    def _read_code(self, code: TrackCode | None) -> None:
+        """A new code (kTCS): its speed is the ceiling."""
+        self._code = code
+        mrsp = self._mrsp_grid
+        self.limits.mrsp = mrsp if code is None else np.minimum(mrsp, code.speed)
 
     def _drive(
         self, now: float, dt: float, verdict: Verdict, inputs: CycleInputs, events: list[Event]
@@ -361,21 +413,44 @@ class TrainEndpoint:
     # ------------------------------------------------------------------ for reports
 
     def limit_speeds(self) -> dict[str, float]:
-        """EBI, SBI, warning, permitted, indication and MRSP speeds at the train's front (m/s)."""
+        """EBI, SBI, warning, permitted and MRSP speeds (and the EBD) at the train's front, m/s.
+
+        Each is the highest speed not beyond its curve, sought below the one before it: a
+        speed beyond the EBI is beyond every later curve, so the numbers keep the curves' order
+        (permitted ≤ warning ≤ SBI ≤ EBI) to the last bit, not only to the bisection's width.
+        """
         sup, lim = self.supervisor, self.limits
         t = self.times
         x = self.position.max_safe_front
         out = {"mrsp": lim.mrsp_at(x), "ebd": lim.ebd_at(x)}
         f = t.fixed
-        for name, lead, dv in (
-            ("ebi", 0.0, f.dv_ebi),
-            ("sbi", t.t_bs2, f.dv_sbi),
-            ("warning", t.t_bs2 + f.t_warning, f.dv_warning),
-            ("permitted", t.t_bs2 + f.t_driver, None),
+        above = math.inf
+        for name, curve, dv in (
+            ("ebi", EBI, f.dv_ebi),
+            ("sbi", SBI, f.dv_sbi),
+            ("warning", WARNING, f.dv_warning),
+            ("permitted", PERMITTED, None),
         ):
             ceiling = out["mrsp"] + (dv(out["mrsp"]) if dv is not None else 0.0)
-            out[name] = sup.limit_speed(lim, x, ceiling, lead, 25)
+            above = out[name] = sup.limit_speed(lim, x, min(ceiling, above), curve, 25)
         return out
+
+    def curve_set(self) -> CurveSet:
+        """Every curve over the whole grid as supervised now (static EBD with the moving
+        targets laid over it), for display."""
+        ebd, static, zero = self._ebd, self._static_ebd, self._zero
+        # where the supervised EBD jumps: a static target whose curve still ends it there, a
+        # layer's speed target likewise, the nearest stop
+        breaks = {b for b in self._static_breaks if b < zero and ebd[b - 1] == static[b - 1]}
+        for ly in self._layers():
+            if ly.lo < ly.k < zero and not ly.stop and ebd[ly.k - 1] == ly.vals[-1]:
+                breaks.add(ly.k)
+        if zero < len(ebd):
+            breaks.add(zero)
+        lim = self.limits
+        return curves_from_envelope(
+            self.grid.x, ebd, sorted(breaks), lim.targets, lim.mrsp, self.times
+        )
 
     @property
     def state(self) -> TrainState:

@@ -9,16 +9,20 @@ back at or below the permitted speed.
 
 Target limits are checked the Subset-026 way, without building every curve: the train is past the
 EBI when V_bec exceeds the EBD at the location it will have reached after D_bec, and similarly for
-SBI2/warning/permitted/indication with their extra time offsets.
+SBI2/warning/permitted/indication with their extra time offsets. A look-ahead that passes a target
+reads, for each curve, that curve's ceiling of the new MRSP there (`SupervisionLimits.seen`), never
+the higher curve of the next target behind the jump: so the curves keep their order at every place.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from enum import Enum
 
-from ktcs_bench.train.curves import CurveTimes
+from ktcs_bench.train.curves import CurveTimes, FixedValues, Target, TargetKind, hold_speeds
 from ktcs_bench.train.deceleration import FloatArray
 
 _GUARD = 1e-7
@@ -44,27 +48,109 @@ class Verdict:
     reason: str = ""
 
 
+EBI, SBI, WARNING, PERMITTED, INDICATION = range(5)
+"""The supervised curves, in order of their lead over the EBD (`Supervisor.curve_lead`)."""
+
+
 @dataclass
 class SupervisionLimits:
-    """The curve grid the supervisor reads: location grid, EBD speed and MRSP speed on it."""
+    """The curve grid the supervisor reads: location grid, EBD speed and MRSP speed on it, and
+    the targets the EBD is built from.
+
+    The EBD array is the envelope of every target's curve (the lowest curve still ahead at each
+    place), so it jumps up just past a speed target. A look-ahead must not see past a target
+    between the train and the place it looks at: curve c seen from front x at y is
+
+        F_c(x, y) = min(EBD(y), min{hold_c(t) : x < L_t < y})
+
+    (`seen`): beyond its location each target holds every curve at that curve's ceiling of the
+    new MRSP (`hold_speeds`; 0 for a stop). F_c(x, ·) never rises, so "beyond" is monotone in
+    speed, and a curve with a longer lead and a lower hold lies below (permitted ≤ warning ≤
+    SBI ≤ EBI); the permitted curve comes down to V_target at a speed target. A target strictly
+    inside a grid cell makes that cell's left part interpolate to the target's foot at its
+    location (and its right part read the next node), so `ebd_at` never reads a jump as a ramp.
+    """
 
     x: FloatArray
     ebd: FloatArray
     mrsp: FloatArray
+    static_targets: Sequence[Target] = ()
+    """Targets that stay (the MRSP's); `set_moving` lays the others over them."""
+    fixed: FixedValues = field(default_factory=FixedValues)
 
     def __post_init__(self) -> None:
         self._x0 = float(self.x[0])
         self._step = float(self.x[1] - self.x[0]) if len(self.x) > 1 else 1.0
         self._n = len(self.x)
+        ts = sorted(
+            (t for t in self.static_targets if math.isfinite(t.location)),
+            key=lambda t: t.location,
+        )
+        self._static = ts
+        self._static_locs = [t.location for t in ts]
+        holds = [hold_speeds(t, self.fixed) for t in ts]
+        self._static_holds = [[h[c] for h in holds] for c in range(5)]
+        self._static_cells: dict[int, tuple[float, float]] = {}
+        for t, h in zip(ts, holds, strict=True):
+            self._add_cell(self._static_cells, t.location, h[EBI])
+        self.set_moving(())
 
-    def _index(self, x: float) -> tuple[int, float]:
-        f = (x - self._x0) / self._step
-        if f <= 0.0:
-            return 0, 0.0
+    def _add_cell(self, cells: dict[int, tuple[float, float]], loc: float, foot: float) -> None:
+        f = (loc - self._x0) / self._step
+        if not 0.0 < f < self._n - 1:
+            return
         i = int(f)
-        if i >= self._n - 1:
-            return self._n - 1, 0.0
-        return i, f - i
+        if f > i:
+            first = cells.get(i)
+            cells[i] = (loc, foot) if first is None else (min(first[0], loc), min(first[1], foot))
+
+    def set_moving(self, targets: Sequence[Target]) -> None:
+        """The targets laid over the static ones now (stop target, kTCS code targets).
+
+        A stop target only marks its grid cell: past the nearest stop the EBD itself is 0, so
+        no look-ahead needs its hold."""
+        self._moving = targets
+        self._locs = self._static_locs
+        self._holds = self._static_holds
+        cells = self._cells = self._static_cells.copy()
+        speed = []
+        for t in targets:
+            if t.kind is TargetKind.STOP:
+                self._add_cell(cells, t.location, 0.0)
+            elif math.isfinite(t.location):
+                speed.append(t)
+        if not speed:
+            return
+        locs = self._locs = list(self._static_locs)
+        holds = self._holds = [list(h) for h in self._static_holds]
+        for t in speed:
+            h = hold_speeds(t, self.fixed)
+            i = bisect.bisect_right(locs, t.location)
+            locs.insert(i, t.location)
+            for c in range(5):
+                holds[c].insert(i, h[c])
+            self._add_cell(cells, t.location, h[EBI])
+
+    @property
+    def targets(self) -> tuple[Target, ...]:
+        """Every target the EBD is built from, static and moving, by location."""
+        moving = [t for t in self._moving if math.isfinite(t.location)]
+        return tuple(sorted([*self._static, *moving], key=lambda t: t.location))
+
+    def first_ahead(self, x: float) -> int:
+        """Index of the first target located beyond x."""
+        return bisect.bisect_right(self._locs, x)
+
+    def seen(self, j: int, y: float, curve: int = EBI) -> float:
+        """F_curve(x, y): the EBD at y seen from a front x whose first target ahead is `j`
+        (`first_ahead(x)`): no higher than the hold of any target in between."""
+        e = self.ebd_at(y)
+        locs, holds = self._locs, self._holds[curve]
+        while j < len(locs) and locs[j] < y:
+            if holds[j] < e:
+                e = holds[j]
+            j += 1
+        return e
 
     def ebd_at(self, x: float) -> float:
         """EBD speed at x, linear between grid nodes (the grid is uniform).
@@ -84,6 +170,13 @@ class SupervisionLimits:
         if frac == 0.0:
             return a
         b: float = ebd.item(i + 1)
+        cell = self._cells.get(i)
+        if cell is not None:  # a target inside this cell: its foot at its location
+            at = (cell[0] - self._x0) / self._step - i
+            if frac > at:
+                return b
+            b = min(cell[1], b)
+            frac /= at
         if a == math.inf or b == math.inf:
             return min(a, b)
         return a + (b - a) * frac
@@ -136,14 +229,19 @@ class Supervisor:
         self._release_requested = False
         self.last = Verdict(Status.INTERVENTION, True, False, True, 0.0, reason)
 
+    def curve_lead(self, curve: int) -> float:
+        """The curve's time offset after the EBI (§3.13.9.3)."""
+        return self._leads[curve]
+
     def _limit_speed(
-        self, lim: SupervisionLimits, x: float, v: float, lead: float, a: float
+        self, lim: SupervisionLimits, x: float, v: float, curve: int, a: float
     ) -> bool:
-        """True when the train at (x, v) is beyond the target curve offset by `lead` seconds."""
+        """True when the train at (x, v) is beyond `curve`."""
+        j, lead = lim.first_ahead(x), self._leads[curve]
         if a <= 0.0 and v >= 0.0:  # `CurveTimes.bec` at a_est = 0, inlined
-            return v > lim.ebd_at(x + v * self._t_bec + v * lead)
+            return v > lim.seen(j, x + v * self._t_bec + v * lead, curve)
         v_bec, d_bec = self.times.bec(v, 0.0, a)
-        return v_bec > lim.ebd_at(x + d_bec + v * lead)
+        return v_bec > lim.seen(j, x + d_bec + v * lead, curve)
 
     def check(self, lim: SupervisionLimits, x: float, v: float, a: float = 0.0) -> Verdict:
         """Supervise the train at max-safe front x with speed v and acceleration a."""
@@ -167,12 +265,22 @@ class Supervisor:
         else:
             v_bec, d_bec = self.times.bec(v, 0.0, a)
         x_bec = x + d_bec
-        ebd_at = lim.ebd_at
-        past_ebi = v > c_ebi or v_bec > ebd_at(x_bec + v * l_ebi)
-        past_sbi = v > c_sbi or v_bec > ebd_at(x_bec + v * l_sbi)
-        past_w = v > c_w or v_bec > ebd_at(x_bec + v * l_w)
-        past_p = v > v_mrsp or v_bec > ebd_at(x_bec + v * l_p)
-        past_i = v_bec > ebd_at(x_bec + v * l_i)
+        locs = lim._locs
+        j = bisect.bisect_right(locs, x)  # the first target ahead
+        if j == len(locs) or locs[j] >= x_bec + v * l_i:  # no target within any look-ahead
+            ebd_at = lim.ebd_at
+            past_ebi = v > c_ebi or v_bec > ebd_at(x_bec + v * l_ebi)
+            past_sbi = v > c_sbi or v_bec > ebd_at(x_bec + v * l_sbi)
+            past_w = v > c_w or v_bec > ebd_at(x_bec + v * l_w)
+            past_p = v > v_mrsp or v_bec > ebd_at(x_bec + v * l_p)
+            past_i = v_bec > ebd_at(x_bec + v * l_i)
+        else:
+            seen = lim.seen
+            past_ebi = v > c_ebi or v_bec > seen(j, x_bec + v * l_ebi, EBI)
+            past_sbi = v > c_sbi or v_bec > seen(j, x_bec + v * l_sbi, SBI)
+            past_w = v > c_w or v_bec > seen(j, x_bec + v * l_w, WARNING)
+            past_p = v > v_mrsp or v_bec > seen(j, x_bec + v * l_p, PERMITTED)
+            past_i = v_bec > seen(j, x_bec + v * l_i, INDICATION)
         permitted = self.permitted_speed(lim, x)
         reason = ""
         if past_ebi and v > 0:
@@ -220,77 +328,106 @@ class Supervisor:
 
     def permitted_speed(self, lim: SupervisionLimits, x: float) -> float:
         """Highest v that is not past the permitted curve at x (bisection; for driver and ATO)."""
-        return self.limit_speed(lim, x, lim.mrsp_at(x), self._leads[3], 18)
+        return self.limit_speed(lim, x, lim.mrsp_at(x), PERMITTED, 18)
 
     def limit_speed(
-        self, lim: SupervisionLimits, x: float, hi: float, lead: float, iterations: int
+        self, lim: SupervisionLimits, x: float, hi: float, curve: int, iterations: int
     ) -> float:
-        """Highest v ≤ hi not beyond the curve `lead` seconds before the EBD at x (a_est = 0):
-        hi itself if it is not beyond, else a bisection of `iterations` halvings from [0, hi].
+        """Highest v ≤ hi not beyond `curve` at x (a_est = 0): hi itself if it is not beyond,
+        else found by halving [0, hi] at most `iterations` times.
 
-        The driver and ATO ask this twice a cycle, so it is the bisection of `_limit_speed`
-        with `ebd_at` inlined, plus one shortcut that keeps the result bit for bit: once both
-        ends of the bracket look ahead into the same grid cell, "beyond" is linear in v there,
-        so each remaining halving is decided by comparing with that cell's root (a point within
-        `_GUARD` of the root is still evaluated in full).
+        The driver and ATO ask this twice a cycle. The halving of `_limit_speed` stops as soon
+        as both ends of the bracket look ahead into the same grid cell with no target inside it
+        and past the same targets: there "beyond" is v > m (the lowest hold passed) or v > the
+        cell's linear root, so the answer is min(m, root), exact. (Where the EBD rises steeply
+        inside the cell, beyond is v < root: the halving goes on, deciding by that root except
+        within `_GUARD` of it.) If the bracket never gets into one piece, the bisection's lower
+        end is the answer.
         """
-        t_bec = self._t_bec
-        if not hi > lim.ebd_at(x + hi * t_bec + hi * lead):
+        t_bec, lead = self._t_bec, self._leads[curve]
+        locs, holds = lim._locs, lim._holds[curve]
+        nt = len(locs)
+        j0 = bisect.bisect_right(locs, x)  # the first target ahead
+        next_loc = locs[j0] if j0 < nt else math.inf
+        y_hi = x + hi * t_bec + hi * lead
+        e = lim.ebd_at(y_hi)
+        j_hi = j0
+        while j_hi < nt and locs[j_hi] < y_hi:
+            if holds[j_hi] < e:
+                e = holds[j_hi]
+            j_hi += 1
+        if not hi > e:
             return hi  # the common case far from any target: one look-up
         item = lim.ebd.item
         x0, step, last = lim._x0, lim._step, lim._n - 1
+        cells = lim._cells
         inf = math.inf
+        ebd_at = lim.ebd_at
+        seen = lim.seen
         lo = 0.0
-        cell, ea, eb = -1, inf, inf  # the grid cell last read
+        # grid cell and targets passed at each end's look-ahead
         f = (x - x0) / step
-        cell_lo = -1 if f <= 0.0 else min(int(f), last)
-        f = (x + hi * t_bec + hi * lead - x0) / step
-        cell_hi = -1 if f <= 0.0 else min(int(f), last)
-        root, rising, fast = 0.0, True, False
+        i_lo, j_lo = (-1 if f <= 0.0 else min(int(f), last)), j0
+        f = (y_hi - x0) / step
+        i_hi = -1 if f <= 0.0 else min(int(f), last)
+        cell, ea, eb, special = -1, inf, inf, True  # the grid cell last read (target inside?)
+        root, m, rising, fast = 0.0, inf, True, False
         t_all = t_bec + lead
         done = 0
-        while done < iterations and not fast:  # full look-ups until the bracket is in one cell
+        while done < iterations and not fast:  # full look-ups until the bracket is in one piece
             v = 0.5 * (lo + hi)
             done += 1
-            f = (x + v * t_bec + v * lead - x0) / step
+            y = x + v * t_bec + v * lead
+            f = (y - x0) / step
             if f <= 0.0:
-                e: float = item(0)
-                i = -1
+                i, e = -1, item(0)
+            elif f >= last:
+                i, e = last, item(last)
             else:
                 i = int(f)
-                if i >= last:
-                    e = item(last)
-                    i = last
+                if i != cell:
+                    cell, ea, eb = i, item(i), item(i + 1)
+                    special = i in cells
+                frac = f - i
+                if frac == 0.0:
+                    e = ea
+                elif special:
+                    e = ebd_at(y)
+                elif ea == inf or eb == inf:
+                    e = min(ea, eb)
                 else:
-                    if i != cell:
-                        cell, ea, eb = i, item(i), item(i + 1)
-                    frac = f - i
-                    if frac == 0.0:
-                        e = ea
-                    elif ea == inf or eb == inf:
-                        e = min(ea, eb)
-                    else:
-                        e = ea + (eb - ea) * frac
+                    e = ea + (eb - ea) * frac
+            j = j0
+            if y > next_loc:
+                while j < nt and locs[j] < y:
+                    if holds[j] < e:
+                        e = holds[j]
+                    j += 1
             if v > e:
-                hi, cell_hi = v, i
+                hi, i_hi, j_hi = v, i, j
             else:
-                lo, cell_lo = v, i
-            if cell_lo == cell_hi == cell and 0 <= cell < last and ea != inf and eb != inf:
-                d = eb - ea
-                slope = 1.0 - d * t_all / step
-                if abs(slope) > 1e-3:
-                    root = (ea + d * ((x - x0) / step - cell)) / slope
-                    rising, fast = slope > 0.0, True
-        ebd_at = lim.ebd_at
-        while done < iterations:  # "beyond" is v > root (or < when falling); close to it: look
+                lo, i_lo, j_lo = v, i, j
+            if i_lo == i_hi == cell and j_lo == j_hi and not special:
+                if ea != inf and eb != inf:
+                    d = eb - ea
+                    slope = 1.0 - d * t_all / step
+                    if abs(slope) > 1e-3:
+                        root = (ea + d * ((x - x0) / step - i_lo)) / slope
+                        m = min(holds[j0:j_lo], default=inf)
+                        rising, fast = slope > 0.0, True
+        if fast and rising:  # beyond is v > m or v > root: the highest speed not beyond
+            return max(lo, min(hi, m, root))
+        while done < iterations:  # beyond is v > m or v < root; close to either: look
             v = 0.5 * (lo + hi)
             done += 1
-            if v - root > _GUARD:
+            if v - m > _GUARD:
+                beyond = True
+            elif m - v > _GUARD and v - root > _GUARD:
                 beyond = rising
-            elif root - v > _GUARD:
+            elif m - v > _GUARD and root - v > _GUARD:
                 beyond = not rising
             else:
-                beyond = v > ebd_at(x + v * t_bec + v * lead)
+                beyond = v > seen(j0, x + v * t_bec + v * lead, curve)
             if beyond:
                 hi = v
             else:

@@ -3,7 +3,11 @@
 `curves_on_grid` builds the EBD envelope for all targets at once (suffix order of the curves,
 closed form per brake band) and shifts the envelope for EBI/SBI/warning/permitted/indication.
 The reference here walks each target separately (`ebd_on_grid`, the band-by-band form) and
-shifts each target's own curve before taking the minimum — slow but obviously right.
+shifts each target's own curve before taking the minimum — slow but obviously right. Beyond its
+location a target holds each curve at that curve's hold speed (`hold_speeds`: the new MRSP's
+ceiling for it, 0 for a stop), so before it a curve with total lead T is also no higher than
+max(hold, (L − s)/T): faster, its look-ahead would pass the target (below the speed cap, above
+which nothing is supervised).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from ktcs_bench.train.curves import (
     curves_on_grid,
     ebd_min_on_grid,
     ebd_on_grid,
+    hold_speeds,
 )
 from ktcs_bench.train.deceleration import (
     FloatArray,
@@ -64,11 +69,16 @@ def _reference(
         e = ebd_on_grid(grid, t, fixed, v_cap)
         np.minimum(out["ebd"], e, out=out["ebd"])
         k = int(np.searchsorted(x, t.location, side="right"))
-        for name, lead in leads.items():
+        before = x < t.location
+        for (name, lead), hold in zip(leads.items(), hold_speeds(t, fixed), strict=True):
             if t.kind is TargetKind.STOP:
                 out[name][k:] = 0.0
             seg = _shifted_reference(x[:k], e[:k], e[:k] * (t_be + lead))
             np.minimum(out[name][:k], seg, out=out[name][:k])
+            if t_be + lead > 0.0:
+                bound = np.maximum((t.location - x[before]) / (t_be + lead), hold)
+                bound[bound >= v_cap] = np.inf  # nothing above the cap is supervised
+                out[name][before] = np.minimum(out[name][before], bound)
     return out
 
 
