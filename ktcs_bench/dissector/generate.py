@@ -105,6 +105,8 @@ def profile_data(p: FrameProfile) -> dict[str, Any]:
             "xor_out": spec.xor_out,
             "check": spec.check,
             "table": crc_table(spec),
+            "first": p.crc_first,
+            "last": p.crc_last,
             "from": p.offset_of(p.crc_first)[0],
             "to_header": to_header,
             "size": p.crc_size,

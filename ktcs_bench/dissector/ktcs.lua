@@ -175,6 +175,30 @@ local function inner_frame(c, buf, j, stop)
     end
 end
 
+-- Whether a failed candidate's own bytes confirm where its LEN says it ends: the ETX there, or
+-- (for an ETX error) a CRC that checks over LEN. Such a candidate is one error record, whole.
+local function len_borne_out(c, buf, j, total, err)
+    if err == "etx" then return c.crc.first == "stx" or c.crc.first == "len" end
+    return c.etx ~= nil and byte_at(buf, j + total - 1) == c.etx
+end
+
+-- Where an error frame [j, stop) whose LEN nothing bears out ends: at the first inner STX that
+-- could begin a real frame (its header runs past `stop`, or its LEN is in range and announces a
+-- frame ending past `stop`), else at `stop`.
+local function cut(c, buf, j, stop)
+    local q = j
+    while true do
+        q = find_char(buf, c.stx_char, q + 1, stop)
+        if q == nil then return stop end
+        if stop - q < c.hs then return q end
+        local len = uint_at(buf, q + c.len_off, c.len_size, c.little)
+        local data_len = len - c.fixed
+        if data_len >= 0 and len <= c.max_len and q + c.hs + data_len + c.trailer > stop then
+            return q
+        end
+    end
+end
+
 -- The slow path for the candidate at j. Returns (next position, garbage-run start, pending).
 local function resolve(c, buf, base, st, j, g, h, out)
     local n, hs = #buf, c.hs
@@ -197,7 +221,14 @@ local function resolve(c, buf, base, st, j, g, h, out)
     if q ~= nil or base + j < st.suspect_until then
         return (q or j + 1), (g or j), false
     end
-    local stop = find_char(buf, c.stx_char, j + 1, j + total) or (j + total)
+    local stop
+    if err == "length" then
+        stop = find_char(buf, c.stx_char, j + 1, j + total) or (j + total)
+    elseif len_borne_out(c, buf, j, total, err) then
+        stop = j + total
+    else
+        stop = cut(c, buf, j, j + total)
+    end
     st.suspect_until = base + j + total
     if g then out[#out + 1] = garbage_rec(base, buf, g, j) end
     local size = stop - j
@@ -431,19 +462,30 @@ local function codec_of(P)
 end
 
 ---------------------------------------------------------------------------------------------
--- ARQ analysis (ktcs_bench/capture/arq.py, with frame numbers): an ACK is linked to the last
--- data frame of the other direction with its SEQ, a NAK to the last frame (bad ones included)
--- of the other direction with the SEQ it refuses; the same SEQ and bytes again in one
--- direction is a retransmission.
+-- ARQ analysis (after ktcs_bench/capture/arq.py, with frame numbers). An ACK is linked to the
+-- last data frame of the other direction with its SEQ, a NAK to the last frame (bad ones too)
+-- of the other direction with the SEQ it refuses. A data frame is a retransmission when one of
+-- the last few frames of its direction had its SEQ and either its bytes or a bad CRC the peer
+-- NAKed (Type I resends one frame; Type II goes back and resends from the refused one).
 ---------------------------------------------------------------------------------------------
+local ARQ_WINDOW = 16  -- frames of one direction within which a repeated SEQ is a resend
+
 local function new_arq_dir()
-    return { last = nil, data_by_seq = {}, any_by_seq = {} }
+    return { count = 0, last_seq = nil, data_by_seq = {}, any_by_seq = {} }
+end
+
+local function is_control(c, op)
+    local opc = c.p.opcodes[op]
+    return opc ~= nil and (opc.name == "ACK" or opc.name == "NAK")
 end
 
 local function arq_observe(c, d, rev, r)
     if r.kind ~= "frame" or r.seq == nil then return end
+    local a = d.arq
     if r.err then
-        d.arq.any_by_seq[r.seq] = r
+        a.count = a.count + 1
+        r.arq_index = a.count
+        a.any_by_seq[r.seq] = r
         return
     end
     local opc = c.p.opcodes[r.op]
@@ -471,22 +513,26 @@ local function arq_observe(c, d, rev, r)
         end
         return
     end
-    local a = d.arq
-    local last = a.last
-    if last and last.seq == r.seq then
-        last.count = last.count + 1
-        if last.raw == r.raw then
-            r.retrans_of, r.transmission = last.first, last.count
-        else
-            r.repeat_diff = true
-            last.raw, last.first = r.raw, r.pnum
-        end
-    else
-        if last and r.seq ~= (last.seq + 1) % c.p.seq_modulo then
-            r.gap_expected = (last.seq + 1) % c.p.seq_modulo
-        end
-        a.last = { seq = r.seq, raw = r.raw, first = r.pnum, count = 1 }
+    a.count = a.count + 1
+    r.arq_index = a.count
+    local function recent(x) return x and a.count - x.arq_index <= ARQ_WINDOW end
+    local good, bad = a.data_by_seq[r.seq], a.any_by_seq[r.seq]
+    local prev
+    if recent(good) and good.raw == r.raw then
+        prev = good  -- sent again intact (its ACK was lost, or Type II went back past it)
+    elseif recent(bad) and bad.err and bad.naked_in and not (bad.op and is_control(c, bad.op)) then
+        prev = bad   -- the peer NAKed its bad CRC
     end
+    if prev then
+        local first = prev.first_tx or prev
+        r.first_tx = first
+        r.retrans_of, r.transmission = first.pnum, (prev.transmission or 1) + 1
+    elseif recent(good) and a.last_seq == r.seq then
+        r.repeat_diff = true
+    elseif a.last_seq and r.seq ~= (a.last_seq + 1) % c.p.seq_modulo then
+        r.gap_expected = (a.last_seq + 1) % c.p.seq_modulo
+    end
+    a.last_seq = r.seq
     a.data_by_seq[r.seq] = r
     a.any_by_seq[r.seq] = r
 end
