@@ -69,20 +69,11 @@ def tshark_json(lua: Path | None, capture: Path, *args: str, home: Path | None =
     return packets
 
 
-ENDPOINTS = {"ctc": ("127.0.0.1", 5020), "ixl": ("127.0.0.2", 20002)}
-
-
 def write_pcapng(path: Path, records: Iterable[CaptureRecord], link: str) -> Path:
-    """With the bench's own writer; Type II end `ctc` at 127.0.0.1:5020, `ixl` 127.0.0.2:20002."""
-    enc = PcapngEncoder(link, ENDPOINTS if link == "type2" else None)
+    """With the bench's own writer (Type II end `ctc` at 127.0.0.1:5020)."""
+    enc = PcapngEncoder(link, {"ctc": ("127.0.0.1", 5020)} if link == "type2" else None)
     path.write_bytes(enc.start() + b"".join(enc.encode(r) for r in records))
     return path
-
-
-def tcp_name(direction: str) -> str:
-    """ "ixl>ctc" as tshark's addresses: "127.0.0.2:20002>127.0.0.1:5020"."""
-    a, b = direction.split(">")
-    return ">".join(f"{ENDPOINTS[x][0]}:{ENDPOINTS[x][1]}" for x in (a, b))
 
 
 def _list(value: Any) -> list[Any]:
@@ -126,16 +117,12 @@ def from_tree(t: dict[str, Any], short: str) -> Rec | None:
 
 
 def dissected(packets: list[Any], short: str) -> dict[str, list[Rec]]:
-    """Records per direction, in the order tshark shows them."""
+    """Records per direction (the packet comment the bench's pcapng writer puts on every packet),
+    in the order tshark shows them."""
     out: dict[str, list[Rec]] = defaultdict(list)
     for packet in packets:
         layers = packet["_source"]["layers"]
-        if short == "ktcs1":
-            iface = layers["frame"].get("frame.interface_id_tree", {})
-            direction = iface.get("frame.interface_name", "?")
-        else:
-            ip, tcp = layers["ip"], layers["tcp"]
-            direction = f"{ip['ip.src']}:{tcp['tcp.srcport']}>{ip['ip.dst']}:{tcp['tcp.dstport']}"
+        direction = layers.get("pkt_comment", {}).get("frame.comment", "?")
         for tree in _list(layers.get(short)):
             rec = from_tree(tree, short)
             if rec is not None:
