@@ -130,21 +130,23 @@ def dissected(packets: list[Any], short: str) -> dict[str, list[Rec]]:
     return dict(out)
 
 
+KEYS = ("offset", "seq", "op", "sub", "data", "items", "crc_ok", "crc_packet", "crc_calc", "error")
+
+
+def as_record(obj: dict[str, Any]) -> Rec:
+    """A `decode --json` object as a record: garbage, or the keys a dissected frame has."""
+    if "garbage" in obj:
+        return {"offset": obj["offset"], "garbage": obj["garbage"]}
+    return {k: obj[k] for k in KEYS}
+
+
 def decoded(stream: bytes, profile: str) -> list[Rec]:
     """`ktcs-bench decode --json` of one direction's bytes, as records."""
     if not stream:
         return []
     done = cli("decode", "--json", "--profile", profile, "-", stdin=stream.hex())
     assert done.returncode in (0, 1), done.stderr
-    out: list[Rec] = []
-    for line in done.stdout.splitlines():
-        obj = json.loads(line)
-        if "garbage" in obj:
-            out.append({"offset": obj["offset"], "garbage": obj["garbage"]})
-            continue
-        out.append({k: obj[k] for k in ("offset", "seq", "op", "sub", "data", "items", "crc_ok",
-                                        "crc_packet", "crc_calc", "error")})  # fmt: skip
-    return out
+    return [as_record(json.loads(line)) for line in done.stdout.splitlines()]
 
 
 def streams(records: Iterable[CaptureRecord], key: Any = None) -> dict[str, bytes]:
