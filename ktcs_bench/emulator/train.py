@@ -2,13 +2,11 @@
 of wall time, in kTCS mode -- its antenna reads the code of the track circuit under its head from
 the rails, and its axles (head..tail) occupy track circuits there.
 
-A code's speed is the target speed at the exit of its track circuit (the wayside ATC's stepped
-codes: 0 in the last track circuit before a stop point), and its target distance locates the
-stop point. So in a track circuit the ceiling is the speed the train was allowed to enter it with
--- the code of the previous track circuit -- (or this code, if that is higher), and the braking
-curve to the stop point does the rest: a train is never given a ceiling it is already above.
-No code at the antenna (none received yet, a dead track circuit, the rails lost) means stop here:
-a train never runs on the absence of a code.
+The process passes each code on as read -- located on the line: its track circuit's ends, its
+speed, gradient and target distance (`TrackCode.read`) -- and the endpoint gives it its meaning
+(the speed at the circuit's exit, the stop point, the ceiling inside the circuit). No code at the
+antenna (none received yet, a dead track circuit, the rails lost) means stop here: a train never
+runs on the absence of a code.
 
 The train's line data (tags, gradients, speed limits) come from the lab's line file, so the ATP
 and the wayside ATC see the same line. Runs in the up direction (rising chainage).
@@ -17,6 +15,7 @@ and the wayside ATC see the same line. Runs in the up direction (rising chainage
 from __future__ import annotations
 
 import asyncio
+import math
 from typing import Any
 
 from ktcs_bench.emulator.device import Device
@@ -51,6 +50,19 @@ def train_line(line: Line) -> LineData:
     return LineData(line.end_m, tags, gradient, restrictions, [])
 
 
+def _code_fields(wire: Any) -> tuple[float, float, float] | None:
+    """(speed km/h, gradient ‰, target distance m) of a rails code [code, speed, gradient,
+    distance], or None unless it is four finite numbers with speed and distance ≥ 0."""
+    if not isinstance(wire, list) or len(wire) != 4:
+        return None
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in wire):
+        return None
+    speed, gradient, distance = (float(v) for v in wire[1:])
+    if not all(math.isfinite(v) for v in (speed, gradient, distance)):
+        return None
+    return (speed, gradient, distance) if speed >= 0.0 and distance >= 0.0 else None
+
+
 class TrainDevice(Device):
     kind = "train"
 
@@ -69,8 +81,6 @@ class TrainDevice(Device):
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None
-        self.entry_kmh: float | None = None  # the previous track circuit's code speed
-        self.code_kmh = 0.0
         self.rails = RailsClient(rails, {"role": "train", "name": name, "train": config.train_id},
                                  self._from_rails)  # fmt: skip
         self.last: Any = None
@@ -106,21 +116,20 @@ class TrainDevice(Device):
         if "code" not in obj:
             return
         wire, tc = obj["code"], obj.get("tc")
-        if tc != self.code_tc and self.code is not None:
-            self.entry_kmh = self.code_kmh  # leaving a track circuit: its exit speed is our entry
-        if wire is None or tc not in self.tcs:
-            self.code, self.code_tc = None, tc  # fail-safe: see `_inputs`
+        fields = _code_fields(wire)
+        if fields is None or tc not in self.tcs:
+            if wire is not None:
+                self.note("bad_code", f"code {wire!r} for {tc!r} not understood: stop")
+            self.code, self.code_tc = None, tc  # fail-safe: see `_code_now`
             return
-        _, speed_kmh, gradient, distance = wire
-        self.code_kmh = float(speed_kmh)
-        ceiling = max(self.code_kmh, self.entry_kmh or 0.0)
-        entry = self.tcs[tc].from_m  # up direction: the code counts from the entry end
-        self.code = TrackCode(kmh(ceiling), float(gradient), entry + float(distance))
+        speed_kmh, gradient, distance = fields
+        circuit = self.tcs[tc]  # up direction: the code counts from the entry end
+        self.code = TrackCode.read(circuit.from_m, circuit.to_m, kmh(speed_kmh), gradient, distance)
         self.code_tc = tc
 
     def _code_now(self) -> TrackCode:
         if self.code is None or not self.rails.connected:
-            return TrackCode(0.0, 0.0, self.endpoint.dynamics.state.position)  # stop here
+            return TrackCode.stop_here(self.endpoint.dynamics.state.position)
         return self.code
 
     def _position(self) -> dict[str, float]:

@@ -3,7 +3,8 @@
 Owns the vocabulary: `min_gap` (follower never closer than X m to the leader's rear),
 `stops_at` (a train comes to a standstill within ±tolerance of a mark), `never_passes` (front
 never beyond a location), `never_exceeds_ebd`, `event` (count of an event kind within bounds),
-`reaches` (front reaches a location, optionally by a time) and `max_speed`.
+`reaches` (front reaches a location, optionally by a time) and `max_speed` (optionally only while
+the front is within [from_m, to_m)).
 """
 
 from __future__ import annotations
@@ -86,8 +87,13 @@ def check(a: Assertion, result: RunResult) -> Outcome:
         )
     if a.kind == "max_speed":
         lim = float(g["kmh"])
-        v = to_kmh(max(tr.speed))
-        return Outcome(a, v <= lim + 1e-9, f"top speed {v:.2f} km/h (limit {lim} km/h)")
+        start, end = float(g.get("from_m", -math.inf)), float(g.get("to_m", math.inf))
+        where = "" if "from_m" not in g and "to_m" not in g else f" on [{start:g}, {end:g}) m"
+        speeds = [v for x, v in zip(tr.head, tr.speed, strict=True) if start <= x < end]
+        if not speeds:
+            return Outcome(a, False, f"the front never was{where}")
+        v = to_kmh(max(speeds))
+        return Outcome(a, v <= lim + 1e-9, f"top speed{where} {v:.2f} km/h (limit {lim} km/h)")
     return Outcome(a, False, f"unknown assertion {a.kind}")
 
 

@@ -8,7 +8,6 @@ CLI draw a bar.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -51,11 +50,13 @@ class RunResult:
 
 
 def code_at(scn: Scenario, x: float) -> TrackCode | None:
-    """The kTCS code under an antenna at x, with its target distance made absolute."""
+    """The kTCS code under an antenna at x: its speed at the circuit's exit, the stop point its
+    target distance designates, and the lowest gradient under the circuit (as the wayside ATC
+    gives it)."""
     for tc in scn.track_circuits:
         if tc.start <= x < tc.end:
-            point = math.inf if tc.target_distance is None else tc.start + tc.target_distance
-            return TrackCode(tc.speed, 0.0, point)
+            gradient = scn.line.gradient.min_between(tc.start, tc.end)
+            return TrackCode.read(tc.start, tc.end, tc.speed, gradient, tc.target_distance)
     return None
 
 

@@ -8,8 +8,11 @@ what happened (events). Two operating modes:
 * ``atcs`` — the ATCS onboard ATP of seeds 000/001: target point = min(end of line, authority end
   from the resource manager, the leader's rear − safety distance, protection zones), MRSP targets
   from the line data, EBD/EBI/SBI supervision with the latched emergency brake;
-* ``ktcs`` — the code under the antenna (target speed, gradient, target distance) replaces the
-  line's speed data: the ceiling is the code speed and the stop target the code's target point.
+* ``ktcs`` — the code under the antenna gives the targets: its speed is the speed at the track
+  circuit's exit (a speed target there, a stop target when 0), its target distance the stop point,
+  and both braking curves use the code's gradient. Inside the track circuit the ceiling is the
+  speed the train was allowed to enter with (the previous circuit's code) or this code if higher.
+  The endpoint owns this reading; a process adapter only passes the code on (`TrackCode.read`).
 
 A process adapter (the live lab) only has to call `step` every `CYCLE` seconds of wall time.
 """
@@ -60,17 +63,48 @@ CYCLE = 0.1
 """The onboard cycle, s (seed 000: 100 ms)."""
 MAX_MA = 3000.0
 """cMAX_MA: the longest authority a train asks for, m."""
+CODE_GRIDS = 8
+"""kTCS code gradients whose curve grid is kept."""
 
 
 @dataclass(frozen=True)
 class TrackCode:
-    """A kTCS track-circuit code as read by the antenna."""
+    """A kTCS track-circuit code as read by the antenna, located on the line (up direction)."""
 
     speed: float
-    """Target speed, m/s (0: stop)."""
+    """Target speed at the track circuit's exit, m/s (0: stop at the exit)."""
     gradient: float = 0.0
+    """Gradient the code gives for braking, ‰ (the lowest under the track circuit)."""
     target_point: float = math.inf
     """Absolute location of the stop point the code's target distance designates, m."""
+    start: float = -math.inf
+    """Entry end of the track circuit, m."""
+    end: float = math.inf
+    """Exit end of the track circuit, m: where `speed` applies."""
+
+    @classmethod
+    def read(
+        cls,
+        start: float,
+        end: float,
+        speed: float,
+        gradient: float = 0.0,
+        target_distance: float | None = None,
+    ) -> TrackCode:
+        """The code of track circuit [start, end): its target distance counts from the entry
+        end (None: no stop point ahead)."""
+        point = math.inf if target_distance is None else start + target_distance
+        return cls(speed, gradient, point, start, end)
+
+    @classmethod
+    def stop_here(cls, x: float) -> TrackCode:
+        """What a train reads with no code at its antenna: stop where it stands."""
+        return cls(0.0, 0.0, x, x, x)
+
+    @property
+    def stop_point(self) -> float:
+        """The nearest place the code says stop: its target point, or its exit for a 0 code."""
+        return min(self.target_point, self.end) if self.speed <= 0.0 else self.target_point
 
 
 class _Layer(NamedTuple):
@@ -196,6 +230,8 @@ class TrainEndpoint:
         self._stop_layer: _Layer | None = None
         self._code: TrackCode | None = None
         self._code_layers: list[_Layer] = []
+        self._code_grids: dict[float, Grid] = {}
+        self._entry_speed = 0.0
         self.limits = SupervisionLimits(
             self.grid.x, self._ebd, self._mrsp_grid, tuple(self._static_targets), fixed
         )
@@ -218,7 +254,7 @@ class TrainEndpoint:
         # 1. target points and curves
         stop = self._target_point(pos, inputs)
         code = inputs.code if cfg.mode == "ktcs" else None
-        self.target_point = stop
+        self.target_point = stop if code is None else min(stop, code.stop_point)
         self._rebuild(stop, code)
         # 2. supervision at the max-safe front
         verdict = self.supervisor.check(
@@ -288,8 +324,6 @@ class TrainEndpoint:
         for start, end in inputs.protection_zones:
             if end > pos.min_safe_rear and start > pos.head - 1.0:
                 target = min(target, start)
-        if self.cfg.mode == "ktcs" and inputs.code is not None:
-            target = min(target, inputs.code.target_point)
         return target
 
     def _rebuild(self, stop: float, code: TrackCode | None) -> None:
@@ -340,10 +374,43 @@ class TrainEndpoint:
         return _Layer(lo, k, vals, target, target.kind is TargetKind.STOP)
 
     def _read_code(self, code: TrackCode | None) -> None:
-        """A new code (kTCS): its speed is the ceiling."""
-        self._code = code
-        mrsp = self._mrsp_grid
-        self.limits.mrsp = mrsp if code is None else np.minimum(mrsp, code.speed)
+        """A new code (kTCS): the ceiling in its track circuit and its targets.
+
+        Its speed holds at the exit: a speed target there (a stop target for 0), with the
+        ceiling V_code beyond it; inside the circuit the ceiling is the speed the train was
+        allowed to enter with (the code of the circuit before, when it came from there) or this
+        code if higher. Both braking curves use the code's gradient.
+        """
+        last, self._code = self._code, code
+        if code is None:
+            self._code_layers = []
+            self.limits.mrsp = self._mrsp_grid
+            return
+        if last is None or code.start != last.start:  # a new track circuit
+            came_from_last = last is not None and abs(code.start - last.end) <= 1e-6
+            self._entry_speed = last.speed if last is not None and came_from_last else code.speed
+        ceiling = max(self._entry_speed, code.speed)
+        x = self.grid.x
+        self.limits.mrsp = np.minimum(self._mrsp_grid, np.where(x < code.end, ceiling, code.speed))
+        grid = self._code_grid(code.gradient)
+        layers = []
+        if math.isfinite(code.stop_point):
+            layers.append(self._layer(grid, Target(code.stop_point)))
+        if 0.0 < code.speed < ceiling and math.isfinite(code.end):
+            layers.append(self._layer(grid, Target(code.end, code.speed, TargetKind.SPEED)))
+        self._code_layers = layers
+
+    def _code_grid(self, gradient: float) -> Grid:
+        """The curve grid with a code's gradient under the whole of it (kept per gradient)."""
+        grid = self._code_grids.get(gradient)
+        if grid is None:
+            if len(self._code_grids) >= CODE_GRIDS:  # codes come from the wire: a bounded cache
+                del self._code_grids[next(iter(self._code_grids))]
+            decel = SafeDeceleration(
+                self.decel.brake, GradientProfile(default=gradient), self.decel.rotating
+            )
+            grid = self._code_grids[gradient] = Grid(self.grid.x, decel)
+        return grid
 
     def _drive(
         self, now: float, dt: float, verdict: Verdict, inputs: CycleInputs, events: list[Event]

@@ -99,3 +99,44 @@ def test_unknown_train_in_assertion_and_cli_exit_2(tmp_path: Path) -> None:
     assert exc.value.place == "assertions[0].never_passes.train"
     assert main(["scenario", "run", str(p)]) == 2
     assert main(["scenario", "run", str(_write(tmp_path, "line: [unclosed"))]) == 2
+
+
+KTCS = """
+name: code-steps
+duration_s: 400
+stop_when_all_stopped: true
+line:
+  length_m: 3000
+  tags: {spacing_m: 100}
+  # no speed limit in the line data: a 30 km/h stretch [1400, 1800) and the stop point at 2800
+  # are known from the codes alone (each code's speed holds at its track circuit's exit)
+  track_circuits:
+    - {id: TC1, from_m: 0, to_m: 1000, code_kmh: 80, target_distance_m: 2800}
+    - {id: TC2, from_m: 1000, to_m: 1400, code_kmh: 30, target_distance_m: 1800}
+    - {id: TC3, from_m: 1400, to_m: 1800, code_kmh: 30, target_distance_m: 1400}
+    - {id: TC4, from_m: 1800, to_m: 2400, code_kmh: 80, target_distance_m: 1000}
+    - {id: TC5, from_m: 2400, to_m: 2800, code_kmh: 0, target_distance_m: 400}
+trains: [{id: T1, mode: ktcs, start_m: 150, length_m: 100, max_speed_kmh: 80}]
+assertions:
+  - max_speed: {train: T1, kmh: 30, from_m: 1400, to_m: 1800}
+  - max_speed: {train: T1, kmh: 80}
+  - reaches: {train: T1, location: 2700}
+  - never_passes: {train: T1, location: 2800}
+  - event: {train: T1, kind: emergency_brake, at_most: 0}
+"""
+
+
+def test_ktcs_code_speeds_hold_at_the_track_circuit_exits(tmp_path: Path) -> None:
+    """The runner passes each code on as read; the train is down to 30 km/h by the exit of the
+    circuit before the 30 stretch, without an emergency brake, and stops at the stop point."""
+    result = run(load_scenario(_write(tmp_path, KTCS)))
+    outcomes = check_all(result)
+    assert all(o.passed for o in outcomes), [o.detail for o in outcomes]
+    assert max(result.traces["T1"].speed) * 3.6 > 70.0  # it ran at line speed before the step
+
+
+def test_max_speed_on_a_stretch_fails_when_exceeded(tmp_path: Path) -> None:
+    text = KTCS.replace("{train: T1, kmh: 30, from_m: 1400", "{train: T1, kmh: 20, from_m: 1400")
+    outcomes = check_all(run(load_scenario(_write(tmp_path, text))))
+    assert [o.passed for o in outcomes] == [False, True, True, True, True]
+    assert "on [1400, 1800) m" in outcomes[0].detail

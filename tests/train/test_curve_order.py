@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from ktcs_bench.train.curves import CurveTimes, Grid, Target, TargetKind, curves_on_grid
 from ktcs_bench.train.deceleration import GradientProfile, SafeDeceleration, StepFunction
 from ktcs_bench.train.dynamics import TrainParams
-from ktcs_bench.train.endpoint import LineData, TrainConfig, TrainEndpoint
+from ktcs_bench.train.endpoint import LineData, TrackCode, TrainConfig, TrainEndpoint
 from ktcs_bench.train.mrsp import Restriction, build_mrsp
 from ktcs_bench.train.supervision import EBI, INDICATION, PERMITTED, SBI, WARNING
 from ktcs_bench.train.units import kmh
@@ -87,25 +87,38 @@ def test_every_curve_set_keeps_the_order_at_every_place(
 def _endpoint(
     line: tuple[list[Restriction], GradientProfile, list[float]],
     build_up: float,
+    code: tuple[float, float, float, float] | None,
 ) -> TrainEndpoint:
     restrictions, gradient, stops = line
     params = TrainParams(max_speed=kmh(120.0), brake_build_up=build_up)
-    cfg = TrainConfig("T", params, start=params.length + 1.0)
+    mode = "atcs" if code is None else "ktcs"
+    cfg = TrainConfig("T", params, start=params.length + 1.0, mode=mode)
     train = TrainEndpoint(cfg, LineData(LINE, [], gradient, restrictions))
-    train._rebuild(min(stops), None)
+    kcode = None
+    if code is not None:
+        start, length, speed, grad = code
+        kcode = TrackCode.read(start, start + length, kmh(speed), grad, stops[0] - start)
+    train._rebuild(min(stops), kcode)
     return train
 
 
+codes = st.none() | st.tuples(
+    st.floats(0.0, 1500.0), st.floats(50.0, 800.0), st.floats(0.0, 110.0), st.floats(-20.0, 20.0)
+)
+
+
 @settings(max_examples=40, deadline=None)
-@given(lines(), st.floats(0.3, 3.0), st.data())
+@given(lines(), st.floats(0.3, 3.0), codes, st.data())
 def test_past_a_curve_is_past_every_later_one(
     line: tuple[list[Restriction], GradientProfile, list[float]],
     build_up: float,
+    code: tuple[float, float, float, float] | None,
     data: st.DataObject,
 ) -> None:
-    """The supervisor's own verdict, at random places and speeds: the curves a train is past are
-    EBI ⇒ SBI ⇒ warning ⇒ permitted ⇒ indication, never a later one without an earlier one."""
-    train = _endpoint(line, build_up)
+    """The supervisor's own verdict, at random places and speeds (with a kTCS code's targets laid
+    over the line's): the curves a train is past are EBI ⇒ SBI ⇒ warning ⇒ permitted ⇒
+    indication, never a later one without an earlier one reversed."""
+    train = _endpoint(line, build_up, code)
     sup, lim = train.supervisor, train.limits
     xs = data.draw(st.lists(st.floats(0.0, LINE), min_size=20, max_size=20))
     for x in xs:
@@ -115,16 +128,17 @@ def test_past_a_curve_is_past_every_later_one(
 
 
 @settings(max_examples=30, deadline=None)
-@given(lines(), st.floats(0.3, 3.0), st.data())
+@given(lines(), st.floats(0.3, 3.0), codes, st.data())
 def test_limit_speeds_keep_the_order_computed_each_on_its_own(
     line: tuple[list[Restriction], GradientProfile, list[float]],
     build_up: float,
+    code: tuple[float, float, float, float] | None,
     data: st.DataObject,
 ) -> None:
     """Each curve's limit speed sought on its own from its own ceiling (no bound from the curve
     before it): EBI ≥ SBI ≥ warning ≥ permitted ≥ indication at every place, to the bisection's
     width."""
-    train = _endpoint(line, build_up)
+    train = _endpoint(line, build_up, code)
     sup, lim, f = train.supervisor, train.limits, train.times.fixed
     xs = data.draw(st.lists(st.floats(0.0, LINE), min_size=30, max_size=30))
     top = kmh(200.0)
