@@ -923,6 +923,10 @@ function T1.proto.dissector(tvb, pinfo, tree)
         pk = S1.pkts[pinfo.number]
     end
     stream_show(T1, S1, c, pk.dir, pk, tvb, pinfo, tree)
+    local a, b = (field_value(f_if_name) or pk.dir.name):match("^(.-)>(.-)$")
+    if a and a ~= "" and b ~= "" then
+        pinfo.cols.src, pinfo.cols.dst = a, b
+    end
     return tvb:len()
 end
 
