@@ -126,7 +126,7 @@ class CtcConnection(Type2Session):
         reason = int(fields["reason"])
         name = self.op_result.reasons.get(reason, f"reason {reason}")
         self._events.append(
-            ev.ControlResult(int(fields["code"]), sub == SUB_ACCEPTED, reason, name)
+            ev.ControlAnswered(int(fields["code"]), sub == SUB_ACCEPTED, reason, name)
         )
 
 

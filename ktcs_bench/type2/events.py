@@ -55,8 +55,8 @@ class ControlRequested:
 
 
 @dataclass(frozen=True, slots=True)
-class ControlResult:
-    """CTC side: the IXL's answer to one control code."""
+class ControlAnswered:
+    """CTC side: the IXL answered one control code (a CONTROL_RESULT item)."""
 
     code: int
     accepted: bool
@@ -70,7 +70,7 @@ class FullStateRequested:
 
 
 @dataclass(frozen=True, slots=True)
-class SeqGap:
+class SequenceGap:
     """A good frame arrived with a SEQ past the one expected (frames were lost)."""
 
     expected: int
@@ -96,7 +96,7 @@ class NakReceived:
 
 
 @dataclass(frozen=True, slots=True)
-class Retransmitted:
+class Retransmission:
     """Frames from `seq` on were sent again (`attempt` = 1..retry_count for that SEQ)."""
 
     seq: int
@@ -125,12 +125,12 @@ Event = (
     | IndicationsChanged
     | FullState
     | ControlRequested
-    | ControlResult
+    | ControlAnswered
     | FullStateRequested
-    | SeqGap
+    | SequenceGap
     | BadFrameReceived
     | NakReceived
-    | Retransmitted
+    | Retransmission
     | LinkDown
     | Closed
 )

@@ -164,7 +164,7 @@ class _CtcLink:
     host: str
     peer: str
     station: int | None = None
-    pending: dict[int, deque[asyncio.Future[ev.ControlResult]]] = field(default_factory=dict)
+    pending: dict[int, deque[asyncio.Future[ev.ControlAnswered]]] = field(default_factory=dict)
 
 
 class _Waitable:
@@ -276,10 +276,10 @@ class CtcServer(_Waitable):
 
     async def control(
         self, station: int, code: int, value: int = 1, timeout: float = 5.0
-    ) -> ev.ControlResult:
+    ) -> ev.ControlAnswered:
         """Send one control and wait for its CONTROL_RESULT (TimeoutError after `timeout`)."""
         cl = self._link_of(station)
-        fut: asyncio.Future[ev.ControlResult] = asyncio.get_running_loop().create_future()
+        fut: asyncio.Future[ev.ControlAnswered] = asyncio.get_running_loop().create_future()
         cl.pending.setdefault(code, deque()).append(fut)
         self.send_control(station, [(code, value)])
         try:
@@ -406,7 +406,7 @@ class CtcServer(_Waitable):
                     view.state = dict(e.items)
                     view.synced = True
                     view.full_states += 1
-            elif isinstance(e, ev.ControlResult):
+            elif isinstance(e, ev.ControlAnswered):
                 queue = cl.pending.get(e.code)
                 if queue:
                     fut = queue.popleft()

@@ -264,7 +264,7 @@ class Type2Session:
             ahead = (seq - self._rx_expected) % _SEQ_MOD
             if ahead >= _HALF:
                 return  # a duplicate from a go-back we no longer need
-            self._events.append(ev.SeqGap(self._rx_expected, seq))
+            self._events.append(ev.SequenceGap(self._rx_expected, seq))
             self._on_gap(now)
         handler = self._handlers.get(frame.op)
         try:
@@ -337,7 +337,7 @@ class Type2Session:
                 frames += 1
             seq = (seq + 1) % _SEQ_MOD
         self._last_tx = now
-        self._events.append(ev.Retransmitted(refused, retries, frames))
+        self._events.append(ev.Retransmission(refused, retries, frames))
 
     # -- helpers -----------------------------------------------------------------------------
     def _close(self, reason: str) -> None:

@@ -149,8 +149,8 @@ def test_control_and_control_result() -> None:
                 await ctc.wait_until(lambda: ctc.stations[20].synced)
                 ok = await ctc.control(20, 7, 1)
                 no = await ctc.control(20, 9, 1)
-        assert ok == ev.ControlResult(7, True, 0, "none")
-        assert no == ev.ControlResult(9, False, 2, "route conflicts")
+        assert ok == ev.ControlAnswered(7, True, 0, "none")
+        assert no == ev.ControlAnswered(9, False, 2, "route conflicts")
 
     run(main())
 
@@ -179,7 +179,7 @@ def test_nak_then_retransmission_delivers_the_change_once() -> None:
             await proxy.close()
         (bad,) = [e for e in rec.of(ev.BadFrameReceived) if e.nak_sent]
         assert (bad.reason, bad.refused_seq) == (1, damaged[0])
-        assert rec.of(ev.Retransmitted)[0].seq == damaged[0]
+        assert rec.of(ev.Retransmission)[0].seq == damaged[0]
         got = [i for e in rec.of(ev.IndicationsChanged) for i in e.items]
         assert got == sent  # exactly once
 
@@ -205,7 +205,7 @@ def test_three_retransmissions_close_and_the_ixl_reconnects() -> None:
             await proxy.close()
         closes = [e.reason for s, e in rec.events if s == 20 and isinstance(e, ev.Closed)]
         assert any("refused after 3 retransmissions" in r for r in closes)
-        assert [e.attempt for e in rec.of(ev.Retransmitted)][:3] == [1, 2, 3]
+        assert [e.attempt for e in rec.of(ev.Retransmission)][:3] == [1, 2, 3]
         assert rec.of(ev.IndicationsChanged) == []  # the damaged change was never acted on
 
     run(main())
@@ -236,7 +236,7 @@ def test_seq_gap_asks_request_all_and_the_full_state_repairs_the_view() -> None:
                 await ctc.wait_until(lambda: ctc.stations[20].state == app.state)
                 assert c.connections == 1
             await proxy.close()
-        (gap,) = rec.of(ev.SeqGap)
+        (gap,) = rec.of(ev.SequenceGap)
         assert gap.expected == dropped[0]
         assert rec.of(ev.FullStateRequested) == [ev.FullStateRequested()]
         assert any(f.op == 0x30 for f in proxy.seen_down)  # REQUEST_ALL on the wire

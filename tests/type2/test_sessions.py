@@ -156,9 +156,9 @@ def test_control_and_control_result() -> None:
     w.ixl.send_control_result(7, True, 0, w.now)
     w.ixl.send_control_result(9, False, 2, w.now)
     w.pump()
-    assert w.of(ev.ControlResult) == [
-        ev.ControlResult(7, True, 0, "none"),
-        ev.ControlResult(9, False, 2, "route conflicts"),
+    assert w.of(ev.ControlAnswered) == [
+        ev.ControlAnswered(7, True, 0, "none"),
+        ev.ControlAnswered(9, False, 2, "route conflicts"),
     ]
 
 
@@ -237,7 +237,7 @@ def test_crc_error_is_naked_and_the_frame_retransmitted_once_delivered() -> None
     nak = frames(w.ctc.data_to_send())
     assert [(f.op, f.sub) for f in nak] == [(0x15, 1)]
     w.ixl_events += w.ixl.receive_data(nak[0].raw, w.now)
-    (re,) = w.of(ev.Retransmitted, "ixl")
+    (re,) = w.of(ev.Retransmission, "ixl")
     assert re.seq == bad.refused_seq and re.attempt == 1 and re.frames == 2
     w.pump()
     got = [i for e in w.of(ev.IndicationsChanged) for i in e.items]
@@ -251,7 +251,7 @@ def test_three_retransmissions_then_the_sender_closes() -> None:
     # the original and every retransmission are damaged on the way (heartbeats pass)
     w.damage = lambda raw: raw[:-1] + bytes([raw[-1] ^ 0xFF]) if raw[3] == 0x10 else raw
     w.advance(10.0)
-    assert [e.attempt for e in w.of(ev.Retransmitted, "ixl")] == [1, 2, 3]
+    assert [e.attempt for e in w.of(ev.Retransmission, "ixl")] == [1, 2, 3]
     assert w.ixl.closed and "3 retransmissions" in (w.ixl.close_reason or "")
     assert w.ctc.closed  # it gives up on its own too, a NAK later
     assert w.of(ev.IndicationsChanged) == []
@@ -286,7 +286,7 @@ def test_stray_bytes_are_naked_and_the_next_frame_still_accepted() -> None:
     w.pump()
     assert w.of(ev.BadFrameReceived)[0].reason == 3
     # the NAK crossed the frame on the wire: the go-back copy is a duplicate and is dropped
-    assert len(w.of(ev.Retransmitted, "ixl")) == 1
+    assert len(w.of(ev.Retransmission, "ixl")) == 1
     assert [i for e in w.of(ev.IndicationsChanged) for i in e.items] == [(4, 1)]
 
 
@@ -295,7 +295,7 @@ def test_a_nak_for_a_frame_not_yet_sent_resends_nothing() -> None:
     w.open(full=[])
     w.ctc_events += w.ctc.receive_data(b"\xff\xfe\xfd" + CODEC.encode(0, 0x40, b"", 0), w.now)
     w.pump()
-    assert w.of(ev.NakReceived, "ixl") and w.of(ev.Retransmitted, "ixl") == []
+    assert w.of(ev.NakReceived, "ixl") and w.of(ev.Retransmission, "ixl") == []
     w.ixl.send_indications([(4, 1)], w.now)
     w.pump()
     assert [i for e in w.of(ev.IndicationsChanged) for i in e.items] == [(4, 1)]
@@ -308,7 +308,7 @@ def test_seq_gap_makes_the_ctc_ask_request_all_and_the_dump_restores_the_view() 
     w.ixl.data_to_send()  # lost on the way
     w.ixl.send_indications([(4, 1)], w.now)
     w.pump()
-    (gap,) = w.of(ev.SeqGap)
+    (gap,) = w.of(ev.SequenceGap)
     assert gap.received == (gap.expected + 1) % 256
     assert w.of(ev.FullStateRequested, "ixl") == [ev.FullStateRequested()]
     view = dict(w.of(ev.FullState)[0].items)
@@ -325,7 +325,7 @@ def test_seq_wraps_without_gaps() -> None:
     for k in range(600):
         w.ixl.send_indications([(1, k % 2)], w.now)
         w.pump()
-    assert w.of(ev.SeqGap) == []
+    assert w.of(ev.SequenceGap) == []
     assert len(w.of(ev.IndicationsChanged)) == 600
 
 
