@@ -1041,7 +1041,7 @@ function T2.proto.dissector(tvb, pinfo, tree)
             r.pnum = pinfo.number
             show_record(T2, c, r, record_tvb(tvb, r, call.start), pinfo, tree, infos)
         end
-    elseif call.carried and not pinfo.visited then
+    elseif call.carried then
         tree:add(T2.proto, tvb()):add_proto_expert_info(T2.e.pending,
             sfmt("%d bytes wait for the rest of their frame in a later segment", call.carried))
         infos[#infos + 1] = "[incomplete, continues in a later segment]"

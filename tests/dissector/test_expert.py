@@ -92,3 +92,21 @@ def test_code_names_from_a_chart(tmp_path: Path) -> None:
     assert f"code: 3 ({chart.name_of(3)})" in text
     assert f"Code 1 {chart.name_of(1)}: 1" in text
     assert "Lua Error" not in text
+
+
+def test_type2_on_the_ports_of_its_preference(lua: Path, tmp_path: Path) -> None:
+    """A stream picked up inside a frame: the heuristic cannot see it; the port preference can."""
+    heartbeat = bytes.fromhex("02 03 02 40 00 E9 84")
+    records = [
+        CaptureRecord(1.0, "ctc>ixl", heartbeat[:3]),
+        CaptureRecord(1.1, "ctc>ixl", heartbeat[3:]),
+    ]
+    cap = write_pcapng(tmp_path / "t2.pcapng", records, "type2")
+    assert not any("ktcs2" in p["_source"]["layers"] for p in tshark_json(lua, cap))
+    packets = tshark_json(lua, cap, "-o", "ktcs2.tcp_ports:5020")
+    frame = packets[1]["_source"]["layers"]["ktcs2"]
+    assert (frame["ktcs2.op_name"], frame["ktcs2.sub_name"], frame["ktcs2.crc_ok"]) == (
+        "HEARTBEAT",
+        "heartbeat",
+        "1",
+    )
