@@ -87,14 +87,9 @@ def parse(words: list[str]) -> dict[str, Any]:
 def _address(args: argparse.Namespace) -> tuple[str, int]:
     if args.address:
         return args.address  # type: ignore[no-any-return]
-    from ktcs_bench.lab.runner import state_file
+    from ktcs_bench.lab.state import attach
 
-    path = state_file(args.lab)
-    if not path.exists():
-        raise UsageError(
-            f"lab {args.lab} is not running; start it (`ktcs-bench lab up`) or give --address"
-        )
-    state = json.loads(path.read_text())
+    state = attach(args.lab)
     ctc = next((d for d in state["devices"].values() if d.get("kind") == "ctc"), None)
     if ctc is None:
         raise UsageError(f"lab {args.lab} has no CTC")

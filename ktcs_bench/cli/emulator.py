@@ -75,6 +75,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "(ctc: client certificates are then required)",
     )  # fmt: skip
     p.add_argument("--tls-server-name", help="ixl: the name (or IP) in the CTC's certificate")
+    p.add_argument(
+        "--lifeline", type=int, metavar="FD",
+        help="stop when this file descriptor (a pipe from the launcher) reaches end of file: "
+        "the launcher is gone (`lab up` gives each device one)",
+    )  # fmt: skip
     p.add_argument("-v", "--verbose", action="store_true", help="log every event to stderr")
     p.set_defaults(handler=run)
 
@@ -185,6 +190,7 @@ def run(args: argparse.Namespace) -> int:
         format="%(asctime)s %(name)s %(levelname)s %(message)s",
     )  # fmt: skip
     device = build_device(args)
+    device.lifeline = args.lifeline
     code: int = asyncio.run(device.run())
     return code
 

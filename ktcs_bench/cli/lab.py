@@ -59,9 +59,7 @@ def run(args: argparse.Namespace) -> int:
     lab_name = getattr(args, "lab", None) or "reference"
     lab_name = load_lab(resolve_lab_path(lab_name)).name if lab_name.endswith(".yaml") else lab_name
     if args.lab_command == "down":
-        _request(lab_name, {"cmd": "down"})
-        print(f"lab {lab_name}: stopping")
-        return 0
+        return _down(lab_name)
     if args.lab_command in ("restart", "kill"):
         answer = _request(lab_name, {"cmd": args.lab_command, "device": args.device})
         if not answer.get("ok"):
@@ -88,16 +86,36 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _request(lab_name: str, obj: dict[str, Any]) -> dict[str, Any]:
-    from ktcs_bench.lab.runner import state_file
+    from ktcs_bench.lab.state import attach
 
-    path = state_file(lab_name)
-    if not path.exists():
-        raise UsageError(f"lab {lab_name} is not running (no {path})")
-    host, _, port = json.loads(path.read_text())["control"].rpartition(":")
+    host, _, port = str(attach(lab_name)["control"]).rpartition(":")
+    if not port:
+        raise PeerError(f"lab {lab_name} is still starting; try again when `lab up` says it is up")
     try:
         return asyncio.run(jsonlines.request(host, int(port), obj, timeout=30))
-    except OSError as exc:
+    except (OSError, TimeoutError) as exc:
         raise PeerError(f"lab {lab_name} does not answer on {host}:{port}: {exc}") from None
+
+
+def _down(lab_name: str) -> int:
+    """Stop a running lab and wait until it has stopped; clean up after one that died."""
+    from ktcs_bench.lab.processes import wait_for
+    from ktcs_bench.lab.state import clean_up_after, is_alive, read_state
+    from ktcs_bench.runtime import process_alive
+
+    state = read_state(lab_name)
+    if state is not None and not is_alive(state):
+        for line in clean_up_after(lab_name):
+            print(line)
+        return 0
+    _request(lab_name, {"cmd": "down"})
+    assert state is not None
+    pid, started = int(state["pid"]), state.get("started")
+    print(f"lab {lab_name}: stopping", flush=True)
+    if not wait_for(lambda: not process_alive(pid, started), 60.0, 0.1):
+        raise PeerError(f"lab {lab_name} (pid {pid}) has not stopped within 60 s")
+    print(f"lab {lab_name}: stopped")
+    return 0
 
 
 def _up(args: argparse.Namespace) -> int:
@@ -122,6 +140,8 @@ def _up(args: argparse.Namespace) -> int:
                     flush=True,
                 )
             await runner.up()
+            for line in runner.notices:  # what was cleaned up after a lab that died
+                print(line, file=sys.stderr, flush=True)
             if args.json:
                 print(json.dumps({"lab": lab.name, "control": runner.control_address,
                                   "links": runner.link_map()}), flush=True)  # fmt: skip

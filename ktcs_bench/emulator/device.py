@@ -2,7 +2,9 @@
 deadline, an event log, a JSON-lines control port, and the "ready" line a launcher reads.
 
 A device prints exactly one JSON line on stdout when it is up: {"ready": NAME, "kind": KIND,
-"control": "HOST:PORT", "ptys": {PEER: PATH}, ...}; everything else goes to stderr (logging).
+"control": "HOST:PORT", "ptys": {PEER: PATH}, ...}, or {"error": TEXT} when it cannot start (a
+port taken); everything else goes to stderr (logging). Given a lifeline (the read end of a pipe
+its launcher holds the other end of), it stops when the launcher is gone.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import os
 import signal
 import sys
 import time
@@ -38,6 +41,7 @@ class Device:
         self._stop: asyncio.Event | None = None
         self._server: asyncio.Server | None = None
         self.ready_info: dict[str, Any] = {}
+        self.lifeline: int | None = None  # fd: end of file there means the launcher is gone
 
     # -- clock and timers ----------------------------------------------------------------------
     @property
@@ -114,12 +118,35 @@ class Device:
         if self._stop is not None:
             self._stop.set()
 
+    def _lifeline_readable(self) -> None:
+        assert self.lifeline is not None
+        try:
+            data = os.read(self.lifeline, 64)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self.loop.remove_reader(self.lifeline)
+            log.warning("%s: the process that started it is gone; stopping", self.name)
+            self.stop()
+
     async def run(self) -> int:
         self._stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self.stop)
-        await self.start()
+        if self.lifeline is not None:
+            os.set_blocking(self.lifeline, False)
+            loop.add_reader(self.lifeline, self._lifeline_readable)
+        try:
+            await self.start()
+        except OSError as exc:  # a port taken, an address not ours: say so, no traceback
+            await self.close()
+            log.error("%s cannot start: %s", self.name, exc)
+            sys.stdout.write(json.dumps({"error": str(exc)}) + "\n")
+            sys.stdout.flush()
+            return 3
         running = await self.tasks()
         ready = {"ready": self.name, "kind": self.kind, **self.ready_info}
         sys.stdout.write(json.dumps(ready) + "\n")

@@ -1,5 +1,10 @@
 """Child processes of a lab: start a device with its command line, read its ready line, watch it,
-stop it (SIGTERM, then SIGKILL after a grace period), restart it with the same arguments."""
+stop it (SIGTERM, then SIGKILL after a grace period), restart it with the same arguments.
+
+Every child holds the read end of a pipe whose write end only its launcher holds (`--lifeline`):
+when the launcher ends, however it ends (SIGKILL included), the kernel closes the write end, the
+child reads end of file and stops. A device never outlives the lab that started it.
+"""
 
 from __future__ import annotations
 
@@ -15,6 +20,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from ktcs_bench.errors import PeerError
+from ktcs_bench.runtime import process_started
 
 READY_TIMEOUT = 30.0
 STOP_GRACE = 5.0
@@ -29,24 +35,39 @@ class Child:
     ready: dict[str, Any] = field(default_factory=dict)
     starts: int = 0
     exit_code: int | None = None
+    started: int | None = None  # the process's start time (runtime.process_started)
     _log: IO[bytes] | None = None
+    _lifeline: int | None = None  # our end of the child's lifeline pipe
 
     def start(self, env: dict[str, str] | None = None) -> dict[str, Any]:
-        """Start and wait for the ready line; PeerError if it dies or stays silent."""
+        """Start and wait for the ready line; PeerError if it dies, stays silent or says why it
+        cannot start (`{"error": ...}`, e.g. its port is taken)."""
+        self.stop()  # what is left of a previous run (its pipes, its log file)
         self._log = open(self.log_path, "ab")  # noqa: SIM115 -- lives as long as the child
-        self.proc = subprocess.Popen(
-            self.argv, stdout=subprocess.PIPE, stderr=self._log, stdin=subprocess.DEVNULL,
-            env=env, start_new_session=True,
-        )  # fmt: skip
+        theirs, self._lifeline = os.pipe()  # both ends close-on-exec; pass_fds opens theirs
+        try:
+            self.proc = subprocess.Popen(
+                [*self.argv, "--lifeline", str(theirs)], stdout=subprocess.PIPE, stderr=self._log,
+                stdin=subprocess.DEVNULL, env=env, start_new_session=True, pass_fds=(theirs,),
+            )  # fmt: skip
+        finally:
+            os.close(theirs)
+        self.started = process_started(self.proc.pid)
         self.starts += 1
         self.exit_code = None
         line = _readline(self.proc, READY_TIMEOUT)
-        if line is None:
+        try:
+            ready = json.loads(line) if line else None
+        except ValueError:
+            ready = None
+        if not isinstance(ready, dict) or "error" in ready:
             code = self.proc.poll()
             self.stop()
+            if isinstance(ready, dict):
+                raise PeerError(f"{self.name} did not start: {ready['error']}")
             tail = _tail(self.log_path)
             raise PeerError(f"{self.name} did not start (exit {code}); its log ends:\n{tail}")
-        self.ready = json.loads(line)
+        self.ready = ready
         # keep draining stdout so the child never blocks on a full pipe
         threading.Thread(target=_drain, args=(self.proc,), daemon=True).start()
         return self.ready
@@ -80,6 +101,9 @@ class Child:
         if self._log is not None:
             self._log.close()
             self._log = None
+        if self._lifeline is not None:
+            os.close(self._lifeline)
+            self._lifeline = None
 
     def kill(self) -> None:
         """SIGKILL, as a crash would (tests and `lab kill`)."""

@@ -9,10 +9,8 @@ to put one device on another machine -- so the lab assumes nothing the devices d
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import os
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,20 +20,13 @@ from ktcs_bench.capture import open_writer
 from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import KtcsError, UsageError
 from ktcs_bench.lab.processes import Child, emulator_argv
+from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
+from ktcs_bench.runtime import private_dir, this_process
 from ktcs_bench.tap import PtyTap, TcpTap
 from ktcs_bench.tap.link import Tap
-from ktcs_bench.tap.registry import announce, run_dir, withdraw
 
 log = logging.getLogger("ktcs_bench.lab")
-
-
-def lab_dir(name: str) -> Path:
-    return run_dir() / "labs" / name
-
-
-def state_file(name: str) -> Path:
-    return lab_dir(name) / "lab.json"
 
 
 @dataclass
@@ -88,7 +79,10 @@ class LabRunner:
         child = self.children.get(name) or Child(name, [], self.dir / "logs" / f"{name}.log")
         child.argv = self._argv(name)
         self.children[name] = child
-        ready = await asyncio.to_thread(child.start)
+        try:
+            ready = await asyncio.to_thread(child.start)
+        finally:
+            self._write_state()
         self.crashed.pop(name, None)
         return ready
 
@@ -106,19 +100,16 @@ class LabRunner:
             host = self.lab.devices[link.a].host
             tap = TcpTap((host, 0), ctc_address, names=names, profile=self.lab.type2_profile,
                          name=link.name, writers=writers)  # fmt: skip
-        tap.start()
-        announce(link.name, {"name": link.name, **tap.info()})
+        tap.start()  # a named tap announces itself in the registry
         return tap
 
     async def up(self) -> None:
-        if state_file(self.lab.name).exists():
-            other = json.loads(state_file(self.lab.name).read_text())
-            if _pid_alive(int(other.get("pid", 0))):
-                raise UsageError(
-                    f"lab {self.lab.name} is already up (pid {other['pid']}); `ktcs-bench lab down` first"
-                )
-        (self.dir / "logs").mkdir(parents=True, exist_ok=True)
-        (self.dir / "captures").mkdir(parents=True, exist_ok=True)
+        """Start everything. A lab of this name that died without stopping is cleaned up first
+        (its leftover devices stopped, its taps dropped); one that is up is a UsageError."""
+        self.notices += await asyncio.to_thread(clean_up_after, self.lab.name)
+        private_dir(self.dir / "logs")
+        private_dir(self.dir / "captures")
+        self._write_state()  # from now on, whatever kills this lab, the next one can clean up
         lab = self.lab
         rails = None
         for tc in lab.of_kind("trackcircuit"):
@@ -186,18 +177,15 @@ class LabRunner:
         state = {
             "lab": self.lab.name,
             "file": str(self.lab.file),
-            "pid": os.getpid(),
+            **this_process(),
             "control": self.control_address,
             "devices": {
-                n: {"pid": c.proc.pid if c.proc else None, **c.ready}
+                n: {"pid": c.proc.pid if c.proc else None, "started": c.started, **c.ready}
                 for n, c in self.children.items()
             },
             "links": self.link_map(),
         }
-        path = state_file(self.lab.name)
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(state, indent=1))
-        tmp.replace(path)
+        write_state(self.lab.name, state)
 
     async def _handle(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any]:
         cmd = obj.get("cmd")
@@ -321,41 +309,9 @@ class LabRunner:
         others = [n for n in self.children if n not in ixls]
         await asyncio.gather(*(asyncio.to_thread(self.children[n].stop) for n in ixls))
         await asyncio.gather(*(asyncio.to_thread(self.children[n].stop) for n in others))
-        for name, tap in self.taps.items():
-            tap.stop()  # closes its pty pairs: the ptys are gone
-            withdraw(name)
+        for tap in self.taps.values():
+            tap.stop()  # closes its pty pairs (the ptys are gone) and withdraws it
         if getattr(self, "_control", None) is not None:
             self._control.close()
-        try:
-            state_file(self.lab.name).unlink()
-        except FileNotFoundError:
-            pass
-
-
-def running_labs() -> list[dict[str, Any]]:
-    """The state (lab.json) of every lab that is up on this machine, for tools that attach to one."""
-    out = []
-    for path in sorted((run_dir() / "labs").glob("*/lab.json")):
-        try:
-            state = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            continue
-        if isinstance(state, dict) and _pid_alive(int(state.get("pid", 0))):
-            out.append(state)
-    return out
-
-
-def _pid_alive(pid: int) -> bool:
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def clean_run_dir(name: str) -> None:
-    shutil.rmtree(lab_dir(name), ignore_errors=True)
+        if (read_state(self.lab.name) or {}).get("pid") == os.getpid():  # ours, not a lab up
+            state_file(self.lab.name).unlink(missing_ok=True)

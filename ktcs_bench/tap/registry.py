@@ -1,32 +1,23 @@
 """Where running taps announce themselves, so `tap fault NAME`, `monitor NAME` and `replay --to
-NAME` find a tap by name: one JSON file per named tap in the run directory.
-
-The run directory is $KTCS_BENCH_RUN_DIR, else $XDG_RUNTIME_DIR/ktcs-bench, else
-/tmp/ktcs-bench-<uid>. A tap may also be addressed by its control address: `HOST:PORT`, `PORT` or
+NAME` find a tap by name: one JSON file per named tap in the run folder (`ktcs_bench.runtime`),
+stamped with the process that holds the tap. A file whose process is gone (a lab killed with
+SIGKILL cannot withdraw its taps) names a dead tap: it is dropped when the taps are listed or the
+name is looked up. A tap may also be addressed by its control address: `HOST:PORT`, `PORT` or
 `tap://HOST:PORT`.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import re
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from ktcs_bench.emulator.endpoints import check_port
 from ktcs_bench.errors import UsageError
+from ktcs_bench.runtime import private_dir, process_alive, run_dir, this_process
 
 _ADDRESS = re.compile(r"^(?:tap://)?(?:(?P<host>[\w.:-]+|\[[0-9a-fA-F:]+\]):)?(?P<port>\d{1,5})$")
-
-
-def run_dir() -> Path:
-    if "KTCS_BENCH_RUN_DIR" in os.environ:
-        return Path(os.environ["KTCS_BENCH_RUN_DIR"])
-    if "XDG_RUNTIME_DIR" in os.environ:
-        return Path(os.environ["XDG_RUNTIME_DIR"]) / "ktcs-bench"
-    return Path(tempfile.gettempdir()) / f"ktcs-bench-{os.getuid()}"
 
 
 def tap_file(name: str) -> Path:
@@ -37,29 +28,43 @@ def tap_file(name: str) -> Path:
 
 def announce(name: str, info: dict[str, Any]) -> Path:
     path = tap_file(name)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
+    private_dir(path.parent)
+    tmp = path.with_suffix(f".{this_process()['pid']}.tmp")
+    tmp.write_text(json.dumps({**info, **this_process()}, indent=1) + "\n", encoding="utf-8")
     tmp.replace(path)
     return path
 
 
 def withdraw(name: str) -> None:
+    """Remove the announcement of tap `name` if this process made it (or its maker is gone)."""
+    path = tap_file(name)
+    info = _live(path)
+    if info is not None and info.get("pid") == this_process()["pid"]:
+        path.unlink(missing_ok=True)
+
+
+def _live(path: Path) -> dict[str, Any] | None:
+    """The tap a registry file announces, or None -- and the file removed -- if the process that
+    held the tap is gone."""
     try:
-        tap_file(name).unlink()
+        info = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        pass
+        return None
+    except (OSError, ValueError):
+        info = None
+    if not isinstance(info, dict) or not process_alive(
+        int(info.get("pid") or 0), info.get("started")
+    ):
+        path.unlink(missing_ok=True)
+        return None
+    return info
 
 
 def known_taps() -> list[dict[str, Any]]:
+    """The named taps whose process still runs (the files of dead ones are dropped)."""
     folder = run_dir() / "taps"
-    out = []
-    for p in sorted(folder.glob("*.json")) if folder.is_dir() else []:
-        try:
-            out.append(json.loads(p.read_text(encoding="utf-8")))
-        except (OSError, ValueError):
-            continue
-    return out
+    found = (_live(p) for p in sorted(folder.glob("*.json"))) if folder.is_dir() else ()
+    return [info for info in found if info is not None]
 
 
 def parse_tap_address(
@@ -81,11 +86,11 @@ def resolve_tap(spec: str) -> tuple[str, int]:
         return addr
     name = spec.removeprefix("tap://")
     path = tap_file(name)
+    info = _live(path)
+    if info is None:
+        raise UsageError(f"no tap named {name!r} runs (looked in {path.parent})")
     try:
-        info = json.loads(path.read_text(encoding="utf-8"))
         host, port = info["control"]
         return str(host), int(port)
-    except FileNotFoundError:
-        raise UsageError(f"no tap named {name!r} (looked in {path.parent})") from None
-    except (OSError, ValueError, KeyError, TypeError):
+    except (KeyError, TypeError, ValueError):
         raise UsageError(f"tap file {path} is unreadable") from None

@@ -75,11 +75,12 @@ class RunningLab:
         )  # fmt: skip
 
 
-def lab_file(tmp: Path, name: str, extra_devices: str = "") -> Path:
-    """The shipped reference lab under another name, with the console on any free port (and
-    `extra_devices`, YAML lines added under `devices:`)."""
+def lab_file(tmp: Path, name: str, extra_devices: str = "", console_port: int = 0) -> Path:
+    """The shipped reference lab under another name, with the console on `console_port` (default
+    any free port) and `extra_devices`, YAML lines added under `devices:`."""
     text = (data_dir("emulators") / "labs" / "reference.yaml").read_text(encoding="utf-8")
-    text = text.replace("lab: reference", f"lab: {name}").replace("port: 8020", "port: 0")
+    text = text.replace("lab: reference", f"lab: {name}")
+    text = text.replace("port: 8020", f"port: {console_port}")
     if extra_devices:
         text = text.replace("\nlinks:\n", f"{extra_devices}\nlinks:\n")
     line = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
@@ -91,12 +92,12 @@ def lab_file(tmp: Path, name: str, extra_devices: str = "") -> Path:
 
 @contextlib.contextmanager
 def start_lab(
-    tmp: Path, name: str, extra_devices: str = "", clear: bool = True
+    tmp: Path, name: str, extra_devices: str = "", clear: bool = True, console_port: int = 0
 ) -> Iterator[RunningLab]:
     """Start a lab and wait until every station is synced at the CTC in center mode (and, with
     `clear`, the empty line reported clear)."""
     run_dir = tmp / "run"
-    path = lab_file(tmp, name, extra_devices)
+    path = lab_file(tmp, name, extra_devices, console_port)
     stderr = open(tmp / f"{name}.stderr", "w")  # noqa: SIM115 -- closed below
     proc = subprocess.Popen(
         [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(path), "--json", "--interval", "5"],
