@@ -30,6 +30,7 @@ lint: setup
 
 bench: setup
 	$(BIN)/python benchmarks/codec.py
+	$(BIN)/python benchmarks/decode.py
 	$(BIN)/python benchmarks/links.py
 	$(BIN)/python benchmarks/links_type2.py
 	$(BIN)/python benchmarks/lab.py

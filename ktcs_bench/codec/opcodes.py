@@ -2,7 +2,8 @@
 
 A payload is one of three shapes (or empty): fixed `fields`; repeated `items` (code, state) records;
 `statuses`, one byte per code in chart order. construct parses and builds them for display and the
-CLI; `items()` is the fast path (struct.iter_unpack derived from the same layout) for bulk work.
+CLI; `items_of()` and `json_items()` are the fast paths (struct.iter_unpack derived from the same
+layout) for bulk work. construct is imported when a fixed-field payload is first built or parsed.
 """
 
 from __future__ import annotations
@@ -11,8 +12,6 @@ import struct
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
-
-import construct as cs
 
 from ktcs_bench.errors import PeerError, UsageError
 
@@ -34,6 +33,8 @@ class FieldSpec:
 
 
 def _construct_field(spec: FieldSpec, little: bool) -> Any:
+    import construct as cs
+
     return {
         ("u8", True): cs.Int8ul,
         ("u8", False): cs.Int8ub,
@@ -57,26 +58,31 @@ class Opcode:
     control: bool = False
     subs: Mapping[int, str] = field(default_factory=dict)
     reasons: Mapping[int, str] = field(default_factory=dict)
-    _fields_cs: Any = field(init=False, repr=False, compare=False)
-    _item_cs: Any = field(init=False, repr=False, compare=False)
     _item_struct: struct.Struct | None = field(init=False, repr=False, compare=False)
+    _fixed: int = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         order = "<" if self.little else ">"
-        fcs = cs.Struct(*(f.name / _construct_field(f, self.little) for f in self.fields))
-        object.__setattr__(self, "_fields_cs", fcs)
+        item_struct = None
         if self.items:
-            ics = cs.Struct(*(f.name / _construct_field(f, self.little) for f in self.items))
-            fmt = order + "".join(_TYPES[f.type][0] for f in self.items)
-            object.__setattr__(self, "_item_cs", ics)
-            object.__setattr__(self, "_item_struct", struct.Struct(fmt))
-        else:
-            object.__setattr__(self, "_item_cs", None)
-            object.__setattr__(self, "_item_struct", None)
+            item_struct = struct.Struct(order + "".join(_TYPES[f.type][0] for f in self.items))
+        object.__setattr__(self, "_item_struct", item_struct)
+        object.__setattr__(self, "_fixed", sum(f.size for f in self.fields))
+
+    @property
+    def _fields_cs(self) -> Any:
+        """The construct Struct of the fixed fields, built on first use."""
+        built = self.__dict__.get("_fields_cs_built")
+        if built is None:
+            import construct as cs
+
+            built = cs.Struct(*(f.name / _construct_field(f, self.little) for f in self.fields))
+            object.__setattr__(self, "_fields_cs_built", built)
+        return built
 
     @property
     def fixed_size(self) -> int:
-        return sum(f.size for f in self.fields)
+        return self._fixed
 
     @property
     def item_size(self) -> int:
@@ -84,7 +90,7 @@ class Opcode:
 
     def parse(self, data: bytes) -> dict[str, Any]:
         """Decode DATA: {field: value, ..., "items": [[..], ..], "statuses": [..]}."""
-        fixed = self.fixed_size
+        fixed = self._fixed
         if len(data) < fixed:
             raise PayloadError(f"{self.name}: DATA has {len(data)} bytes, needs {fixed}")
         out: dict[str, Any] = {}
@@ -111,14 +117,30 @@ class Opcode:
             )
         return [list(t) for t in st.iter_unpack(data)]
 
+    def json_items(self, data: bytes) -> list[list[int]] | None:
+        """The `items` of a frame's JSON record (SPEC §7): its items, or its statuses as
+        [code, status] from code 1, or None for a payload of fixed fields only. Raises
+        PayloadError exactly where `parse` does; reads no fixed field (the bulk fast path)."""
+        fixed = self._fixed
+        size = len(data)
+        if size < fixed:
+            raise PayloadError(f"{self.name}: DATA has {size} bytes, needs {fixed}")
+        st = self._item_struct
+        if st is not None:
+            if (size - fixed) % st.size:
+                raise PayloadError(
+                    f"{self.name}: {size - fixed} item bytes is not a multiple of {st.size}"
+                )
+            return [list(t) for t in st.iter_unpack(data[fixed:] if fixed else data)]
+        if self.statuses:
+            return [[k, s] for k, s in enumerate(data[fixed:], 1)]
+        if size > fixed:
+            raise PayloadError(f"{self.name}: {size - fixed} unexpected bytes after the payload")
+        return None
+
     def build(self, values: Mapping[str, Any]) -> bytes:
         """Encode DATA from {field: value, "items": [[..]..]} or {"statuses": [..]}."""
-        try:
-            out = bytes(self._fields_cs.build({f.name: values[f.name] for f in self.fields}))
-        except KeyError as exc:
-            raise UsageError(f"{self.name}: missing field {exc.args[0]!r}") from None
-        except cs.ConstructError as exc:
-            raise UsageError(f"{self.name}: {exc}") from None
+        out = self._build_fields(values) if self.fields else b""
         if self.items:
             out += self.pack_items(values.get("items", ()))
         elif self.statuses:
@@ -127,6 +149,16 @@ class Opcode:
                 raise UsageError(f"{self.name}: a status must be a byte (0..255)")
             out += bytes(int(s) for s in statuses)
         return out
+
+    def _build_fields(self, values: Mapping[str, Any]) -> bytes:
+        import construct as cs
+
+        try:
+            return bytes(self._fields_cs.build({f.name: values[f.name] for f in self.fields}))
+        except KeyError as exc:
+            raise UsageError(f"{self.name}: missing field {exc.args[0]!r}") from None
+        except cs.ConstructError as exc:  # a value that does not fit its field
+            raise UsageError(f"{self.name}: {exc}") from None
 
     def pack_items(self, items: Iterable[Iterable[int]]) -> bytes:
         st = self._item_struct

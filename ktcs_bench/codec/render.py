@@ -6,6 +6,7 @@ JSON object has exactly the keys of SPEC §7; garbage is `{"garbage": hex, "offs
 
 from __future__ import annotations
 
+import json
 from typing import Any, Literal
 
 from ktcs_bench.charts.model import CodeChart
@@ -52,36 +53,40 @@ def payload(
         return opcode, None, str(exc)
 
 
-def _items(opcode: Opcode | None, parsed: dict[str, Any] | None) -> list[list[int]] | None:
-    if opcode is None or parsed is None:
-        return None
-    if "items" in parsed:
-        return [list(x) for x in parsed["items"]]
-    if "statuses" in parsed:
-        return [[k + 1, s] for k, s in enumerate(parsed["statuses"])]
-    return None
-
-
 def to_json(record: Record, profile: FrameProfile) -> dict[str, Any]:
-    if isinstance(record, Garbage):
+    if record.__class__ is Garbage:
         return {"garbage": record.raw.hex(), "offset": record.offset}
-    opcode, parsed, perr = payload(record, profile)
-    error = record.error or ("format" if perr else None)
+    assert isinstance(record, Frame)
+    op = record.op
+    opcode = None if op is None else profile.opcodes.by_op.get(op)
+    error = record.error
+    data = record.raw[record.data_start : record.data_end]
+    items = None
+    if opcode is not None and error is None:
+        try:
+            items = opcode.json_items(data)
+        except PayloadError:
+            error = "format"
+    packet, calc = record.crc_packet, record.crc_calc
     return {
         "protocol": profile.protocol,
         "profile": profile.name,
         "offset": record.offset,
         "seq": record.seq,
-        "op": record.op,
-        "op_name": opcode.name if opcode else None,
+        "op": op,
+        "op_name": None if opcode is None else opcode.name,
         "sub": record.sub,
-        "data": record.data.hex() if record.error != "length" else "",
-        "items": _items(opcode, parsed),
-        "crc_ok": record.crc_ok,
-        "crc_packet": record.crc_packet,
-        "crc_calc": record.crc_calc,
+        "data": data.hex() if record.error != "length" else "",
+        "items": items,
+        "crc_ok": packet is not None and packet == calc,
+        "crc_packet": packet,
+        "crc_calc": calc,
         "error": error,
     }
+
+
+# one encoder, made once: json.dumps with arguments builds a new one for every call
+json_line = json.JSONEncoder(ensure_ascii=False, separators=(", ", ": ")).encode
 
 
 def _paint(text: str, colour: str, on: bool) -> str:
