@@ -26,6 +26,7 @@ from ktcs_bench.capture.records import (
     split_direction,
     valid_direction,
 )
+from ktcs_bench.codec.hextext import decode_text
 from ktcs_bench.errors import UsageError
 
 __all__ = [
@@ -141,11 +142,16 @@ class Capture:
         return list(seen)
 
 
-def parse_capture(data: bytes) -> Capture:
-    """A capture from its bytes: pcapng by its magic, else hex text of any form `decode` reads."""
+def parse_capture(data: bytes, name: str = "the capture") -> Capture:
+    """A capture from its bytes: pcapng by its magic, else hex text of any form `decode` reads
+    (UTF-8 or CP949/EUC-KR). Bytes that are neither -- a binary file -- are refused, never taken
+    for hex text and sent as garbage."""
     if is_pcapng(data):
         return Capture(parse_pcapng(data), "pcapng")
-    log = parse_hex_log(data.decode("utf-8", errors="replace"))
+    text = decode_text(data)
+    if text is None:
+        raise UsageError(f"{name} is not a capture: neither pcapng nor hex text (a binary file?)")
+    log = parse_hex_log(text)
     return Capture(log.records, "hex", log.profile, log.link, log.start)
 
 
@@ -154,4 +160,4 @@ def read_capture(path: str | Path) -> Capture:
         data = Path(path).read_bytes()
     except OSError as exc:
         raise UsageError(f"cannot read capture {path}: {exc.strerror}") from None
-    return parse_capture(data)
+    return parse_capture(data, str(path))

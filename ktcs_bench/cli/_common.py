@@ -1,5 +1,5 @@
 """Small pieces every subcommand shares: colour on a terminal, the argument types of durations
-and ports, reading hex input, JSON lines."""
+and ports, JSON lines."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import math
 import os
 import sys
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any, TextIO
 
 from ktcs_bench.emulator.endpoints import check_port, parse_host_port
@@ -60,28 +59,6 @@ def host_port(any_free: bool = False) -> Callable[[str], tuple[str, int]]:
             raise argparse.ArgumentTypeError(str(exc)) from None
 
     return parse
-
-
-def read_text_inputs(inputs: list[str]) -> str:
-    """Arguments that name files are read; '-' (or nothing, with a pipe) reads stdin; else hex text."""
-    if not inputs:
-        if sys.stdin.isatty():
-            raise UsageError("no input: give hex text, a capture file, or pipe it on stdin")
-        return sys.stdin.read()
-    parts = []
-    for item in inputs:
-        if item == "-":
-            parts.append(sys.stdin.read())
-            continue
-        path = Path(item)
-        if path.is_file():
-            try:
-                parts.append(path.read_text(encoding="utf-8", errors="replace"))
-            except OSError as exc:
-                raise UsageError(f"cannot read {item}: {exc.strerror}") from None
-        else:
-            parts.append(item)
-    return "\n".join(parts)
 
 
 def print_json_line(obj: dict[str, Any], stream: TextIO = sys.stdout) -> None:

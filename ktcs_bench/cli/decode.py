@@ -1,15 +1,26 @@
-"""`ktcs-bench decode`: hex text in any common form -> frames with every field and the CRC verdict."""
+"""`ktcs-bench decode`: hex text in any common form -> frames with every field and the CRC verdict.
+
+It streams: the input is read a block at a time, each block's lines parsed, decoded and printed
+before the next is read, so memory stays bounded whatever the input's size. `--profile auto`
+decides on the first frames (a bounded window), then streams the rest with the profile chosen.
+"""
 
 from __future__ import annotations
 
 import argparse
+import codecs
+import re
+import sys
+from collections import deque
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
 
 from ktcs_bench.charts.model import CodeChart, load_chart
-from ktcs_bench.cli._common import print_json_line, read_text_inputs
 from ktcs_bench.codec.frame import Frame, Record
-from ktcs_bench.codec.hextext import HexText, parse_hex_text
+from ktcs_bench.codec.hextext import Chunk, HexTextParser, text_encoding
 from ktcs_bench.codec.profile import FrameProfile, get_profile, profile_names
-from ktcs_bench.codec.render import BOLD, RESET, to_json, to_text
+from ktcs_bench.codec.render import BOLD, RESET, json_line, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.errors import UsageError
 
@@ -17,10 +28,17 @@ HELP = "decode hex frames (console captures, hex dumps, hex logs) into fields an
 DESCRIPTION = """\
 Decode Type I / Type II frames from hex text. The input is hex in any common form, mixed freely:
   <02><04><00>...      [02][84][00]...      02 04 00 ...      020400...      0x02,0x04,...
-  xxd / hexdump -C dumps, the seed 004 Fig. 7 console lines ("수신 = <02>...", "송신 = [02]...",
-  wrapped over several lines), and the bench's hex logs ("<seconds> <direction> <hex>").
+  xxd, hexdump -C and od -t x1 dumps (their offset columns are not data), the seed 004 Fig. 7
+  console lines ("수신 = <02>...", "송신 = [02]...", wrapped over several lines), and the bench's
+  hex logs ("<seconds> <direction> <hex>"). Files may be UTF-8 or CP949/EUC-KR (as Korean
+  consoles save them).
 Lines that are not hex (console annotations) are skipped. The bytes are decoded as one stream,
-so a frame may span lines and garbage between frames is reported with its offset.
+so a frame may span lines and garbage between frames is reported with its offset. Any input size
+streams in bounded memory; --profile auto decides on the first frames.
+
+An argument is a file when one exists by that name; one that looks like a path (a /, a leading
+. or ~, an extension) but does not exist is an error, as is a bare word of hex digits too short to
+hold a frame (`decode fade` with no file `fade`; write hex to decode as 'FA DE').
 """
 EPILOG = """\
 examples:
@@ -30,8 +48,15 @@ examples:
   xxd capture.bin | ktcs-bench decode --chart code_charts/st20_ixl_to_ctc.yaml
 
 exit status: 0 every frame checks; 1 a frame failed a check (crc, etx, length, truncated, format)
-or no frame was found; 2 bad arguments, profile or chart.
+or no frame was found; 2 bad arguments, profile, chart or input file.
 """
+
+READ_BLOCK = 1 << 20  # bytes of input read, parsed, decoded and printed at a time
+AUTO_WINDOW = 256 << 10  # --profile auto decides once this many bytes decoded hold a good frame,
+AUTO_WINDOW_MAX = 4 << 20  # or at this many in any case (or at the end of the input)
+_PATHLIKE = re.compile(r"[/\\]|^[.~]|\.[A-Za-z][A-Za-z0-9]{0,7}$")
+_BARE_WORD = re.compile(r"[\w-]+")
+_HEX_WORD = re.compile(r"(?:[0-9a-fA-F]{2})+")
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -50,82 +75,259 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--profile", default="auto",
         help="profile name (ktcs-type1, ktcs-type1-fig7, ktcs-type2), FILE.yaml[:NAME] of your own, "
-        "or auto: try each and take the one whose CRC checks (default)",
+        "or auto: try each on the first frames and take the one whose CRC checks (default)",
     )  # fmt: skip
     p.add_argument("--chart", help="code chart YAML: show code names for items and statuses")
     p.add_argument("--json", action="store_true", help="one JSON object per frame (SPEC §7 keys)")
     p.set_defaults(handler=run)
 
 
+# -- choosing a profile -------------------------------------------------------------------------
 def decode_all(data: bytes, profile: FrameProfile) -> list[Record]:
     dec = StreamDecoder(profile)
     return dec.feed(data) + dec.close()
 
 
+class ProfileVote:
+    """The same bytes decoded by each shipped profile of a protocol side by side, counting the
+    frames whose checks pass; the one with the most wins (ties: the one listed first)."""
+
+    def __init__(self, protocol: str) -> None:
+        names = profile_names(None if protocol == "auto" else protocol)
+        if not names:
+            raise UsageError(f"no shipped profile for protocol {protocol}")
+        self.profiles = [get_profile(n) for n in names]
+        self._decoders = [StreamDecoder(p) for p in self.profiles]
+        self.good = dict.fromkeys(names, 0)
+        self.seen = 0
+
+    def feed(self, data: bytes | bytearray) -> None:
+        self.seen += len(data)
+        for prof, dec in zip(self.profiles, self._decoders, strict=True):
+            self.good[prof.name] += _good(dec.feed(data))
+
+    def close(self) -> None:
+        for prof, dec in zip(self.profiles, self._decoders, strict=True):
+            self.good[prof.name] += _good(dec.close())
+
+    def winner(self) -> FrameProfile:
+        best = max(self.good.values())
+        return next(p for p in self.profiles if self.good[p.name] == best)
+
+
+def _good(records: list[Record]) -> int:
+    return sum(1 for r in records if isinstance(r, Frame) and r.error is None)
+
+
 def choose_profile(data: bytes, protocol: str) -> tuple[FrameProfile, list[Record], dict[str, int]]:
-    """Try each shipped profile; the one with the most CRC-good frames wins (ties: listed first)."""
-    names = profile_names(None if protocol == "auto" else protocol)
-    scores: dict[str, int] = {}
-    best: tuple[int, int, FrameProfile, list[Record]] | None = None
-    for rank, name in enumerate(names):
-        prof = get_profile(name)
-        records = decode_all(data, prof)
-        good = sum(1 for r in records if isinstance(r, Frame) and r.error is None)
-        scores[name] = good
-        if best is None or good > best[0]:
-            best = (good, rank, prof, records)
-    if best is None:
-        raise UsageError(f"no shipped profile for protocol {protocol}")
-    return best[2], best[3], scores
+    """The profile whose CRC checks most often over all of `data`, its records and the counts."""
+    vote = ProfileVote(protocol)
+    vote.feed(data)
+    vote.close()
+    profile = vote.winner()
+    return profile, decode_all(data, profile), vote.good
+
+
+# -- input --------------------------------------------------------------------------------------
+def _check_inputs(inputs: list[str]) -> list[str]:
+    """The inputs, refusing (before anything is printed) a file that does not exist."""
+    if not inputs:
+        if sys.stdin.isatty():
+            raise UsageError("no input: give hex text, a capture file, or pipe it on stdin")
+        return ["-"]
+    bare = [i for i in inputs if not Path(i).exists() and _BARE_WORD.fullmatch(i)]
+    bare_bytes = sum(len(i) // 2 for i in bare if _HEX_WORD.fullmatch(i))
+    smallest = min(get_profile(n).frame_size(0) for n in profile_names())
+    for item in inputs:
+        path = Path(item)
+        if item == "-" or path.is_file():
+            continue
+        if path.exists():
+            raise UsageError(f"{item} is not a file")
+        if _PATHLIKE.search(item):
+            raise UsageError(f"no such file: {item}")
+        if item in bare and (not _HEX_WORD.fullmatch(item) or bare_bytes < smallest):
+            raise UsageError(
+                f"no such file: {item} (as hex, the bare words given hold {bare_bytes} bytes, "
+                f"fewer than the smallest frame's {smallest}; to decode them, write the bytes "
+                "spaced and quoted, e.g. 'FA DE')"
+            )
+    return inputs
+
+
+def _binary_lines(stream: BinaryIO, name: str) -> Iterator[list[str]]:
+    """The lines of a text file or pipe, a block at a time, in the encoding its head shows."""
+    block = stream.read1(READ_BLOCK) if hasattr(stream, "read1") else stream.read(READ_BLOCK)
+    encoding = text_encoding(block[:65536])
+    if encoding is None:
+        raise UsageError(
+            f"{name} is not text (a binary file?): decode reads hex text; "
+            f"for raw bytes, `xxd {name if name != 'stdin' else 'FILE'} | ktcs-bench decode`"
+        )
+    decoder = codecs.getincrementaldecoder(encoding)(errors="replace")
+    tail = ""
+    while block:
+        lines = (tail + decoder.decode(block)).split("\n")
+        tail = lines.pop()
+        yield lines
+        block = stream.read1(READ_BLOCK) if hasattr(stream, "read1") else stream.read(READ_BLOCK)
+    rest = tail + decoder.decode(b"", final=True)
+    if rest:
+        yield [rest]
+
+
+def input_lines(inputs: list[str]) -> Iterator[list[str]]:
+    """Every input's lines, in order, a block at a time: hex text arguments, files, stdin."""
+    for item in inputs:
+        if item == "-":
+            yield from _binary_lines(sys.stdin.buffer, "stdin")
+        elif Path(item).is_file():
+            try:
+                with open(item, "rb") as f:
+                    yield from _binary_lines(f, item)
+            except OSError as exc:
+                raise UsageError(f"cannot read {item}: {exc.strerror}") from None
+        else:
+            yield item.splitlines()
+
+
+# -- output -------------------------------------------------------------------------------------
+class _Output:
+    """Records -> text or JSON lines on stdout, a block at a time, and the counts of the summary."""
+
+    def __init__(self, args: argparse.Namespace, chart: CodeChart | None) -> None:
+        self.json = bool(args.json)
+        self.chart = chart
+        self.colour: bool = args.colour  # main decides, for every command
+        self.origins: deque[Chunk] = deque()  # chunks not yet passed, for the line labels
+        self.frames = self.good = self.garbage = 0
+        self.failed = False
+        self._lines: list[str] = []
+
+    def records(self, records: list[Record], profile: FrameProfile) -> None:
+        lines = self._lines
+        if self.json:
+            for record in records:
+                obj = to_json(record, profile)
+                if record.__class__ is Frame:
+                    self.frames += 1
+                    if obj["error"] is None:
+                        self.good += 1
+                    else:
+                        self.failed = True
+                lines.append(json_line(obj))
+            return
+        for record in records:
+            if isinstance(record, Frame):
+                self.frames += 1
+                if record.error is None:
+                    self.good += 1
+                else:
+                    self.failed = True
+            else:
+                self.garbage += len(record.raw)
+            lines.append(to_text(record, profile, self.chart, self.colour, self._label(record)))
+            lines.append("")
+
+    def _label(self, record: Record) -> str:
+        origins = self.origins
+        while len(origins) > 1 and origins[1].offset <= record.offset:
+            origins.popleft()
+        origin = origins[0] if origins and origins[0].offset <= record.offset else None
+        if origin is None:
+            return ""
+        parts = [f"line {origin.line}"]
+        if origin.direction:
+            parts.insert(0, origin.direction)
+        if origin.time is not None:
+            parts.insert(0, f"t={origin.time:.6f}")
+        return " ".join(parts) + "  "
+
+    def line(self, text: str) -> None:
+        self._lines.append(text)
+
+    def flush(self) -> None:
+        if self._lines:
+            self._lines.append("")
+            sys.stdout.write("\n".join(self._lines))
+            self._lines.clear()
+        sys.stdout.flush()
 
 
 def run(args: argparse.Namespace) -> int:
-    text = read_text_inputs(args.inputs)
-    hex_text: HexText = parse_hex_text(text)
-    data = hex_text.data
-    if not data:
-        raise UsageError("no hex bytes found in the input")
-    chart: CodeChart | None = load_chart(args.chart) if args.chart else None
-    colour: bool = args.colour
-    if args.profile == "auto":
-        profile, records, scores = choose_profile(data, args.protocol)
-        if not args.json:
-            tried = ", ".join(f"{n}: {s}" for n, s in scores.items())
-            verdict = "CRC checks" if scores[profile.name] else "no profile's CRC checks; showing"
-            print(f"profile auto: {verdict} {profile.name}  (good frames per profile: {tried})")
-    else:
+    profile: FrameProfile | None = None
+    if args.profile != "auto":
         profile = get_profile(args.profile)
         if args.protocol != "auto" and profile.protocol != args.protocol:
             raise UsageError(f"profile {profile.name} is {profile.protocol}, not {args.protocol}")
-        records = decode_all(data, profile)
-    failed = not any(isinstance(r, Frame) for r in records)
-    for record in records:
-        if isinstance(record, Frame) and record.error is not None:
-            failed = True
-        if args.json:
-            obj = to_json(record, profile)
-            failed = failed or bool(obj.get("error"))
-            print_json_line(obj)
-            continue
-        origin = hex_text.origin(record.offset)
-        label = ""
-        if origin is not None:
-            parts = [f"line {origin.line}"]
-            if origin.direction:
-                parts.insert(0, origin.direction)
-            if origin.time is not None:
-                parts.insert(0, f"t={origin.time:.6f}")
-            label = " ".join(parts) + "  "
-        print(to_text(record, profile, chart, colour, label))
-        print()
+    chart: CodeChart | None = load_chart(args.chart) if args.chart else None
+    inputs = _check_inputs(args.inputs)
+    out = _Output(args, chart)
+    parser = HexTextParser()
+    track_origins = not args.json
+    vote = ProfileVote(args.protocol) if profile is None else None
+    window = bytearray()  # what --profile auto has seen while it decides
+    decoder = None if profile is None else StreamDecoder(profile)
+    total = 0
+
+    def decide(final: bool) -> None:
+        nonlocal profile, decoder
+        assert vote is not None
+        if final:
+            vote.close()
+        profile = vote.winner()
+        if not args.json:
+            counts = ", ".join(f"{n}: {s}" for n, s in vote.good.items())
+            scope = "" if final else f" in the first {vote.seen} bytes"
+            verdict = (
+                "CRC checks" if vote.good[profile.name] else "no profile's CRC checks; showing"
+            )
+            out.line(f"profile auto: {verdict} {profile.name}  (good frames per profile{scope}: "
+                     f"{counts})")  # fmt: skip
+        decoder = StreamDecoder(profile)
+        out.records(decoder.feed(window), profile)
+        window.clear()
+
+    for lines in input_lines(inputs):
+        block = bytearray()
+        feed = parser.feed
+        for line in lines:
+            pieces = feed(line)
+            if track_origins and parser.new_chunk and parser.chunk is not None:
+                out.origins.append(parser.chunk)
+            for piece in pieces:
+                block += piece
+        total += len(block)
+        if decoder is not None and profile is not None:
+            out.records(decoder.feed(block), profile)
+        else:
+            assert vote is not None
+            vote.feed(block)
+            window += block
+            if vote.seen >= AUTO_WINDOW_MAX or (
+                vote.seen >= AUTO_WINDOW and any(vote.good.values())
+            ):
+                decide(final=False)
+        out.flush()
+    if not total:
+        raise UsageError("no hex bytes found in the input" + _word_dump_hint(parser))
+    if decoder is None:
+        decide(final=True)
+    assert decoder is not None and profile is not None
+    out.records(decoder.close(), profile)
     if not args.json:
-        frames = [r for r in records if isinstance(r, Frame)]
-        good = sum(1 for f in frames if f.error is None)
-        summary = f"{len(frames)} frames, {good} good, {len(frames) - good} with errors"
-        garbage = sum(len(r.raw) for r in records if not isinstance(r, Frame))
-        if garbage:
-            summary += f", {garbage} garbage bytes"
-        if hex_text.skipped_lines:
-            summary += f"; {len(hex_text.skipped_lines)} non-hex lines skipped"
-        print(f"{BOLD}{summary}{RESET}" if colour else summary)
-    return 1 if failed else 0
+        summary = f"{out.frames} frames, {out.good} good, {out.frames - out.good} with errors"
+        if out.garbage:
+            summary += f", {out.garbage} garbage bytes"
+        if parser.skipped:
+            summary += f"; {parser.skipped} non-hex lines skipped" + _word_dump_hint(parser)
+        out.line(f"{BOLD}{summary}{RESET}" if out.colour else summary)
+    out.flush()
+    return 1 if out.failed or not out.frames else 0
+
+
+def _word_dump_hint(parser: HexTextParser) -> str:
+    if not parser.word_dump_lines:
+        return ""
+    return (f" ({parser.word_dump_lines} lines of 2-byte words in host order, as od and hexdump "
+            "print by default: give od -t x1 or hexdump -C)")  # fmt: skip

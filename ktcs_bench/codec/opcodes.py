@@ -60,6 +60,7 @@ class Opcode:
     reasons: Mapping[int, str] = field(default_factory=dict)
     _item_struct: struct.Struct | None = field(init=False, repr=False, compare=False)
     _fixed: int = field(init=False, repr=False, compare=False)
+    _keys: frozenset[str] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         order = "<" if self.little else ">"
@@ -68,6 +69,8 @@ class Opcode:
             item_struct = struct.Struct(order + "".join(_TYPES[f.type][0] for f in self.items))
         object.__setattr__(self, "_item_struct", item_struct)
         object.__setattr__(self, "_fixed", sum(f.size for f in self.fields))
+        shape = ("items",) if self.items else ("statuses",) if self.statuses else ()
+        object.__setattr__(self, "_keys", frozenset([f.name for f in self.fields] + list(shape)))
 
     @property
     def _fields_cs(self) -> Any:
@@ -139,7 +142,12 @@ class Opcode:
         return None
 
     def build(self, values: Mapping[str, Any]) -> bytes:
-        """Encode DATA from {field: value, "items": [[..]..]} or {"statuses": [..]}."""
+        """Encode DATA from {field: value, "items": [[..]..]} or {"statuses": [..]}. A value the
+        opcode does not carry is refused, never dropped."""
+        extra = [k for k in values if k not in self._keys]
+        if extra:
+            carried = ", ".join(sorted(self._keys)) or "nothing (no DATA)"
+            raise UsageError(f"{self.name} carries no {', '.join(extra)} (it carries {carried})")
         out = self._build_fields(values) if self.fields else b""
         if self.items:
             out += self.pack_items(values.get("items", ()))

@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 
 def cli(*args: str, stdin: str | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
@@ -62,3 +64,88 @@ def test_decode_without_hex_is_a_usage_error() -> None:
 def test_help_teaches() -> None:
     out = cli("--help")
     assert "decode" in out.stdout and "encode" in out.stdout and "exit codes" in out.stdout
+
+
+# -- hex input (issue 13) -----------------------------------------------------------------------
+REQ = bytes.fromhex("02 04 00 10 00 00 00 00 FF FF 83 7B 00 00 03")
+ACK = bytes.fromhex("02 00 00 10 06 00 03 87 00 00 03")
+FIG7 = Path(__file__).resolve().parents[2] / "protocols" / "captures" / "fig7.hex"
+
+
+def cli_in(cwd: Path, *args: str, stdin: str | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "ktcs_bench.cli.main", *args],
+        input=stdin, capture_output=True, text=True, timeout=60, cwd=cwd,
+    )  # fmt: skip
+
+
+def test_a_path_that_does_not_exist_is_an_error_not_hex(tmp_path: Path) -> None:
+    for missing in ("fade", str(tmp_path / "nowhere" / "cap.hex"), "cap.hex", "./fade"):
+        out = cli_in(tmp_path, "decode", "--profile", "ktcs-type1", missing)
+        assert out.returncode == 2, (missing, out.stdout)
+        assert f"no such file: {missing}" in out.stderr and "Traceback" not in out.stderr
+        assert out.stdout == "", "nothing decoded before the error"
+
+
+def test_hex_given_as_words_is_still_hex(tmp_path: Path) -> None:
+    spaced = cli_in(tmp_path, "decode", "--json", "--profile", "ktcs-type1", "FA DE")
+    assert json.loads(spaced.stdout) == {"garbage": "fade", "offset": 0}
+    words = cli_in(tmp_path, "decode", "--json", "--profile", "ktcs-type1", *ACK.hex(" ").split())
+    assert words.returncode == 0 and json.loads(words.stdout)["op_name"] == "ACK"
+    (tmp_path / "fade").write_text(ACK.hex(" "), encoding="utf-8")  # a file by that name wins
+    named = cli_in(tmp_path, "decode", "--json", "--profile", "ktcs-type1", "fade")
+    assert named.returncode == 0 and json.loads(named.stdout)["op_name"] == "ACK"
+
+
+def test_a_capture_saved_in_euc_kr_or_cp949_decodes_like_the_utf8_one(tmp_path: Path) -> None:
+    text = FIG7.read_text(encoding="utf-8")
+    want = cli_in(tmp_path, "decode", "--no-color", str(FIG7))
+    assert "rx line 4" in want.stdout and "tx line 7" in want.stdout
+    for encoding in ("euc-kr", "cp949"):
+        path = tmp_path / f"fig7.{encoding}.hex"
+        path.write_bytes(text.encode(encoding))
+        with pytest.raises(UnicodeDecodeError):
+            path.read_bytes().decode("utf-8")
+        got = cli_in(tmp_path, "decode", "--no-color", str(path))
+        assert (got.returncode, got.stdout) == (want.returncode, want.stdout)
+
+
+def test_a_binary_file_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "capture.bin"
+    path.write_bytes(REQ + bytes(range(256)))
+    out = cli_in(tmp_path, "decode", str(path))
+    assert out.returncode == 2 and "is not text" in out.stderr and "xxd" in out.stderr
+    assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("dump", ["hexdump -C", "od -t x1", "od -A x -t x1z", "xxd"])
+def test_dump_offsets_are_not_data(tmp_path: Path, dump: str) -> None:
+    path = tmp_path / "cap.bin"
+    path.write_bytes(REQ + ACK)
+    text = subprocess.run([*dump.split(), str(path)], capture_output=True, text=True, check=True)
+    out = cli_in(tmp_path, "decode", "--json", "--profile", "ktcs-type1", stdin=text.stdout)
+    rows = [json.loads(line) for line in out.stdout.splitlines()]
+    assert [(r["op_name"], r["offset"], r["error"]) for r in rows] == [
+        ("REQUEST_ALL", 0, None),
+        ("ACK", len(REQ), None),
+    ]
+    assert out.returncode == 0
+
+
+@pytest.mark.parametrize(
+    ("args", "problem"),
+    [
+        (("--op", "LINK_TEST", "--items", "3=1"), "LINK_TEST carries no items"),
+        (("--op", "CHANGE", "--field", "start=1"), "CHANGE carries no start"),
+        (("--op", "ALL_INFO", "--items", "3=1"), "ALL_INFO carries no items"),
+        (("--op", "CHANGE", "--statuses", "1,0"), "CHANGE carries no statuses"),
+        (("--op", "REQUEST_ALL", "--field", "start=0", "--field", "count=4", "--field", "end=9"),
+         "REQUEST_ALL carries no end"),
+        (("--protocol", "type2", "--op", "IDENT", "--sub", "0", "--field", "station=20",
+          "--field", "version=1", "--items", "1=1"), "IDENT carries no items"),
+    ],
+)  # fmt: skip
+def test_encode_refuses_what_the_opcode_does_not_carry(args: tuple[str, ...], problem: str) -> None:
+    out = cli("encode", "--seq", "1", *args)
+    assert out.returncode == 2 and problem in out.stderr, out.stderr
+    assert out.stdout == "" and "Traceback" not in out.stderr

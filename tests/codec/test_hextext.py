@@ -1,8 +1,12 @@
 """Every hex form of SPEC §7 gives the same bytes."""
 
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
-from ktcs_bench.codec.hextext import parse_hex_text
+from ktcs_bench.codec.hextext import REPEAT_PIECE, HexTextParser, parse_hex_text, text_encoding
 
 FRAME = bytes.fromhex("0200001006000387000003")
 
@@ -38,3 +42,67 @@ def test_annotations_skipped_and_origin_kept() -> None:
 
 def test_odd_digit_groups_are_not_hex() -> None:
     assert parse_hex_text("020").data == b""
+
+
+# -- dumps: the offset column is not data, `*` is expanded, word dumps are never guessed --------
+def _capture() -> bytes:
+    """Two frames with 40 zero bytes between them: dumps fold the zeros into a `*` line."""
+    return bytes.fromhex("02040010000000 84F1E703") + bytes(40) + FRAME
+
+
+DUMPS = ["hexdump -C", "od -t x1", "od -A x -t x1z", "od -A d -t x1", "od -A x -t x1 -w8", "xxd",
+         "xxd -a", "hexdump -C -v"]  # fmt: skip
+
+
+@pytest.mark.parametrize("command", DUMPS)
+def test_dump_of_a_real_tool_gives_the_bytes_back(command: str, tmp_path: Path) -> None:
+    path = tmp_path / "cap.bin"
+    path.write_bytes(_capture())
+    text = subprocess.run([*command.split(), str(path)], capture_output=True, text=True, check=True)
+    parsed = parse_hex_text(text.stdout)
+    assert parsed.data == _capture(), text.stdout
+    assert parsed.skipped_lines == [] and parsed.word_dump_lines == 0
+
+
+def test_a_folded_run_is_expanded_from_the_offsets_in_their_radix() -> None:
+    line = bytes([2]) + bytes(15)
+    row = " ".join(f"{b:02x}" for b in line)
+    # od's default offsets are octal: 0000060 is byte 48, so `*` left out two copies of the line
+    octal = f"0000000 {row}\n*\n0000060 03\n0000061\n"
+    assert parse_hex_text(octal).data == line * 3 + b"\x03"
+    # the same dump with decimal offsets (od -A d): 0000048 is byte 48
+    decimal = f"0000000 {row}\n0000016 {row}\n*\n0000048 05\n0000049\n"
+    assert parse_hex_text(decimal).data == line * 3 + b"\x05"
+    # the closing offset alone says how long a folded run at the end was (hexdump -C, hex)
+    tail = f"00000000  {row}  |................|\n*\n00000040\n"
+    assert parse_hex_text(tail).data == line * 4
+
+
+def test_a_huge_folded_run_is_expanded_in_bounded_pieces() -> None:
+    parser = HexTextParser()
+    first = "00000000  00 00 00 00 00 00 00 00  00 00 00 00 00 00 00 00  |................|"
+    assert list(parser.feed(first)) == [bytes(16)]
+    assert list(parser.feed("*")) == []
+    pieces = parser.feed("40000000")  # 1 GiB of zeros announced by three lines of text
+    first_piece = next(iter(pieces))
+    assert len(first_piece) <= REPEAT_PIECE and not any(first_piece)
+
+
+@pytest.mark.parametrize("command", ["od", "od -x", "hexdump"])
+def test_two_byte_word_dumps_are_skipped_not_guessed(command: str, tmp_path: Path) -> None:
+    path = tmp_path / "cap.bin"
+    path.write_bytes(_capture())
+    text = subprocess.run([*command.split(), str(path)], capture_output=True, text=True, check=True)
+    parsed = parse_hex_text(text.stdout)
+    assert parsed.data == b"" and parsed.word_dump_lines >= 3
+
+
+# -- text files in the encodings Korean consoles save -------------------------------------------
+def test_text_encoding_of_utf8_cp949_euc_kr_and_binary() -> None:
+    line = "수신 = <02><04><00><10>\n"
+    assert text_encoding(line.encode("utf-8")) == "utf-8"
+    assert text_encoding(line.encode("euc-kr")) == "cp949"
+    assert text_encoding(line.encode("cp949")) == "cp949"
+    assert text_encoding(line.encode("utf-8")[:4]) == "utf-8"  # cut inside a character
+    assert text_encoding(bytes(range(256)) * 4) is None
+    assert text_encoding(Path(sys.executable).read_bytes()[:65536]) is None

@@ -1,0 +1,70 @@
+"""`decode` streams: its peak memory does not grow with the input, `--profile auto` included.
+
+Each decode runs as a subprocess under a fresh wrapper whose only child it is, so the wrapper's
+RUSAGE_CHILDREN peak RSS is that decode's alone. Two captures, one three times the other, must
+peak within a few MB of each other (a decode that holds its input, its records or its output
+grows by about 20 bytes of memory per byte of hex log)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from ktcs_bench.codec import FrameCodec, get_profile
+
+GROWTH_ALLOWED_MB = 10.0
+
+
+def hex_log(path: Path, blocks: int) -> None:
+    """`blocks` times the same 2,000 lines of Type I traffic (about 0.3 MB)."""
+    codec = FrameCodec(get_profile("ktcs-type1"))
+    samples = [
+        codec.encode_message(1, "ALL_INFO", statuses=[k & 1 for k in range(132)]),
+        codec.encode_message(2, "CHANGE", items=[[k, 1] for k in range(5)]),
+        codec.encode(3, 0x0006),
+        bytes.fromhex("02 FF 03 AA 55"),  # garbage between frames, a false STX in it
+    ]
+    block = "".join(
+        f"{k * 0.01:.6f} ixl>atc {samples[k % 4].hex(' ').upper()}\n" for k in range(2000)
+    )
+    with path.open("w", encoding="utf-8") as f:
+        for _ in range(blocks):
+            f.write(block)
+
+
+def peak_rss_mb(*args: str) -> float:
+    probe = (
+        "import resource, subprocess, sys\n"
+        "done = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)\n"
+        "assert done.returncode in (0, 1), done.stderr\n"
+        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+    )
+    argv = [sys.executable, "-c", probe, sys.executable, "-m", "ktcs_bench.cli.main", *args]
+    out = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return int(out.stdout) / 1024
+
+
+@pytest.fixture(scope="module")
+def captures(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    folder = tmp_path_factory.mktemp("captures")
+    small, large = folder / "small.hex", folder / "large.hex"
+    hex_log(small, 7)  # 2 MB: past the 1 MiB blocks decode reads and the auto window
+    hex_log(large, 21)
+    return small, large
+
+
+@pytest.mark.parametrize(
+    "options", [("--json", "--profile", "ktcs-type1"), ("--profile", "auto")], ids=["json", "auto"]
+)
+def test_decode_peak_memory_does_not_grow_with_the_input(
+    captures: tuple[Path, Path], options: tuple[str, ...]
+) -> None:
+    small, large = captures
+    assert large.stat().st_size == 3 * small.stat().st_size > 2_000_000
+    low = peak_rss_mb("decode", *options, str(small))
+    high = peak_rss_mb("decode", *options, str(large))
+    assert high - low < GROWTH_ALLOWED_MB, (low, high)
