@@ -49,7 +49,8 @@ TARGET:
         are injected as if sent by one end (--send a>b, default the tap's first direction) and
         the other end's frames are the replies
 
---timing original  keep the capture's time between frames
+--timing original  keep the capture's time between frames (at least; --max-gap S: a
+                   silence longer than S seconds is cut to S)
          line      as fast as the line allows at --baud (default; 10 bits a byte); no pacing
                    over TCP unless --baud is given
          step      wait for a reply (or Enter, on a terminal) before each next frame
@@ -77,6 +78,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--to", required=True, metavar="TARGET", help="where to send (see above)")
     p.add_argument("--send", metavar="DIR", help="which direction of FILE to send (a>b, tx, ...)")
     p.add_argument("--timing", choices=("original", "line", "step"), default="line")
+    p.add_argument(
+        "--max-gap",
+        type=float,
+        metavar="S",
+        help="with --timing original: cap every silence between frames at S seconds",
+    )
     p.add_argument("--baud", type=int, help="line rate for --timing line and serial ports (9600)")
     p.add_argument("--wait", type=duration, default=1.0,
                    help="seconds of quiet that end the replay after the last frame (1.0); "
@@ -294,6 +301,11 @@ def _enter_pressed() -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.max_gap is not None:
+        if args.timing != "original":
+            raise UsageError("--max-gap caps the capture's gaps: it goes with --timing original")
+        if not args.max_gap >= 0:
+            raise UsageError(f"--max-gap is seconds, 0 or more, not {args.max_gap}")
     capture = read_capture(args.file)
     if not capture.records:
         raise UsageError(f"{args.file}: no frames in it")
@@ -345,11 +357,14 @@ def run(args: argparse.Namespace) -> int:
 
         pace = args.baud or (None if args.to.startswith("tcp://") or header else 9600)
         start = time.monotonic()
-        t0 = to_send[0].time
         line_free = start
+        last_time = to_send[0].time  # --timing original: each frame follows the one before
+        last_sent = start  # by the capture's gap (capped at --max-gap), never less
         for k, rec in enumerate(to_send):
-            if args.timing == "original" and rec.time is not None and t0 is not None:
-                pump(start + (rec.time - t0))
+            if args.timing == "original" and rec.time is not None and last_time is not None:
+                gap = max(0.0, rec.time - last_time)
+                pump(last_sent + (gap if args.max_gap is None else min(gap, args.max_gap)))
+                last_time = rec.time
             elif args.timing == "line":
                 pump(line_free)
             elif args.timing == "step" and k > 0:
@@ -360,6 +375,7 @@ def run(args: argparse.Namespace) -> int:
             if target.errors:
                 raise PeerError(f"{args.to}: {target.errors[0]}")
             target.send(rec.data)
+            last_sent = time.monotonic()
             sent = CaptureRecord(time.time(), out_dir, rec.data)
             for w in writers:
                 w.write(sent)

@@ -285,3 +285,52 @@ def test_replay_over_tcp_and_into_a_tap(tmp_path: Path, env: dict[str, str]) -> 
                 th.join(5)
         assert out.returncode == 0, out.stdout + out.stderr
         assert sum(r.direction == "atc>ixl" for r in tap.records()) == 3
+
+
+def test_replay_original_timing_caps_long_silences_with_max_gap(
+    echo_pty: PtyEcho, tmp_path: Path, env: dict[str, str]
+) -> None:
+    """A capture with a 100 s silence replays with it cut to --max-gap, shorter gaps kept: the
+    replay ends well inside the 30 s the CLI is given (it would take 100 s uncapped), and the
+    recording shows each gap at least as long as the capped schedule says."""
+    frames = [C1.encode(0x20 + k, 3) for k in range(4)]
+    times = [10.0, 10.15, 110.15, 110.25]  # the third frame comes after 100 s of silence
+    req, exp, rec = tmp_path / "req.hex", tmp_path / "exp.hex", tmp_path / "got.hex"
+    with open_writer(req, profile="ktcs-type1") as w, open_writer(exp, profile="ktcs-type1") as e:
+        for t, f in zip(times, frames, strict=True):
+            w.write(CaptureRecord(t, "ixl>atc", f))
+            e.write(CaptureRecord(t, "atc>ixl", f))
+    out = cli("replay", str(req), "--to", echo_pty.path, "--timing", "original", "--max-gap",
+              "0.3", "--wait", "0.3", "--expect", str(exp), "--record", str(rec), env=env)  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "4 replies match" in out.stdout
+    sent = [r.time for r in read_capture(rec).records if r.direction == "ixl>atc"]
+    assert len(sent) == 4 and all(t is not None for t in sent)
+    gaps = [b - a for a, b in zip(sent, sent[1:], strict=False)]  # type: ignore[operator]
+    assert gaps[0] >= 0.15 - 0.002 and gaps[1] >= 0.3 - 0.002 and gaps[2] >= 0.1 - 0.002, gaps
+
+
+def test_replay_max_gap_goes_with_original_timing(tmp_path: Path, env: dict[str, str]) -> None:
+    req, _, _ = _requests(tmp_path)
+    out = cli("replay", str(req), "--to", "loop://", "--max-gap", "1", env=env)
+    assert out.returncode == 2 and "--timing original" in out.stderr
+
+
+def test_replay_refuses_a_binary_file_that_is_not_a_capture(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        binary = tmp_path / "firmware.bin"
+        binary.write_bytes(Path(sys.executable).read_bytes()[:200_000])
+        out = cli("replay", str(binary), "--to", os.ttyname(slave), env=env)
+        assert out.returncode == 2, out.stdout + out.stderr
+        assert "is not a capture" in out.stderr and "Traceback" not in out.stderr
+        # the replay has exited: anything it had sent would be waiting on the pty now
+        os.set_blocking(master, False)
+        with pytest.raises(BlockingIOError):
+            os.read(master, 4096)
+    finally:
+        os.close(master)
+        os.close(slave)
