@@ -57,6 +57,7 @@ AUTO_WINDOW_MAX = 4 << 20  # or at this many in any case (or at the end of the i
 _PATHLIKE = re.compile(r"[/\\]|^[.~]|\.[A-Za-z][A-Za-z0-9]{0,7}$")
 _BARE_WORD = re.compile(r"[\w-]+")
 _HEX_WORD = re.compile(r"(?:[0-9a-fA-F]{2})+")
+_HEX_DIGITS = re.compile(r"[0-9a-fA-F]+")
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -169,11 +170,27 @@ def _binary_lines(stream: BinaryIO, name: str) -> Iterator[list[str]]:
     while block:
         lines = (tail + decoder.decode(block)).split("\n")
         tail = lines.pop()
+        if len(tail) > READ_BLOCK:  # a line with no end in sight (one long hex string)
+            head, tail = _cut_long_line(tail)
+            if head:
+                lines.append(head)
         yield lines
         block = stream.read1(READ_BLOCK) if hasattr(stream, "read1") else stream.read(READ_BLOCK)
     rest = tail + decoder.decode(b"", final=True)
     if rest:
         yield [rest]
+
+
+def _cut_long_line(text: str) -> tuple[str, str]:
+    """A line too long to hold, cut where its rest reads as a continuation line of hex (bare
+    hex continues the record its line began): after its last separator, or, in one unbroken run
+    of hex digits, at an even count. ("", text) when it cannot be cut (a comment)."""
+    if "#" in text:
+        return "", text
+    cut = max(text.rfind(c) for c in " \t,>]")
+    if cut < 0 and _HEX_DIGITS.fullmatch(text):
+        cut = len(text) - len(text) % 2 - 1
+    return (text[: cut + 1], text[cut + 1 :]) if cut > 0 else ("", text)
 
 
 def input_lines(inputs: list[str]) -> Iterator[list[str]]:

@@ -6,6 +6,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ktcs_bench.cli.decode import _cut_long_line
+from ktcs_bench.codec.hextext import parse_hex_text
 
 
 def cli(*args: str, stdin: str | None = None) -> subprocess.CompletedProcess[str]:
@@ -149,3 +154,31 @@ def test_encode_refuses_what_the_opcode_does_not_carry(args: tuple[str, ...], pr
     out = cli("encode", "--seq", "1", *args)
     assert out.returncode == 2 and problem in out.stderr, out.stderr
     assert out.stdout == "" and "Traceback" not in out.stderr
+
+
+@settings(max_examples=300)
+@given(
+    data=st.binary(min_size=1, max_size=200),
+    form=st.sampled_from(["compact", "spaced", "angle", "hexlog", "console"]),
+    cuts=st.lists(st.integers(20, 2000), min_size=1, max_size=6),
+)
+def test_a_line_too_long_to_hold_is_cut_into_lines_that_read_the_same(
+    data: bytes, form: str, cuts: list[int]
+) -> None:
+    """decode cuts a line that has no end in sight (over 1 MiB, so never inside a line's prefix,
+    here under 20 characters); the pieces read as the same bytes and the same one record (bare
+    hex continues the record its line began)."""
+    body = {"compact": data.hex(), "spaced": data.hex(" "), "angle": "".join(f"<{b:02X}>" for b in data),
+            "hexlog": f"1.5 a>b {data.hex(' ')}", "console": f"수신 = {data.hex()}"}[form]  # fmt: skip
+    lines, rest = [], body
+    for at in cuts:  # cut where decode would, once the line is `at` characters long
+        head, rest2 = _cut_long_line(rest[:at])
+        if not head:
+            continue
+        lines.append(head)
+        rest = rest2 + rest[at:]
+    lines.append(rest)
+    whole, pieces = parse_hex_text(body), parse_hex_text("\n".join(lines))
+    assert pieces.data == whole.data == data
+    assert len(pieces.chunks) == len(whole.chunks) == 1
+    assert pieces.chunks[0].direction == whole.chunks[0].direction

@@ -18,8 +18,9 @@ from ktcs_bench.codec import FrameCodec, get_profile
 GROWTH_ALLOWED_MB = 10.0
 
 
-def hex_log(path: Path, blocks: int) -> None:
-    """`blocks` times the same 2,000 lines of Type I traffic (about 0.3 MB)."""
+def hex_log(path: Path, blocks: int, one_line: bool = False) -> None:
+    """`blocks` times the same 2,000 lines of Type I traffic (about 0.3 MB); `one_line`: the
+    same bytes as one line of compact hex, with no end of line anywhere."""
     codec = FrameCodec(get_profile("ktcs-type1"))
     samples = [
         codec.encode_message(1, "ALL_INFO", statuses=[k & 1 for k in range(132)]),
@@ -30,6 +31,8 @@ def hex_log(path: Path, blocks: int) -> None:
     block = "".join(
         f"{k * 0.01:.6f} ixl>atc {samples[k % 4].hex(' ').upper()}\n" for k in range(2000)
     )
+    if one_line:
+        block = "".join(samples[k % 4].hex() for k in range(2000)) * 2  # about as many bytes
     with path.open("w", encoding="utf-8") as f:
         for _ in range(blocks):
             f.write(block)
@@ -49,21 +52,30 @@ def peak_rss_mb(*args: str) -> float:
 
 
 @pytest.fixture(scope="module")
-def captures(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+def captures(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, Path]]:
     folder = tmp_path_factory.mktemp("captures")
-    small, large = folder / "small.hex", folder / "large.hex"
-    hex_log(small, 7)  # 2 MB: past the 1 MiB blocks decode reads and the auto window
-    hex_log(large, 21)
-    return small, large
+    out = {}
+    for kind in ("lines", "one-line"):
+        small, large = folder / f"small-{kind}.hex", folder / f"large-{kind}.hex"
+        hex_log(small, 7, kind == "one-line")  # 2 MB: past the 1 MiB blocks decode reads
+        hex_log(large, 21, kind == "one-line")  # and the auto window
+        out[kind] = small, large
+    return out
 
 
 @pytest.mark.parametrize(
-    "options", [("--json", "--profile", "ktcs-type1"), ("--profile", "auto")], ids=["json", "auto"]
+    ("kind", "options"),
+    [
+        ("lines", ("--json", "--profile", "ktcs-type1")),
+        ("lines", ("--profile", "auto")),
+        ("one-line", ("--json", "--profile", "ktcs-type1")),
+    ],
+    ids=["json", "auto", "one-line"],
 )
 def test_decode_peak_memory_does_not_grow_with_the_input(
-    captures: tuple[Path, Path], options: tuple[str, ...]
+    captures: dict[str, tuple[Path, Path]], kind: str, options: tuple[str, ...]
 ) -> None:
-    small, large = captures
+    small, large = captures[kind]
     assert large.stat().st_size == 3 * small.stat().st_size > 2_000_000
     low = peak_rss_mb("decode", *options, str(small))
     high = peak_rss_mb("decode", *options, str(large))
