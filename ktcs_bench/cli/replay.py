@@ -80,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--timing", choices=("original", "line", "step"), default="line")
     p.add_argument(
         "--max-gap",
-        type=float,
+        type=duration,
         metavar="S",
         help="with --timing original: cap every silence between frames at S seconds",
     )
@@ -304,8 +304,6 @@ def run(args: argparse.Namespace) -> int:
     if args.max_gap is not None:
         if args.timing != "original":
             raise UsageError("--max-gap caps the capture's gaps: it goes with --timing original")
-        if not args.max_gap >= 0:
-            raise UsageError(f"--max-gap is seconds, 0 or more, not {args.max_gap}")
     capture = read_capture(args.file)
     if not capture.records:
         raise UsageError(f"{args.file}: no frames in it")
