@@ -6,8 +6,8 @@
    on the open links.
 2. Sustained indication changes end to end, goal >= 20,000 /s: every IXL keeps changing random
    codes and pushing them with `IxlClient.indicate()` for `--seconds`; the figure is the changes
-   the CTC has applied to its station views divided by the time from "go" until the last one was
-   applied. Afterwards every station view is checked equal to its IXL's table.
+   the CTC has applied to its indication tables divided by the time from "go" until the last one was
+   applied. Afterwards every indication table is checked equal to its IXL's table.
 
 By default the CTC runs in this process and the 50 IXL clients in a second process (one event loop
 for all of them), as in the lab where they are separate programs; `--single-process` puts both in
@@ -29,8 +29,10 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from ktcs_bench.codec.crc import crc_extension_in_use
+from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.type2 import events as ev
-from ktcs_bench.type2.net import CtcServer, IxlClient, StateTable
+from ktcs_bench.type2.ctc_server import CtcServer
+from ktcs_bench.type2.ixl_client import IxlClient, StateTable
 
 FIRST_STATION = 100
 BATCH = 40  # changes per indicate() call by default: one full INDICATION message
@@ -154,7 +156,8 @@ async def bench(
 
     out: list[str] = []
     names = [FIRST_STATION + k for k in range(stations)]
-    async with CtcServer(names, on_event=on_event) as ctc:
+    views = IndicationTables(names)
+    async with CtcServer(names, views, on_event=on_event) as ctc:
         local = IxlSide(ctc.port, stations, codes, batch, delay) if single else None
         remote = None if single else Remote(ctc.port, stations, codes, batch, delay)
         if remote is not None:
@@ -164,7 +167,7 @@ async def bench(
             return local.snapshot() if local is not None else await remote.call("snapshot")  # type: ignore[union-attr]
 
         def synced() -> bool:
-            return all(ctc.stations[s].synced for s in names)
+            return all(views.stations[s].synced for s in names)
 
         # 1a. cold start: connect + IDENT + full state
         t0 = time.perf_counter()
@@ -175,19 +178,19 @@ async def bench(
         await ctc.wait_until(synced, timeout=60)
         cold = time.perf_counter() - t0
         truth = await snapshot()
-        assert all(ctc.stations[s].state == truth[s] for s in names), "views differ after resync"
+        assert all(views.stations[s].state == truth[s] for s in names), "views differ after resync"
         out.append(
             f"full resync, cold start: {stations} IXLs x {codes} codes in {cold:.3f} s "
             f"({stations * codes / cold:,.0f} codes/s; goal <= 2 s: {'PASS' if cold <= 2 else 'FAIL'})"
         )
 
         # 1b. REQUEST_ALL to every station on the open links
-        before = {s: ctc.stations[s].full_states for s in names}
+        before = {s: views.stations[s].full_states for s in names}
         t0 = time.perf_counter()
         for s in names:
             ctc.request_all(s)
         await ctc.wait_until(
-            lambda: all(ctc.stations[s].full_states > before[s] for s in names), timeout=60
+            lambda: all(views.stations[s].full_states > before[s] for s in names), timeout=60
         )
         warm = time.perf_counter() - t0
         out.append(
@@ -206,7 +209,7 @@ async def bench(
         elapsed = time.perf_counter() - t0
         rate = applied / elapsed
         truth = await snapshot()
-        same = all(ctc.stations[s].state == truth[s] for s in names)
+        same = all(views.stations[s].state == truth[s] for s in names)
         out.append(
             f"sustained indications: {applied:,} changes in {elapsed:.2f} s = {rate:,.0f} changes/s "
             f"end to end ({batch} per indicate() call, indication_delay {delay * 1000:g} ms; goal >= 20,000/s: {'PASS' if rate >= 20000 else 'FAIL'}); "

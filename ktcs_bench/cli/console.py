@@ -54,16 +54,20 @@ async def _serve(args: argparse.Namespace) -> None:
     # imported here so that other subcommands do not pay for aiohttp
     from ktcs_bench.console.demo import RigIxl, with_throw_time
     from ktcs_bench.console.server import ConsoleServer, load_charts
+    from ktcs_bench.ctc.tables import IndicationTables
     from ktcs_bench.station.loader import load_line
-    from ktcs_bench.type2.net import CtcServer
+    from ktcs_bench.type2.ctc_server import CtcServer
 
     line = load_line(args.line)
     if args.throw_time is not None:
         line = with_throw_time(line, args.throw_time)
     charts = load_charts(line.stations)
-    ctc = CtcServer(sorted(line.stations), host=args.host, port=args.ctc_port)
+    tables = IndicationTables(line.stations)
+    ctc = CtcServer(sorted(line.stations), tables, host=args.host, port=args.ctc_port)
     await ctc.start()
-    console = ConsoleServer(ctc, line, charts, taps=args.tap, host=args.host, port=args.port)
+    console = ConsoleServer(
+        ctc, tables, line, charts, taps=args.tap, host=args.host, port=args.port
+    )
     await console.start()
     rigs = []
     if args.demo_ixls:

@@ -18,7 +18,7 @@ from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station.model import Line, Station
-from ktcs_bench.type2.net import IxlClient
+from ktcs_bench.type2.ixl_client import IxlClient
 
 TICK_S = 0.05  # how often the rig's timers are honoured
 

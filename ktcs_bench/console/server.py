@@ -38,13 +38,14 @@ from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.console.diagram import build
 from ktcs_bench.console.state import Action, StationModel, station_models
 from ktcs_bench.console.trains import EndpointTrains, TrainSource
+from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.station.model import Line
 from ktcs_bench.tap.registry import resolve_tap
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.type2 import events as ev
-from ktcs_bench.type2.net import CtcServer
+from ktcs_bench.type2.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.console")
 
@@ -105,6 +106,7 @@ class ConsoleServer:
     def __init__(
         self,
         ctc_server: CtcServer,
+        tables: IndicationTables,
         stations: Line,
         charts: Mapping[int, tuple[CodeChart, CodeChart]] | None = None,
         taps: Sequence[TapSpec] = (),
@@ -113,8 +115,9 @@ class ConsoleServer:
         port: int = 0,
     ) -> None:
         self.ctc = ctc_server
+        self.tables = tables
         self.line = stations
-        numbers = [n for n in ctc_server.stations if n in stations.stations]
+        numbers = [n for n in tables.stations if n in stations.stations]
         self.models: dict[int, StationModel] = station_models(
             stations, charts if charts is not None else load_charts(numbers)
         )
@@ -198,7 +201,7 @@ class ConsoleServer:
     def snapshot(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
         for n, model in self.models.items():
-            view = self.ctc.stations.get(n)
+            view = self.tables.stations.get(n)
             if view is None:
                 out[str(n)] = model.picture({}, False, False)
             else:
@@ -254,7 +257,7 @@ class ConsoleServer:
         if kind == "route_set":
             return model.set_route(str(msg["entry"]), str(msg["exit"]))
         if kind == "route_cancel":
-            view = self.ctc.stations.get(model.number)
+            view = self.tables.stations.get(model.number)
             return model.cancel_route(str(msg["entry"]), view.state if view else {})
         if kind == "point":
             return model.move_point(str(msg["point"]), str(msg["position"]))

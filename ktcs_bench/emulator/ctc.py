@@ -15,11 +15,12 @@ from typing import Any
 from ktcs_bench.charts import names as n
 from ktcs_bench.charts.generate import station_chart
 from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.station.model import Line
-from ktcs_bench.type2.net import CtcServer
+from ktcs_bench.type2.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")
 CONTROL_TIMEOUT = 10.0
@@ -77,8 +78,9 @@ class CtcDevice(Device):
             view = line.view(st)
             self.ind[st] = station_chart(view, "ixl_to_ctc")
             self.ctl[st] = station_chart(view, "ctc_to_ixl")
+        self.tables = IndicationTables(stations)
         self.server: CtcServer = variants.ctc_server(
-            faults, stations, allowed_sources=list(allowed_sources) if allowed_sources else None,
+            faults, stations, self.tables, allowed_sources=list(allowed_sources) if allowed_sources else None,
             host=listen[0], port=listen[1], ssl=ssl,
         )  # fmt: skip
         self.command_log: list[dict[str, Any]] = []
@@ -89,7 +91,7 @@ class CtcDevice(Device):
 
     # -- state as names ----------------------------------------------------------------------------
     def named(self, st: int) -> dict[str, int]:
-        view = self.server.stations.get(st)
+        view = self.tables.stations.get(st)
         if view is None:
             return {}
         chart = self.ind[st]
@@ -101,7 +103,7 @@ class CtcDevice(Device):
         The CTC knows them only while the link is up and has brought a full state: otherwise
         (`known` false) mode, points and signals read "unknown" and no route or occupied track
         circuit is listed -- never the last ones seen, which may no longer hold."""
-        view = self.server.stations.get(st)
+        view = self.tables.stations.get(st)
         station = self.line.station(st)
         known = bool(view is not None and view.connected and view.synced)
         if not known:
@@ -209,7 +211,7 @@ class CtcDevice(Device):
             entry["result"] = f"refused by the CTC: {exc}"
             log.warning("command %s refused: %s", entry["command"], exc)
             return {"ok": False, "error": str(exc).strip("'\"")}
-        view = self.server.stations.get(st)
+        view = self.tables.stations.get(st)
         if view is None or not view.connected:
             entry["result"] = "station link down"
             return {"ok": False, "error": f"station {st} is not connected"}
@@ -246,7 +248,7 @@ class CtcDevice(Device):
         codes = [chart.number_of(n.asp(st, entry, a)) for a in aspects if a != "R"]
 
         def proceed() -> bool:  # a proceed aspect shown (not merely "R" no longer shown)
-            view = self.server.stations.get(st)
+            view = self.tables.stations.get(st)
             return view is not None and any(view.state.get(c) == 1 for c in codes)
 
         await self.server.wait_until(proceed, float(obj.get("timeout", 30.0)))
@@ -265,7 +267,7 @@ class CtcDevice(Device):
 
             self.remote_trains = RemoteTrains()
             self.console = ConsoleServer(
-                self.server, self.line, taps=self.taps, trains=self.remote_trains, host=host,
+                self.server, self.tables, self.line, taps=self.taps, trains=self.remote_trains, host=host,
                 port=port,
             )  # fmt: skip
             await self.console.start()

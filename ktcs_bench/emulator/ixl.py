@@ -14,7 +14,7 @@ from ktcs_bench.ixl.interlocking import Interlocking, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.model import Line
 from ktcs_bench.type1 import LinkConfig
-from ktcs_bench.type2.net import IxlClient
+from ktcs_bench.type2.ixl_client import IxlClient
 
 
 class IxlDevice(Device):

@@ -23,8 +23,9 @@ from ktcs_bench.type1.arq import Acceptance, Receiver
 from ktcs_bench.type1.events import Event
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.admission import ADMIT, AdmissionPolicy, Decision
+from ktcs_bench.type2.ctc_server import CtcApplication, CtcServer
+from ktcs_bench.type2.ixl_client import IxlApplication, IxlClient
 from ktcs_bench.type2.ixl_side import IxlSession
-from ktcs_bench.type2.net import CtcServer, IxlApplication, IxlClient, StationView
 
 
 @dataclass(frozen=True)
@@ -192,15 +193,10 @@ class _OpenPolicy(AdmissionPolicy):
         return decision
 
 
-class _OpenServer(CtcServer):
-    def _ident(self, cl: Any, e: ev.IdentRequested, now: float) -> None:
-        self.stations.setdefault(e.station, StationView(e.station))
-        super()._ident(cl, e, now)
-
-
 def ctc_server(
     faults: frozenset[str],
     stations: Iterable[int],
+    app: CtcApplication,
     *,
     allowed_sources: Iterable[str] | None,
     host: str,
@@ -209,6 +205,6 @@ def ctc_server(
 ) -> CtcServer:
     if "accept-unknown-station" in faults:
         policy: AdmissionPolicy = _OpenPolicy(stations, allowed_sources=allowed_sources)
-        return _OpenServer(policy, host=host, port=port, ssl=ssl)
-    policy = AdmissionPolicy(stations, allowed_sources=allowed_sources)
-    return CtcServer(policy, host=host, port=port, ssl=ssl)
+    else:
+        policy = AdmissionPolicy(stations, allowed_sources=allowed_sources)
+    return CtcServer(policy, app, host=host, port=port, ssl=ssl)

@@ -1,8 +1,10 @@
 """Type II link (SPEC §4): CTC <-> IXL over TCP.
 
 Owns: the sans-I/O sessions of both ends (`session`, `ixl_side`, `ctc_side`), their events and
-settings, the CTC's admission policy, and the asyncio adapters in `net`. Must not touch: the
-interlocking or CTC application logic (plugged in through callbacks) or `ktcs_bench/transport/`.
+settings, the CTC's admission policy, and the asyncio adapters: `pump` (one session on one stream),
+`ctc_server` (accept, TLS, admission, one link per station), `ixl_client` (connect, back-off).
+Must not import: the interlocking or the CTC's application (`ixl`, `ctc`: they plug in through the
+`IxlApplication` / `CtcApplication` protocols), `emulator`, `console` or `ktcs_bench/transport/`.
 """
 
 from ktcs_bench.type2.admission import AdmissionPolicy, BadFrameMeter, Decision

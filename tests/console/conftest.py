@@ -19,6 +19,7 @@ import pytest
 
 from ktcs_bench.console.demo import RigIxl, with_throw_time
 from ktcs_bench.console.server import ConsoleServer, load_charts
+from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.tap import TcpTap
@@ -26,7 +27,7 @@ from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import CycleInputs, LineData, TrainConfig, TrainEndpoint
 from ktcs_bench.train.mrsp import Restriction
 from ktcs_bench.train.units import kmh
-from ktcs_bench.type2.net import CtcServer
+from ktcs_bench.type2.ctc_server import CtcServer
 
 T = TypeVar("T")
 CHROMIUM = "/usr/bin/chromium"
@@ -72,22 +73,30 @@ class Bench:
         return self.call(run())
 
     async def start(self) -> None:
-        self.ctc = CtcServer(sorted(self.line.stations))
+        self.tables = IndicationTables(self.line.stations)
+        self.ctc = CtcServer(sorted(self.line.stations), self.tables)
         await self.ctc.start()
         self.tap = TcpTap(("127.0.0.1", 0), ("127.0.0.1", self.ctc.port), names=("ixl", "ctc"))
         await asyncio.to_thread(self.tap.start)
         assert self.tap.listen_address is not None and self.tap.control_address is not None
         host, port = self.tap.control_address
         self.console = ConsoleServer(
-            self.ctc, self.line, self.charts, taps=[f"{host}:{port}"], trains={"T1": self.train}
+            self.ctc,
+            self.tables,
+            self.line,
+            self.charts,
+            taps=[f"{host}:{port}"],
+            trains={"T1": self.train},
         )
         await self.console.start()
-        self.bare = ConsoleServer(self.ctc, self.line, self.charts)  # no taps, no trains
+        self.bare = ConsoleServer(
+            self.ctc, self.tables, self.line, self.charts
+        )  # no taps, no trains
         await self.bare.start()
         for n in sorted(self.line.stations):
             self.start_rig(n, Mode.LOCAL if n == 22 else Mode.CENTER)
         await self.ctc.wait_until(
-            lambda: all(v.connected and v.synced for v in self.ctc.stations.values()), 10.0
+            lambda: all(v.connected and v.synced for v in self.tables.stations.values()), 10.0
         )
 
     def start_rig(self, n: int, mode: Mode) -> RigIxl:

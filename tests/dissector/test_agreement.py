@@ -16,12 +16,14 @@ from typing import Any
 from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
 from ktcs_bench.codec.frame import FrameCodec
 from ktcs_bench.codec.profile import get_profile
+from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.tap import BitErrors, InsertGarbage, PtyTap, TcpTap
 from ktcs_bench.transport.aio import LinkRunner
 from ktcs_bench.transport.serialport import SerialTransport
 from ktcs_bench.type1 import LinkConfig, LinkUp, Type1Link
-from ktcs_bench.type2.net import CtcServer, IxlClient, StateTable
+from ktcs_bench.type2.ctc_server import CtcServer
+from ktcs_bench.type2.ixl_client import IxlClient, StateTable
 
 from .harness import (
     Rec,
@@ -240,7 +242,8 @@ def type2_session(path: Path) -> None:
             {code: code % 4 for code in range(1, 101)},
             control=lambda c, v: (c % 2 == 0, 0 if c % 2 == 0 else 2),
         )
-        async with CtcServer([20]) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables) as ctc:
             tap = TcpTap(
                 ("127.0.0.1", 0),
                 ("127.0.0.1", ctc.port),
@@ -259,7 +262,7 @@ def type2_session(path: Path) -> None:
                     backoff_initial=0.05,
                     backoff_max=0.2,
                 ) as ixl:
-                    await ctc.wait_until(lambda: ctc.stations[20].synced)
+                    await ctc.wait_until(lambda: tables.stations[20].synced)
                     for k in range(6):
                         app.state[k + 1] = (app.state[k + 1] + 1) % 4
                         ixl.indicate([(k + 1, app.state[k + 1])])
@@ -271,7 +274,7 @@ def type2_session(path: Path) -> None:
                         await asyncio.sleep(0.01)
                     tap.clear()
                     await asyncio.sleep(0.3)
-                    await ctc.wait_until(lambda: ctc.stations[20].synced, timeout=20)
+                    await ctc.wait_until(lambda: tables.stations[20].synced, timeout=20)
                     tap.send("ixl>ctc", b"\x17\x02\x99")  # garbage with a false STX
                     too_long = bytearray(codec.encode(0x33, 0x10, bytes([7, 0, 1]), 0))
                     too_long[1] = 200  # LEN over the maximum (124)

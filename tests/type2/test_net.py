@@ -8,10 +8,12 @@ import random
 
 import pytest
 
+from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.admission import AdmissionPolicy
 from ktcs_bench.type2.config import Type2Config
-from ktcs_bench.type2.net import CtcServer, IxlClient, StateTable
+from ktcs_bench.type2.ctc_server import CtcServer
+from ktcs_bench.type2.ixl_client import IxlClient, StateTable
 
 from .netutil import CUT, PROFILE, Proxy, damage, poll_until, run
 
@@ -45,14 +47,15 @@ def change(app: StateTable, client: IxlClient, codes: list[int]) -> list[tuple[i
 
 def test_ident_accepted_and_full_state_in_parts_of_40_in_chart_order() -> None:
     async def main() -> None:
-        async with CtcServer([20]) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables) as ctc:
             proxy = Proxy(ctc.port)
             port = await proxy.start()
             app = table()
             async with IxlClient(20, "127.0.0.1", port, app, **FAST):
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
-                assert ctc.stations[20].state == app.state
-                assert ctc.stations[20].peer is not None
+                await ctc.wait_until(lambda: tables.stations[20].synced)
+                assert tables.stations[20].state == app.state
+                assert tables.stations[20].peer is not None
             await proxy.close()
         ind = [f for f in proxy.seen_up if f.op == INDICATION]
         assert [f.sub for f in ind] == [1] * 24 + [2]
@@ -69,10 +72,11 @@ def test_unknown_station_refused_and_logged_with_peer_address(
 ) -> None:
     async def main() -> None:
         rec = Recorder()
-        async with CtcServer([20]) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables) as ctc:
             async with IxlClient(99, "127.0.0.1", ctc.port, table(5), on_event=rec, **FAST) as c:
                 await c.wait_until(lambda: len(rec.of(ev.IdentRefused)) >= 2)
-            assert ctc.stations[20].connections == 0
+            assert tables.stations[20].connections == 0
             assert ctc.refusals[0][0].startswith("127.0.0.1:")
             assert "station 99 is not configured" in ctc.refusals[0][1]
 
@@ -86,14 +90,15 @@ def test_second_connection_for_the_same_station_is_refused(
 ) -> None:
     async def main() -> None:
         rec = Recorder()
-        async with CtcServer([20]) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables) as ctc:
             first = IxlClient(20, "127.0.0.1", ctc.port, table(5), **FAST)
             second = IxlClient(20, "127.0.0.1", ctc.port, table(5), on_event=rec, **FAST)
             async with first:
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
+                await ctc.wait_until(lambda: tables.stations[20].synced)
                 async with second:
                     await second.wait_until(lambda: len(rec.of(ev.IdentRefused)) >= 1)
-                assert first.identified and ctc.stations[20].connections == 1
+                assert first.identified and tables.stations[20].connections == 1
             assert any("already connected" in reason for _, reason in ctc.refusals)
 
     with caplog.at_level(logging.WARNING, logger="ktcs_bench.type2"):
@@ -104,34 +109,39 @@ def test_second_connection_for_the_same_station_is_refused(
 def test_source_address_allow_list() -> None:
     async def main() -> None:
         policy = AdmissionPolicy([20], allowed_sources=["10.0.0.0/8"])
-        async with CtcServer(policy) as ctc:
+        tables = IndicationTables(policy.stations)
+        async with CtcServer(policy, tables) as ctc:
             async with IxlClient(20, "127.0.0.1", ctc.port, table(5), **FAST) as client:
                 await ctc.wait_until(lambda: len(ctc.refusals) >= 2)
                 assert not client.identified
             assert "source address 127.0.0.1 is not allowed" in ctc.refusals[0][1]
         policy = AdmissionPolicy([20], station_sources={20: ["127.0.0.0/8"]})
-        async with CtcServer(policy) as ctc:
+        tables = IndicationTables(policy.stations)
+        async with CtcServer(policy, tables) as ctc:
             async with IxlClient(20, "127.0.0.1", ctc.port, table(5), **FAST):
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
+                await ctc.wait_until(lambda: tables.stations[20].synced)
 
     run(main())
 
 
 def test_change_indications_reach_the_ctc_state() -> None:
     async def main() -> None:
-        async with CtcServer([18, 20]) as ctc:
+        tables = IndicationTables([18, 20])
+        async with CtcServer([18, 20], tables) as ctc:
             apps = {18: table(300, 18), 20: table(1000, 20)}
             clients = [IxlClient(st, "127.0.0.1", ctc.port, apps[st], **FAST) for st in apps]
             for c in clients:
                 c.start()
-            await ctc.wait_until(lambda: all(ctc.stations[s].synced for s in apps))
+            await ctc.wait_until(lambda: all(tables.stations[s].synced for s in apps))
             rnd = random.Random(7)
             for _ in range(50):
                 for c in clients:
                     change(apps[c.station], c, rnd.sample(range(1, len(apps[c.station].state)), 60))
                 await asyncio.sleep(0)
-            await ctc.wait_until(lambda: all(ctc.stations[s].state == apps[s].state for s in apps))
-            assert all(ctc.stations[s].full_states == 1 for s in apps)
+            await ctc.wait_until(
+                lambda: all(tables.stations[s].state == apps[s].state for s in apps)
+            )
+            assert all(tables.stations[s].full_states == 1 for s in apps)
             for c in clients:
                 await c.close()
 
@@ -144,9 +154,10 @@ def test_control_and_control_result() -> None:
             return (True, 0) if code == 7 else (False, 2)
 
         app = StateTable({1: 0}, on_control)
-        async with CtcServer([20]) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables) as ctc:
             async with IxlClient(20, "127.0.0.1", ctc.port, app, **FAST):
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
+                await ctc.wait_until(lambda: tables.stations[20].synced)
                 ok = await ctc.control(20, 7, 1)
                 no = await ctc.control(20, 9, 1)
         assert ok == ev.ControlAnswered(7, True, 0, "none")
@@ -158,7 +169,8 @@ def test_control_and_control_result() -> None:
 def test_nak_then_retransmission_delivers_the_change_once() -> None:
     async def main() -> None:
         rec = Recorder()
-        async with CtcServer([20], on_event=rec) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables, on_event=rec) as ctc:
             proxy = Proxy(ctc.port)
             port = await proxy.start()
             app = table(100)
@@ -172,9 +184,9 @@ def test_nak_then_retransmission_delivers_the_change_once() -> None:
 
             proxy.up = up
             async with IxlClient(20, "127.0.0.1", port, app, on_event=rec, **FAST) as c:
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
+                await ctc.wait_until(lambda: tables.stations[20].synced)
                 sent = change(app, c, [5, 6, 7])
-                await ctc.wait_until(lambda: ctc.stations[20].state == app.state)
+                await ctc.wait_until(lambda: tables.stations[20].state == app.state)
                 assert c.connections == 1
             await proxy.close()
         (bad,) = [e for e in rec.of(ev.BadFrameReceived) if e.nak_sent]
@@ -189,18 +201,19 @@ def test_nak_then_retransmission_delivers_the_change_once() -> None:
 def test_three_retransmissions_close_and_the_ixl_reconnects() -> None:
     async def main() -> None:
         rec = Recorder()
-        async with CtcServer([20], on_event=rec) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables, on_event=rec) as ctc:
             proxy = Proxy(ctc.port)
             port = await proxy.start()
             app = table(100)
             proxy.up = lambda f: damage(f.raw) if f.op == INDICATION and f.sub == 0 else f.raw
             async with IxlClient(20, "127.0.0.1", port, app, on_event=rec, **FAST) as c:
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
+                await ctc.wait_until(lambda: tables.stations[20].synced)
                 change(app, c, [5, 6, 7])
                 await c.wait_until(lambda: c.connections >= 2)
                 proxy.up = None
                 await ctc.wait_until(
-                    lambda: ctc.stations[20].synced and ctc.stations[20].state == app.state
+                    lambda: tables.stations[20].synced and tables.stations[20].state == app.state
                 )
             await proxy.close()
         closes = [e.reason for s, e in rec.events if s == 20 and isinstance(e, ev.Closed)]
@@ -214,7 +227,8 @@ def test_three_retransmissions_close_and_the_ixl_reconnects() -> None:
 def test_seq_gap_asks_request_all_and_the_full_state_repairs_the_view() -> None:
     async def main() -> None:
         rec = Recorder()
-        async with CtcServer([20], on_event=rec) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables, on_event=rec) as ctc:
             proxy = Proxy(ctc.port)
             port = await proxy.start()
             app = table(200)
@@ -228,12 +242,12 @@ def test_seq_gap_asks_request_all_and_the_full_state_repairs_the_view() -> None:
 
             proxy.up = up
             async with IxlClient(20, "127.0.0.1", port, app, on_event=rec, **FAST) as c:
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
+                await ctc.wait_until(lambda: tables.stations[20].synced)
                 change(app, c, [1, 2, 3])
                 await poll_until(lambda: bool(dropped))  # that frame is lost; then the next
                 change(app, c, [4])
-                await ctc.wait_until(lambda: ctc.stations[20].full_states >= 2)
-                await ctc.wait_until(lambda: ctc.stations[20].state == app.state)
+                await ctc.wait_until(lambda: tables.stations[20].full_states >= 2)
+                await ctc.wait_until(lambda: tables.stations[20].state == app.state)
                 assert c.connections == 1
             await proxy.close()
         (gap,) = rec.of(ev.SequenceGap)
@@ -248,12 +262,13 @@ def test_silent_link_goes_down_and_the_ixl_reconnects() -> None:
     async def main() -> None:
         cfg = Type2Config(heartbeat_period=0.05, t_max=0.25, ident_timeout=0.5, nak_repeat=0.05)
         rec = Recorder()
-        async with CtcServer([20], config=cfg, on_event=rec) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables, config=cfg, on_event=rec) as ctc:
             proxy = Proxy(ctc.port)
             port = await proxy.start()
             app = table(50)
             async with IxlClient(20, "127.0.0.1", port, app, config=cfg, on_event=rec, **FAST) as c:
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
+                await ctc.wait_until(lambda: tables.stations[20].synced)
                 # idle but alive: heartbeats both ways keep it up. Wait for the heartbeats of
                 # twice T_MAX of idle time, each way (every timer runs on this one loop, so a
                 # T_MAX that heartbeats did not hold off would have fired before the last of them)
@@ -278,8 +293,8 @@ def test_silent_link_goes_down_and_the_ixl_reconnects() -> None:
                 await ctc.wait_until(
                     lambda: (
                         c.connections >= 2
-                        and ctc.stations[20].synced
-                        and ctc.stations[20].state == app.state
+                        and tables.stations[20].synced
+                        and tables.stations[20].state == app.state
                     )
                 )
             await proxy.close()
@@ -289,7 +304,8 @@ def test_silent_link_goes_down_and_the_ixl_reconnects() -> None:
 
 def test_cutting_tcp_mid_frame_ends_in_a_full_resync() -> None:
     async def main() -> None:
-        async with CtcServer([20]) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables) as ctc:
             proxy = Proxy(ctc.port)
             port = await proxy.start()
             app = table(1000)
@@ -303,16 +319,16 @@ def test_cutting_tcp_mid_frame_ends_in_a_full_resync() -> None:
 
             proxy.up = up
             async with IxlClient(20, "127.0.0.1", port, app, **FAST) as c:
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
+                await ctc.wait_until(lambda: tables.stations[20].synced)
                 change(app, c, list(range(1, 41)))  # this frame is cut in half
-                await ctc.wait_until(lambda: not ctc.stations[20].connected)
+                await ctc.wait_until(lambda: not tables.stations[20].connected)
                 for k in range(41, 200, 7):  # the IXL keeps changing while the link is down
                     app.state[k] = (app.state[k] + 1) % 4
                 await ctc.wait_until(
                     lambda: (
                         c.connections >= 2
-                        and ctc.stations[20].synced
-                        and ctc.stations[20].state == app.state
+                        and tables.stations[20].synced
+                        and tables.stations[20].state == app.state
                     )
                 )
             await proxy.close()
@@ -327,16 +343,17 @@ def test_peer_sending_repeated_bad_frames_is_dropped(caplog: pytest.LogCaptureFi
 
         codec = FrameCodec(PROFILE)
         policy = AdmissionPolicy([20], bad_frame_limit=3)
-        async with CtcServer(policy) as ctc:
+        tables = IndicationTables(policy.stations)
+        async with CtcServer(policy, tables) as ctc:
             reader, writer = await asyncio.open_connection("127.0.0.1", ctc.port)
             writer.write(codec.encode_message(0, "IDENT", 0, station=20, version=1))
-            await ctc.wait_until(lambda: ctc.stations[20].connected)
+            await ctc.wait_until(lambda: tables.stations[20].connected)
             # damaged frames without a stray STX inside (so each decodes as one error frame)
             bad = [damage(codec.encode_message(seq, "HEARTBEAT", 0)) for seq in range(16, 64)]
             for frame in [b for b in bad if 0x02 not in b[1:]][:3]:
                 writer.write(frame)
                 await writer.drain()
-            await ctc.wait_until(lambda: not ctc.stations[20].connected)
+            await ctc.wait_until(lambda: not tables.stations[20].connected)
             assert await reader.read() != b""  # IDENT accepted, NAKs, then EOF
             writer.close()
             assert any(reason.startswith("dropped") for _, reason in ctc.refusals)
@@ -350,7 +367,8 @@ def test_peer_sending_repeated_bad_frames_is_dropped(caplog: pytest.LogCaptureFi
 
 def test_server_listens_on_loopback_by_default() -> None:
     async def main() -> None:
-        async with CtcServer([20]) as ctc:
+        tables = IndicationTables([20])
+        async with CtcServer([20], tables) as ctc:
             assert ctc.host == "127.0.0.1"
             assert ctc._server is not None
             assert {s.getsockname()[0] for s in ctc._server.sockets} == {"127.0.0.1"}

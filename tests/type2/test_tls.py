@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from ktcs_bench.type2.net import CtcServer, IxlClient, StateTable
+from ktcs_bench.ctc.tables import IndicationTables
+from ktcs_bench.type2.ctc_server import CtcServer
+from ktcs_bench.type2.ixl_client import IxlClient, StateTable
 
 from .netutil import run
 
@@ -43,16 +45,17 @@ def test_tls_with_client_certificates(tmp_path: Path) -> None:
 
     async def main() -> None:
         app = StateTable({c: c % 2 for c in range(1, 101)})
-        async with CtcServer([20, 22], ssl=server_ctx) as ctc:
+        tables = IndicationTables([20, 22])
+        async with CtcServer([20, 22], tables, ssl=server_ctx) as ctc:
             good = IxlClient(20, "127.0.0.1", ctc.port, app, ssl=client_ctx(ixl_cert, ixl_key),
                              server_hostname="127.0.0.1", backoff_initial=0.02, backoff_max=0.1)  # fmt: skip
             bad = IxlClient(22, "127.0.0.1", ctc.port, app,
                             ssl=client_ctx(stranger_cert, stranger_key),
                             server_hostname="127.0.0.1", backoff_initial=0.02, backoff_max=0.1)  # fmt: skip
             async with good, bad:
-                await ctc.wait_until(lambda: ctc.stations[20].synced)
-                assert ctc.stations[20].state == app.state
+                await ctc.wait_until(lambda: tables.stations[20].synced)
+                assert tables.stations[20].state == app.state
                 await bad.wait_until(lambda: bad.attempts >= 3)
-                assert not ctc.stations[22].connected and bad.connections == 0
+                assert not tables.stations[22].connected and bad.connections == 0
 
     run(main())
