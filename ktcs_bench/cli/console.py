@@ -53,26 +53,24 @@ def _run(args: argparse.Namespace) -> int:
 async def _serve(args: argparse.Namespace) -> None:
     # imported here so that other subcommands do not pay for aiohttp
     from ktcs_bench.console.demo import RigIxl, with_throw_time
-    from ktcs_bench.console.server import ConsoleServer, load_charts
-    from ktcs_bench.ctc.tables import IndicationTables
+    from ktcs_bench.console.server import ConsoleServer
+    from ktcs_bench.ctc.desk import Desk
+    from ktcs_bench.ctc.model import CtcModel
     from ktcs_bench.station.loader import load_line
     from ktcs_bench.type2.ctc_server import CtcServer
 
     line = load_line(args.line)
     if args.throw_time is not None:
         line = with_throw_time(line, args.throw_time)
-    charts = load_charts(line.stations)
-    tables = IndicationTables(line.stations)
-    ctc = CtcServer(sorted(line.stations), tables, host=args.host, port=args.ctc_port)
+    model = CtcModel(line)
+    ctc = CtcServer(sorted(line.stations), model.tables, host=args.host, port=args.ctc_port)
     await ctc.start()
-    console = ConsoleServer(
-        ctc, tables, line, charts, taps=args.tap, host=args.host, port=args.port
-    )
+    console = ConsoleServer(Desk(model, ctc), taps=args.tap, host=args.host, port=args.port)
     await console.start()
     rigs = []
     if args.demo_ixls:
         for n in sorted(line.stations):
-            rig = RigIxl(line, n, *charts[n])
+            rig = RigIxl(line, n)
             rig.start(args.host, ctc.port)
             rigs.append(rig)
     print(f"CTC Type II server on {args.host}:{ctc.port}", flush=True)

@@ -13,7 +13,6 @@ import asyncio
 import contextlib
 from dataclasses import replace
 
-from ktcs_bench.charts.model import CodeChart
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.rig import StationRig
@@ -43,18 +42,10 @@ def with_throw_time(line: Line, seconds: float) -> Line:
 class RigIxl:
     """One station's interlocking + trackside, reachable over Type II once `start()`ed."""
 
-    def __init__(
-        self,
-        line: Line,
-        station: int,
-        indications: CodeChart,
-        controls: CodeChart,
-        *,
-        mode: Mode = Mode.CENTER,
-    ) -> None:
-        self.indications = indications
-        self.controls = controls
+    def __init__(self, line: Line, station: int, *, mode: Mode = Mode.CENTER) -> None:
         self.rig = StationRig(line.view(station), mode=mode)
+        self.indications = self.rig.ixl.charts["ixl_to_ctc"]  # the interlocking's own charts
+        self.controls = self.rig.ixl.charts["ctc_to_ixl"]
         self.station = station
         self.client: IxlClient | None = None
         self._t0 = 0.0

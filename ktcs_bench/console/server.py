@@ -1,18 +1,18 @@
 """The CTC operator console (seed 004 Fig. 8) as a web page served by the CTC process (aiohttp).
 
-`ConsoleServer` reads the CTC's per-station indication tables (`CtcServer.stations[n].state`),
-serves the track diagram and a websocket that pushes the station pictures whenever the CTC's
-state changes, and turns the operator's clicks into Type II CONTROLs (`CtcServer.control`) whose
-results come back to the page and the log. Side panels: a link monitor over tap control ports
-(Fig. 7 console text) and a speed–distance view of a train (`trains.TrainSource`).
+`ConsoleServer` serves the track diagram and a websocket that pushes the station pictures the
+CTC's model draws (`ctc.model.CtcModel.picture`) whenever the CTC's state changes, and hands the
+operator's clicks to the CTC's desk (`ctc.desk.Desk.operate`, the same path `ktcs-bench ctc`
+takes), whose results come back to the page and the log. Side panels: a link monitor over tap
+control ports (Fig. 7 console text) and a speed–distance view of a train (`trains.TrainSource`).
 
 Embedding (e.g. in the CTC emulator process, on its event loop):
 
-    console = ConsoleServer(ctc, load_line(), load_charts(ctc.stations), taps=["st18-ctc"])
+    console = ConsoleServer(desk, taps=["st18-ctc"])
     await console.start(); print(console.url); ...; await console.close()
 
-It chains itself onto `ctc.on_event` (restored on close) and also re-checks the state every
-`POLL_S`, so it needs nothing else from the CTC.
+It chains itself onto the server's `on_event` (restored on close) and also re-checks the state
+every `POLL_S`, so it needs nothing else from the CTC.
 """
 
 from __future__ import annotations
@@ -30,29 +30,25 @@ from typing import Any
 
 from aiohttp import WSMsgType, web
 
-from ktcs_bench.charts.model import CodeChart, load_chart
+from ktcs_bench.charts.model import CodeChart
 from ktcs_bench.codec.frame import Frame
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import to_text
 from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.console.diagram import build
-from ktcs_bench.console.state import Action, StationModel, station_models
 from ktcs_bench.console.trains import EndpointTrains, TrainSource
-from ktcs_bench.ctc.tables import IndicationTables
-from ktcs_bench.datafiles import data_dir
+from ktcs_bench.ctc.desk import Desk
+from ktcs_bench.ctc.model import Action
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
-from ktcs_bench.station.model import Line
 from ktcs_bench.tap.registry import resolve_tap
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.type2 import events as ev
-from ktcs_bench.type2.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.console")
 
 STATIC = Path(__file__).resolve().parent / "static"
 POLL_S = 0.5  # state re-check besides the CTC's events (link state, missed callbacks)
 TRAIN_PERIOD_S = 0.5  # speed–distance refresh for a client watching a train
-CONTROL_TIMEOUT_S = 5.0  # CONTROL -> CONTROL_RESULT
 LOG_KEEP = 300  # log entries kept for pages that connect later
 FRAMES_KEEP = 60  # decoded frames kept per tap
 TAP_RETRY_S = 2.0
@@ -60,20 +56,14 @@ TAP_RETRY_S = 2.0
 TapSpec = str | tuple[str, int]
 # Type II opcodes whose items are code numbers (protocols/type2.yaml)
 IDENT_OP, INDICATION_OP, CONTROL_OP, CONTROL_RESULT_OP = 0x01, 0x10, 0x20, 0x21
-
-
-def load_charts(
-    stations: Iterable[int], folder: str | Path | None = None
-) -> dict[int, tuple[CodeChart, CodeChart]]:
-    """`{n: (ixl_to_ctc, ctc_to_ixl)}` from `code_charts/stNN_*.yaml` (default: the shipped ones)."""
-    base = Path(folder) if folder is not None else data_dir("code_charts")
-    return {
-        n: (
-            load_chart(base / f"st{n}_ixl_to_ctc.yaml"),
-            load_chart(base / f"st{n}_ctc_to_ixl.yaml"),
-        )
-        for n in stations
-    }
+# the page's requests -> the CTC control port's command words (`CtcModel.action`)
+REQUESTS = {
+    "route_set": {"cmd": "route", "action": "set"},
+    "route_cancel": {"cmd": "route", "action": "cancel"},  # the route set from the clicked entry
+    "point": {"cmd": "point"},
+    "mode": {"cmd": "mode"},
+}
+REQUEST_FIELDS = ("station", "entry", "exit", "point", "position", "mode")
 
 
 def _clock(t: float) -> str:
@@ -105,23 +95,17 @@ class ConsoleServer:
 
     def __init__(
         self,
-        ctc_server: CtcServer,
-        tables: IndicationTables,
-        stations: Line,
-        charts: Mapping[int, tuple[CodeChart, CodeChart]] | None = None,
+        desk: Desk,
         taps: Sequence[TapSpec] = (),
         trains: TrainSource | Mapping[str, TrainEndpoint] | None = None,
         host: str = "127.0.0.1",
         port: int = 0,
     ) -> None:
-        self.ctc = ctc_server
-        self.tables = tables
-        self.line = stations
-        numbers = [n for n in tables.stations if n in stations.stations]
-        self.models: dict[int, StationModel] = station_models(
-            stations, charts if charts is not None else load_charts(numbers)
-        )
-        self.layout = build(stations)
+        self.desk = desk
+        self.ctc = desk.server
+        self.model = desk.model
+        self.line = desk.model.line
+        self.layout = build(self.line)
         self.taps = [_TapFeed(t, t if isinstance(t, str) else f"{t[0]}:{t[1]}") for t in taps]
         if trains is None or isinstance(trains, Mapping):
             self.trains: TrainSource | None = EndpointTrains(trains) if trains else None
@@ -199,14 +183,7 @@ class ConsoleServer:
     # ------------------------------------------------------------------ state
 
     def snapshot(self) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for n, model in self.models.items():
-            view = self.tables.stations.get(n)
-            if view is None:
-                out[str(n)] = model.picture({}, False, False)
-            else:
-                out[str(n)] = model.picture(view.state, view.connected, view.synced)
-        return out
+        return {str(n): self.model.picture(n) for n in self.model.models}
 
     def _changed(self) -> None:
         if not self._flush_scheduled:
@@ -245,54 +222,31 @@ class ConsoleServer:
 
     # ------------------------------------------------------------------ operator actions
 
-    def _model(self, msg: Mapping[str, Any]) -> StationModel:
-        try:
-            return self.models[int(msg["station"])]
-        except (KeyError, ValueError, TypeError):
-            raise UsageError(f"unknown station {msg.get('station')!r}") from None
-
-    def _action_of(self, msg: Mapping[str, Any]) -> Action:
-        kind = msg.get("type")
-        model = self._model(msg)
-        if kind == "route_set":
-            return model.set_route(str(msg["entry"]), str(msg["exit"]))
-        if kind == "route_cancel":
-            view = self.tables.stations.get(model.number)
-            return model.cancel_route(str(msg["entry"]), view.state if view else {})
-        if kind == "point":
-            return model.move_point(str(msg["point"]), str(msg["position"]))
-        if kind == "mode":
-            return model.mode(str(msg["mode"]))
-        raise UsageError(f"unknown request {kind!r}")
-
     async def perform(self, msg: Mapping[str, Any]) -> dict[str, Any]:
         """Carry out one operator request; the result as sent to the page (and logged)."""
-        try:
-            action = self._action_of(msg)
-        except (UsageError, KeyError) as exc:
-            text = str(exc).strip("'\"")
+        kind = msg.get("type")
+        words = REQUESTS.get(kind) if isinstance(kind, str) else None
+        if words is None:
+            text = f"unknown request {kind!r}"
             self._log(f"refused by the console: {text}", "error")
             return {"ok": False, "reason": text, "text": text}
-        self._log(f"{action.text} ({action.name}={action.value}) sent")
-        try:
-            result = await self.ctc.control(
-                action.station, action.code, action.value, CONTROL_TIMEOUT_S
-            )
-        except UsageError as exc:
-            reason = str(exc)
-        except TimeoutError:
-            reason = f"no CONTROL_RESULT within {CONTROL_TIMEOUT_S:g} s"
-        except PeerError as exc:
-            reason = str(exc)
-        else:
-            if result.accepted:
-                text = f"{action.text}: accepted"
-                self._log(text, "ok")
-                return {"ok": True, "reason": None, "text": text}
-            reason = result.reason_name or f"reason {result.reason}"
-        text = f"{action.text}: rejected: {reason}"
+        command = {**words, **{k: msg[k] for k in REQUEST_FIELDS if k in msg}}
+
+        def sent(action: Action) -> None:
+            self._log(f"{action.text} ({action.name}={action.value}) sent")
+
+        outcome = await self.desk.operate(command, "console", on_sent=sent)
+        if outcome.action is None:
+            text = str(outcome.why)
+            self._log(f"refused by the CTC: {text}", "error")
+            return {"ok": False, "reason": text, "text": text}
+        if outcome.accepted:
+            text = f"{outcome.action.text}: accepted"
+            self._log(text, "ok")
+            return {"ok": True, "reason": None, "text": text}
+        text = f"{outcome.action.text}: rejected: {outcome.why}"
         self._log(text, "error")
-        return {"ok": False, "reason": reason, "text": text}
+        return {"ok": False, "reason": outcome.why, "text": text}
 
     # ------------------------------------------------------------------ HTTP
 
@@ -316,7 +270,7 @@ class ConsoleServer:
         hello = {
             "type": "hello",
             "line": self.line.name,
-            "stations": sorted(self.models),
+            "stations": sorted(self.model.models),
             "taps": [t.label for t in self.taps],
             "trains": self.trains.train_ids() if self.trains is not None else [],
             "log": list(self.log_entries),
@@ -426,7 +380,7 @@ class ConsoleServer:
             return None
         if frame.op == IDENT_OP and len(frame.data) >= 2:
             feed.station = int.from_bytes(frame.data[:2], "little")
-        model = self.models.get(feed.station) if feed.station is not None else None
+        model = self.model.models.get(feed.station) if feed.station is not None else None
         if model is None:
             return None
         if frame.op in (INDICATION_OP, CONTROL_RESULT_OP):

@@ -1,11 +1,28 @@
-"""The CTC's application, under its devices and its console.
+"""The CTC's application, under its device process and its web console.
 
 Owns: what the CTC knows of each station (`tables`: indication tables and link standing, fed by
-the Type II server) and what it means to the operator (`model`). Pure: no sockets, no clock, no
-asyncio. Must not import `emulator`, `console` or `type2`'s asyncio adapters (the server reaches the
-tables through the `CtcApplication` protocol it declares).
+the Type II server through its `CtcApplication` protocol), what that means to the operator and
+which control each operator command is (`model`: one reading of a station's indications, code
+charts derived from station data), the command log (`log`), and the desk (`desk`) that sends a
+command through the CTC server and logs what came of it. `tables`, `model` and `log` are pure (no
+sockets, no clock); `desk` is the one part that awaits the server.
+Must not import `emulator` or `console` (they are built on this package), nor the interlocking.
 """
 
+from ktcs_bench.ctc.desk import Desk, Outcome
+from ktcs_bench.ctc.log import CommandLog, command_words
+from ktcs_bench.ctc.model import Action, CtcModel, StationModel, signal_name
 from ktcs_bench.ctc.tables import IndicationTable, IndicationTables
 
-__all__ = ["IndicationTable", "IndicationTables"]
+__all__ = [
+    "Action",
+    "CommandLog",
+    "CtcModel",
+    "Desk",
+    "IndicationTable",
+    "IndicationTables",
+    "Outcome",
+    "StationModel",
+    "command_words",
+    "signal_name",
+]

@@ -9,6 +9,8 @@ GREEN, RED, YELLOW, CYAN, DIM, BOLD, RESET = (
     "\x1b[32m", "\x1b[31m", "\x1b[33m", "\x1b[36m", "\x1b[2m", "\x1b[1m", "\x1b[0m"
 )  # fmt: skip
 ASPECT = {"R": RED, "Y": YELLOW, "YG": YELLOW, "G": GREEN}
+# a point's position as the CTC's summary reads it (ctc.model) -> its letter, as the console's
+POINT = {"normal": "N", "reverse": "R", "to_normal": "→N", "to_reverse": "→R", "failed": "F"}
 
 
 def _c(text: str, colour: str, on: bool) -> str:
@@ -40,7 +42,7 @@ def station_lines(status: dict[str, Any], colour: bool) -> list[str]:
         mode_txt = _c(mode, CYAN if mode == "center" else YELLOW, colour)
         none = "-" if s.get("known", True) else "unknown"  # the CTC does not know them now
         routes = ", ".join(s.get("routes", [])) or none
-        points = " ".join(f"{p}:{pos[0].upper() if pos else '?'}{'L' if 'locked' in pos else ''}"
+        points = " ".join(f"{p}:{POINT.get(pos.split(' ')[0], '?')}{'L' if 'locked' in pos else ''}"
                           for p, pos in s.get("points", {}).items())  # fmt: skip
         signals = " ".join(
             _c(f"{n}:{a}", ASPECT.get(a, ""), colour) for n, a in s.get("signals", {}).items()

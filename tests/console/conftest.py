@@ -18,8 +18,9 @@ from typing import Any, TypeVar
 import pytest
 
 from ktcs_bench.console.demo import RigIxl, with_throw_time
-from ktcs_bench.console.server import ConsoleServer, load_charts
-from ktcs_bench.ctc.tables import IndicationTables
+from ktcs_bench.console.server import ConsoleServer
+from ktcs_bench.ctc.desk import Desk
+from ktcs_bench.ctc.model import CtcModel
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.tap import TcpTap
@@ -57,7 +58,6 @@ class Bench:
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
         self.thread.start()
         self.line = with_throw_time(load_line(), THROW_S)
-        self.charts = load_charts(self.line.stations)
         self.train = make_train()
         self.rigs: dict[int, RigIxl] = {}
         self.tap: TcpTap | None = None
@@ -73,34 +73,26 @@ class Bench:
         return self.call(run())
 
     async def start(self) -> None:
-        self.tables = IndicationTables(self.line.stations)
-        self.ctc = CtcServer(sorted(self.line.stations), self.tables)
+        self.model = CtcModel(self.line)
+        self.ctc = CtcServer(sorted(self.line.stations), self.model.tables)
+        desk = Desk(self.model, self.ctc)
         await self.ctc.start()
         self.tap = TcpTap(("127.0.0.1", 0), ("127.0.0.1", self.ctc.port), names=("ixl", "ctc"))
         await asyncio.to_thread(self.tap.start)
         assert self.tap.listen_address is not None and self.tap.control_address is not None
         host, port = self.tap.control_address
-        self.console = ConsoleServer(
-            self.ctc,
-            self.tables,
-            self.line,
-            self.charts,
-            taps=[f"{host}:{port}"],
-            trains={"T1": self.train},
-        )
+        self.console = ConsoleServer(desk, taps=[f"{host}:{port}"], trains={"T1": self.train})
         await self.console.start()
-        self.bare = ConsoleServer(
-            self.ctc, self.tables, self.line, self.charts
-        )  # no taps, no trains
+        self.bare = ConsoleServer(desk)  # no taps, no trains
         await self.bare.start()
         for n in sorted(self.line.stations):
             self.start_rig(n, Mode.LOCAL if n == 22 else Mode.CENTER)
         await self.ctc.wait_until(
-            lambda: all(v.connected and v.synced for v in self.tables.stations.values()), 10.0
+            lambda: all(v.connected and v.synced for v in self.model.tables.stations.values()), 10.0
         )
 
     def start_rig(self, n: int, mode: Mode) -> RigIxl:
-        rig = RigIxl(self.line, n, *self.charts[n], mode=mode)
+        rig = RigIxl(self.line, n, mode=mode)
         if n == 18:
             assert self.tap is not None and self.tap.listen_address is not None
             rig.start(*self.tap.listen_address)

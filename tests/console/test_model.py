@@ -10,9 +10,8 @@ import re
 import pytest
 
 from ktcs_bench.console.diagram import Scale, build, lane_order
-from ktcs_bench.console.server import load_charts
-from ktcs_bench.console.state import station_models
 from ktcs_bench.console.trains import EndpointTrains
+from ktcs_bench.ctc.model import CtcModel
 from ktcs_bench.errors import UsageError
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.rig import StationRig
@@ -20,7 +19,7 @@ from ktcs_bench.station.loader import load_line
 from tests.console.conftest import make_train
 
 LINE = load_line()
-CHARTS = load_charts(LINE.stations)
+MODELS = CtcModel(LINE).models
 
 
 def test_every_track_circuit_point_and_signal_is_drawn_once_with_its_id() -> None:
@@ -51,8 +50,8 @@ def test_the_scale_runs_left_to_right_through_every_boundary() -> None:
 
 
 def _picture(rig: StationRig, number: int = 18) -> dict[str, object]:
-    model = station_models(LINE, CHARTS)[number]
-    chart = CHARTS[number][0]
+    model = MODELS[number]
+    chart = rig.ixl.charts["ixl_to_ctc"]  # the numbers the interlocking sends
     table = {chart.number_of(k): v for k, v in rig.ctc.items()}
     return model.picture(table, True, True)
 
@@ -82,21 +81,22 @@ def test_picture_of_a_moving_point_and_of_an_unknown_table() -> None:
     assert _picture(rig, 20)["points"]["33"]["position"] == "to_reverse"  # type: ignore[index]
     rig.advance(5.0)
     assert _picture(rig, 20)["points"]["33"]["position"] == "reverse"  # type: ignore[index]
-    model = station_models(LINE, CHARTS)[20]
+    model = MODELS[20]
     empty = model.picture({}, False, False)
     assert empty["mode"] == "unknown" and empty["connected"] is False
     assert empty["track_circuits"]["TC2055"]["occupied"] is None  # type: ignore[index]
 
 
 def test_actions_map_to_the_control_chart() -> None:
-    model = station_models(LINE, CHARTS)[18]
-    controls = CHARTS[18][1]
+    model = MODELS[18]
+    ixl = StationRig(LINE.view(18)).ixl
+    controls = ixl.charts["ctc_to_ixl"]  # the numbers the interlocking reads
     act = model.set_route("01", "12")
     assert (act.name, act.code, act.value) == ("RSC180112", controls.number_of("RSC180112"), 1)
     assert model.move_point("32", "reverse").name == "SRC1832"
     assert model.mode("center").name == "CMQ18"
     assert model.mode("local").name == "LMQ18"
-    rsi = CHARTS[18][0].number_of("RSI180112")
+    rsi = ixl.charts["ixl_to_ctc"].number_of("RSI180112")
     assert model.cancel_route("01", {rsi: 1}).name == "RCC180112"
     with pytest.raises(UsageError, match="no route is set from signal 01"):
         model.cancel_route("01", {rsi: 0})

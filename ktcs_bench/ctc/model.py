@@ -1,0 +1,384 @@
+"""The CTC's operator model: what a station's indications mean to the operator, and the operator's
+commands as control codes (pure: no sockets, no clock).
+
+`StationModel` pairs one station's data with its two Type II code charts, both derived from the
+station data (`charts.generate.station_chart`, as the IXL derives its own), and reads an
+indication table once (`read`) into mode, routes, track circuits, points, signals and traffic
+directions. Two renderings of that one reading: `picture` (what the web console draws) and
+`summary` (what `ktcs-bench ctc show` and `lab status` print). Operator commands become `Action`s:
+chart code, value, and the sentence the console shows. `CtcModel` holds one per station of the
+line, over the CTC's `IndicationTables`.
+
+A track circuit shows "locked" while a route whose track circuits (or overlap) include it reports
+RSI (set and locked): the IXL->CTC chart carries route locking per route, not per track circuit,
+so sections already released one by one behind a train stay shown locked until the route is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from ktcs_bench.charts import names as n
+from ktcs_bench.charts.generate import station_chart
+from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.ctc.tables import IndicationTable, IndicationTables
+from ktcs_bench.errors import UsageError
+from ktcs_bench.station.model import Line, Station, StationView
+
+UNKNOWN = "unknown"  # what the CTC does not know now (link down, no full state yet, no indication)
+# a point's indications, in the order they are read: the first one on gives its position
+POINT_INDICATIONS: tuple[tuple[Callable[[int, str], str], str], ...] = (
+    (n.sni, "normal"), (n.sri, "reverse"), (n.snr, "to_reverse"), (n.srn, "to_normal"),
+)  # fmt: skip
+
+
+def signal_name(text: str) -> str:
+    """Operators write S1, S01 or 01; station data names signals "01"."""
+    s = str(text).strip().upper().lstrip("S")
+    return s.zfill(2) if s.isdigit() else s
+
+
+@dataclass(frozen=True)
+class Action:
+    """One CONTROL for an operator command: chart code name and number, value, and a sentence."""
+
+    station: int
+    name: str
+    code: int
+    value: int
+    text: str  # "station 18: set route 01-11"
+
+
+@dataclass(frozen=True)
+class PointReading:
+    position: str  # normal, reverse, to_reverse, to_normal, failed (no detection) or unknown
+    locked: bool
+
+
+@dataclass(frozen=True)
+class SignalReading:
+    aspect: str | None  # None: no aspect indicated
+    held: bool
+    lamp_failed: bool
+
+
+@dataclass(frozen=True)
+class StationReading:
+    """One indication table read once. None wherever the table holds no indication."""
+
+    mode: str | None  # "center" (CTC) or "local" (LOC)
+    center_requested: bool  # CMR: center mode asked, awaiting the local operator
+    routes_set: frozenset[str]  # RSI
+    approach_locked: frozenset[str]  # ALI
+    track_circuits: dict[str, bool | None]  # occupied
+    points: dict[str, PointReading]
+    signals: dict[str, SignalReading]
+    directions: dict[str, str | None]  # interval -> "up" / "down" / None
+
+
+class StationModel:
+    """One station as the CTC operator sees and commands it. See the module docstring."""
+
+    def __init__(self, view: StationView) -> None:
+        self.view = view
+        self.station: Station = view.station
+        self.number = view.number
+        self.indications: CodeChart = station_chart(view, "ixl_to_ctc")
+        self.controls: CodeChart = station_chart(view, "ctc_to_ixl")
+
+    # ------------------------------------------------------------------ indications
+
+    def _reader(self, state: Mapping[int, int]) -> Callable[[str], int | None]:
+        """name -> the state the table holds for that indication code (None: none)."""
+        chart = self.indications
+
+        def get(name: str) -> int | None:
+            try:
+                return state.get(chart.number_of(name))
+            except KeyError:
+                return None
+
+        return get
+
+    def read(self, state: Mapping[int, int]) -> StationReading:
+        """The one decoding of an indication table (code number -> state)."""
+        get, st = self._reader(state), self.number
+
+        points = {}
+        for p in self.station.points:
+            position = "failed" if get(n.sfi(st, p.name)) else UNKNOWN
+            for code, label in POINT_INDICATIONS:
+                if get(code(st, p.name)):
+                    position = label
+                    break
+            points[p.name] = PointReading(position, bool(get(n.sli(st, p.name))))
+        signals = {}
+        for s in self.station.signals:
+            shown = [a for a in s.aspects if get(n.asp(st, s.name, a))]
+            signals[s.name] = SignalReading(
+                shown[0] if shown else None,
+                bool(get(n.ssi(st, s.name))) if s.has_lamps else False,
+                bool(get(n.lfi(st, s.name))) if s.has_lamps else False,
+            )
+        directions: dict[str, str | None] = {}
+        for iv in self.view.intervals:
+            directions[iv.name] = (
+                "up" if get(n.tdu(iv.name)) else "down" if get(n.tdd(iv.name)) else None
+            )
+        occupied = {tc.name: get(tc.name) for tc in self.view.track_circuits}
+        return StationReading(
+            mode="center" if get(n.ctc(st)) else "local" if get(n.loc(st)) else None,
+            center_requested=bool(get(n.cmr(st))),
+            routes_set=frozenset(r.name for r in self.station.routes if get(n.rsi(st, r.name))),
+            approach_locked=frozenset(
+                r.name for r in self.station.routes if get(n.ali(st, r.name))
+            ),
+            track_circuits={k: None if v is None else bool(v) for k, v in occupied.items()},
+            points=points,
+            signals=signals,
+            directions=directions,
+        )
+
+    def named(self, state: Mapping[int, int]) -> dict[str, int]:
+        """The table with code names for numbers (a number the chart does not have stays one)."""
+        chart = self.indications
+        return {chart.name_of(code) or str(code): v for code, v in state.items()}
+
+    def picture(self, state: Mapping[int, int], connected: bool, synced: bool) -> dict[str, Any]:
+        """The station as the web console draws it; what is not indicated reads None / unknown."""
+        r = self.read(state)
+        mode = "center" if r.mode == "center" else "requested" if r.center_requested else r.mode
+        locked_tcs: set[str] = set()
+        routes: dict[str, dict[str, Any]] = {}
+        for route in self.station.routes:
+            rset = route.name in r.routes_set
+            routes[route.name] = {"entry": route.entry, "exit": route.exit, "set": rset,
+                                  "approach_locked": route.name in r.approach_locked}  # fmt: skip
+            if rset:
+                locked_tcs.update(route.all_track_circuits)
+        return {
+            "station": self.number,
+            "name": self.station.name,
+            "connected": connected,
+            "synced": synced,
+            "mode": mode or UNKNOWN,
+            "track_circuits": {
+                tc: {"occupied": occ, "locked": tc in locked_tcs}
+                for tc, occ in r.track_circuits.items()
+            },
+            "points": {
+                p: {
+                    "position": pr.position,
+                    "moving": pr.position.startswith("to_"),
+                    "locked": pr.locked,
+                }  # fmt: skip
+                for p, pr in r.points.items()
+            },
+            "signals": {
+                s.name: {
+                    "kind": s.kind,
+                    "aspect": r.signals[s.name].aspect,
+                    "held": r.signals[s.name].held,
+                    "lamp_failed": r.signals[s.name].lamp_failed,
+                }  # fmt: skip
+                for s in self.station.signals
+            },
+            "routes": routes,
+            "directions": r.directions,
+        }
+
+    def summary(self, table: IndicationTable | None) -> dict[str, Any]:
+        """Mode, routes, points, signals, occupancy and link, as `ktcs-bench ctc show` prints them.
+
+        The CTC knows them only while the link is up and has brought a full state: otherwise
+        (`known` false) mode, points and signals read "unknown" and no route or occupied track
+        circuit is listed -- never the last ones seen, which may no longer hold."""
+        lamps = self.station.lamp_signals
+        if table is None or not table.known:
+            return {
+                "station": self.number,
+                "link": "up" if table is not None and table.connected else "down",
+                "synced": False,
+                "known": False,
+                "mode": UNKNOWN,
+                "center_requested": False,
+                "routes": [],
+                "points": {p.name: UNKNOWN for p in self.station.points},
+                "signals": {s.name: UNKNOWN for s in lamps},
+                "occupied": [],
+            }
+        r = self.read(table.state)
+        return {
+            "station": self.number,
+            "link": "up",
+            "synced": True,
+            "known": True,
+            "mode": r.mode or UNKNOWN,
+            "center_requested": r.center_requested,
+            "routes": sorted(r.routes_set),
+            "points": {
+                p: pr.position + (" locked" if pr.locked else "") for p, pr in r.points.items()
+            },
+            "signals": {s.name: r.signals[s.name].aspect or UNKNOWN for s in lamps},
+            "occupied": sorted(tc for tc, occ in r.track_circuits.items() if occ),
+        }
+
+    def proceed_shown(self, signal: str, state: Mapping[int, int]) -> bool:
+        """Signal `signal` shows a proceed aspect (not merely "R" no longer shown)."""
+        get, name = self._reader(state), signal_name(signal)
+        aspects = self.station.signal(name).aspects
+        return any(get(n.asp(self.number, name, a)) for a in aspects if a != "R")
+
+    # ------------------------------------------------------------------ commands -> controls
+
+    def _action(self, name: str, text: str, value: int = 1) -> Action:
+        try:
+            code = self.controls.number_of(name)
+        except KeyError:
+            raise UsageError(f"station {self.number}: no control {name} in the chart") from None
+        return Action(self.number, name, code, value, text)
+
+    def route_between(self, entry: str, exit_: str) -> str:
+        entry, exit_ = signal_name(entry), signal_name(exit_)
+        for r in self.station.routes:
+            if r.entry == entry and r.exit == exit_:
+                return r.name
+        raise UsageError(f"station {self.number}: no route from signal {entry} to {exit_}")
+
+    def set_route(self, entry: str, exit_: str) -> Action:
+        route = self.station.route(self.route_between(entry, exit_))
+        return self._action(
+            n.rsc(self.number, route.name),
+            f"station {self.number}: set route {route.entry}-{route.exit}",
+        )
+
+    def cancel_route(
+        self, entry: str, state: Mapping[int, int], exit_: str | None = None
+    ) -> Action:
+        """Cancel the route from signal `entry` to `exit_`; without `exit_`, the one from `entry`
+        that reports RSI (set)."""
+        if exit_ is not None:
+            route = self.station.route(self.route_between(entry, exit_))
+        else:
+            entry = signal_name(entry)
+            candidates = [r for r in self.station.routes if r.entry == entry]
+            if not candidates:
+                raise UsageError(f"station {self.number}: no route starts at signal {entry}")
+            set_now = self.read(state).routes_set
+            found = [r for r in candidates if r.name in set_now]
+            if not found:
+                raise UsageError(f"station {self.number}: no route is set from signal {entry}")
+            route = found[0]
+        return self._action(
+            n.rcc(self.number, route.name),
+            f"station {self.number}: cancel route {route.entry}-{route.exit}",
+        )
+
+    def move_point(self, point: str, position: str) -> Action:
+        if point not in {p.name for p in self.station.points}:
+            raise UsageError(f"station {self.number}: no point {point}")
+        if position not in ("normal", "reverse"):
+            raise UsageError(f"point position must be normal or reverse, not {position!r}")
+        fn = n.snc if position == "normal" else n.src
+        return self._action(
+            fn(self.number, point), f"station {self.number}: point {point} to {position}"
+        )
+
+    def signal(self, signal: str, action: str) -> Action:
+        """Hold signal `signal` at stop ("stop", SSC=1) or release it ("release", SSC=0)."""
+        name = signal_name(signal)
+        if name not in {s.name for s in self.station.lamp_signals}:
+            raise UsageError(f"station {self.number}: no signal {name}")
+        if action not in ("stop", "release"):
+            raise UsageError(f"signal action must be stop or release, not {action!r}")
+        return self._action(
+            n.ssc(self.number, name),
+            f"station {self.number}: signal {name} {action}",
+            1 if action == "stop" else 0,
+        )
+
+    def mode(self, wanted: str) -> Action:
+        if wanted == "center":
+            return self._action(n.cmq(self.number), f"station {self.number}: request center mode")
+        if wanted == "local":
+            return self._action(n.lmq(self.number), f"station {self.number}: hand back to local")
+        raise UsageError(f"mode must be center or local, not {wanted!r}")
+
+    def control(self, name: str, value: int = 1) -> Action:
+        """Any CTC->IXL code of the chart, by name."""
+        return self._action(name, f"station {self.number}: control {name}={value}", value)
+
+
+class CtcModel:
+    """The CTC operator's model of every station of `line` it serves, over its indication tables.
+
+    `stations`: the station numbers of the CTC (default: every station of the line); the tables
+    the Type II server feeds are `tables`.
+    """
+
+    def __init__(self, line: Line, stations: Iterable[int] | None = None) -> None:
+        self.line = line
+        numbers = sorted(line.stations if stations is None else stations)
+        self.tables = IndicationTables(numbers)
+        self.models: dict[int, StationModel] = {
+            st: StationModel(line.view(st)) for st in numbers if st in line.stations
+        }
+
+    def station(self, station: object) -> StationModel:
+        """The model of station `station` (a number or its digits); UsageError if not served."""
+        try:
+            return self.models[int(str(station))]
+        except (KeyError, ValueError):
+            served = ", ".join(map(str, self.models))
+            raise UsageError(f"station {station} is not in this lab ({served})") from None
+
+    def table(self, station: int) -> IndicationTable | None:
+        return self.tables.stations.get(station)
+
+    def state(self, station: int) -> Mapping[int, int]:
+        table = self.table(station)
+        return table.state if table is not None else {}
+
+    def picture(self, station: int) -> dict[str, Any]:
+        table = self.table(station)
+        if table is None:
+            return self.station(station).picture({}, False, False)
+        return self.station(station).picture(table.state, table.connected, table.synced)
+
+    def summary(self, station: int) -> dict[str, Any]:
+        return self.station(station).summary(self.table(station))
+
+    def named(self, station: int) -> dict[str, int]:
+        return self.station(station).named(self.state(station))
+
+    def action(self, command: Mapping[str, Any]) -> Action:
+        """The Action of one operator command, in the CTC control port's words:
+        `{"cmd": "route", "action": "set"|"cancel", "station": 18, "entry": "S1", "exit": "S11"}`
+        (cancel without "exit": the route set from "entry"), `{"cmd": "point", "position":
+        "normal"|"reverse", "point": "31"}`, `{"cmd": "signal", "action": "stop"|"release",
+        "signal": "01"}`, `{"cmd": "mode", "mode": "center"|"local"}`, `{"cmd": "control",
+        "code": "RSC180111", "value": 1}`. UsageError when it cannot be carried out."""
+        cmd = command.get("cmd")
+        if cmd not in ("route", "point", "signal", "mode", "control"):
+            raise UsageError(f"unknown command {cmd!r}")
+        model = self.station(command.get("station"))
+        try:
+            if cmd == "route":
+                entry, exit_ = str(command["entry"]), command.get("exit")
+                if command.get("action", "set") == "set":
+                    return model.set_route(entry, str(command["exit"]))
+                state = self.state(model.number)
+                return model.cancel_route(entry, state, None if exit_ is None else str(exit_))
+            if cmd == "point":
+                return model.move_point(str(command["point"]), str(command["position"]))
+            if cmd == "signal":
+                return model.signal(str(command["signal"]), str(command.get("action", "stop")))
+            if cmd == "mode":
+                return model.mode(str(command["mode"]))
+            return model.control(str(command["code"]), int(command.get("value", 1)))
+        except KeyError as exc:
+            raise UsageError(f"{cmd} command without {exc}") from None
+        except ValueError as exc:
+            raise UsageError(f"{cmd} command: {exc}") from None
