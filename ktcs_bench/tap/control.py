@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from ktcs_bench.capture.records import split_direction
 from ktcs_bench.codec.hextext import hex_bytes
 from ktcs_bench.errors import UsageError
-from ktcs_bench.tap.faults import (
+from ktcs_bench.faults import (
     BitErrors,
     Cut,
     Delay,

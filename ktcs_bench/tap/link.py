@@ -6,7 +6,7 @@ connects to the target (one connection at a time: a new one replaces the old). B
 loop -- in a thread of their own after `start()` (library use, tests), or in the caller's thread
 with `run()` (the `ktcs-bench tap run` process). The public methods are thread-safe.
 
-The logic is elsewhere and sans-I/O: `FaultInjector` (faults.py) per direction, `Recorder`
+The logic is elsewhere and sans-I/O: `FaultInjector` (`ktcs_bench.faults`) per direction, `Recorder`
 (recorder.py) for timestamped frames, `parse_command` (control.py) for the control language. The
 control port (127.0.0.1, line-based) serves the same commands to other processes, and `subscribe`
 streams the recorded traffic as JSON lines.
@@ -32,9 +32,9 @@ from typing import Any, Protocol, TypeVar
 from ktcs_bench.capture.records import CaptureRecord
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.faults import Cut, Fault, FaultInjector
 from ktcs_bench.tap import registry
 from ktcs_bench.tap.control import HELP, Command, parse_command
-from ktcs_bench.tap.faults import Cut, Fault, FaultInjector
 from ktcs_bench.tap.recorder import Recorder
 from ktcs_bench.transport.tcp import open_tcp
 

@@ -15,7 +15,8 @@ import serial
 from ktcs_bench.capture import open_writer, read_capture
 from ktcs_bench.codec import FrameCodec, get_profile
 from ktcs_bench.errors import PeerError
-from ktcs_bench.tap import BitErrors, Delay, DropFrame, PtyTap, TapClient, TcpTap
+from ktcs_bench.faults import BitErrors, Delay, DropFrame
+from ktcs_bench.tap import PtyTap, TapClient, TcpTap
 
 CODEC1 = FrameCodec(get_profile("ktcs-type1"))
 CODEC2 = FrameCodec(get_profile("ktcs-type2"))

@@ -5,7 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ktcs_bench.codec import Frame, FrameCodec, StreamDecoder, get_profile
-from ktcs_bench.transport.virtual import Fault, VirtualBench, VirtualWire
+from ktcs_bench.faults import FaultInjector
+from ktcs_bench.transport.virtual import VirtualBench, VirtualWire
 from ktcs_bench.type1 import LinkConfig, Type1Link
 
 PROFILE = get_profile("ktcs-type1")
@@ -19,7 +20,7 @@ def make_pair(
     state_a: dict[int, int] | None = None,
     state_b: dict[int, int] | None = None,
     config: LinkConfig = CONFIG,
-    **bench_args: Fault | int | float | None,
+    **bench_args: FaultInjector | int | float | None,
 ) -> tuple[Type1Link, Type1Link, VirtualBench]:
     a = Type1Link(PROFILE, config, "a", state_provider=provider(state_a or {}))
     b = Type1Link(PROFILE, config, "b", state_provider=provider(state_b or {}))
@@ -46,20 +47,3 @@ def frames_on(wire: VirtualWire, arrived: bool = False) -> list[Frame]:
 
 def data_frames(wire: VirtualWire, op: str) -> list[Frame]:
     return [f for f in frames_on(wire) if f.ok and f.op == OPS[op]]
-
-
-def once(fault: Callable[[bytes], bytes | None]) -> Fault:
-    """A fault that applies `fault` to the first chunk it changes (returns non-None for)."""
-    done = False
-
-    def apply(data: bytes) -> bytes:
-        nonlocal done
-        if done:
-            return data
-        changed = fault(data)
-        if changed is None:
-            return data
-        done = True
-        return changed
-
-    return apply

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
+from ktcs_bench.faults import BitErrors, ByteLoss, FaultInjector, Noise
 from ktcs_bench.transport.virtual import VirtualBench
 from ktcs_bench.type1 import (
     CommunicationError,
@@ -19,7 +20,6 @@ from ktcs_bench.type1 import (
     MessageReceived,
     Type1Link,
 )
-from ktcs_bench.type1.faults import LineFaults
 
 from .helpers import CONFIG, PROFILE
 
@@ -57,13 +57,15 @@ class Ledger:
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_delivered_once_and_intact_or_communication_error(seed: int) -> None:
-    faults = {
-        d: LineFaults(ber=1e-3, drop_rate=2e-4, garbage_rate=0.02, seed=seed * 10 + i)
-        for i, d in enumerate(("ab", "ba"))
-    }
+    faults = {d: FaultInjector.seeded(PROFILE, seed * 10 + i) for i, d in enumerate(("ab", "ba"))}
+    for injector in faults.values():
+        # bit errors; a byte lost now and then; a burst of 1..12 random bytes (half of them with
+        # a false STX) after about one chunk in fifty (the links hand ~17-byte chunks to the wire)
+        for fault in (BitErrors(1e-3), ByteLoss(2e-4), Noise(1.2e-3)):
+            injector.apply(fault, 0.0)
     a = Type1Link(PROFILE, CONFIG, "a", state_provider=lambda s, c: STATE["a"])
     b = Type1Link(PROFILE, CONFIG, "b", state_provider=lambda s, c: STATE["b"])
-    bench = VirtualBench(a, b, fault_ab=faults["ab"], fault_ba=faults["ba"])
+    bench = VirtualBench(a, b, faults_ab=faults["ab"], faults_ba=faults["ba"])
     ledgers = {"a": Ledger(), "b": Ledger()}  # keyed by sender
     rng = random.Random(seed)
     counts = {"a": 0, "b": 0}
@@ -94,8 +96,11 @@ def test_delivered_once_and_intact_or_communication_error(seed: int) -> None:
                     ledgers[at].lost(msg)
         seen = len(bench.events)
 
-    flipped = faults["ab"].flipped_bits + faults["ba"].flipped_bits
-    assert flipped > 500  # the line really was noisy
+    stats = [f.stats for f in faults.values()]
+    # the line really was noisy, in every way
+    assert sum(s.bits_flipped for s in stats) > 500
+    assert sum(s.bytes_dropped for s in stats) > 10
+    assert sum(s.garbage_inserted for s in stats) > 500
     for name, ledger in ledgers.items():
         duplicated = sum(1 for n in ledger.delivered.values() if n > 1)
         missing = [i for i in ledger.sent if not ledger.delivered[i] and i not in ledger.reported]

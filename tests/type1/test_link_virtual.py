@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from ktcs_bench.errors import UsageError
+from ktcs_bench.faults import CorruptFrame, Cut, DropFrame, TruncateFrame
 from ktcs_bench.type1 import (
     AckSent,
     CommunicationError,
@@ -22,7 +23,7 @@ from ktcs_bench.type1 import (
     Type1Link,
 )
 
-from .helpers import CODEC, CONFIG, OPS, PROFILE, data_frames, frames_on, make_pair, once
+from .helpers import CODEC, CONFIG, OPS, PROFILE, data_frames, frames_on, make_pair
 
 
 def settled(**kw: object):  # type: ignore[no-untyped-def]
@@ -74,15 +75,8 @@ def test_message_delivered_once_and_acked() -> None:
 
 
 def test_1_crc_error_nak_then_same_frame_again() -> None:
-    def flip_crc(chunk: bytes) -> bytes | None:
-        if len(chunk) <= 11:  # an ACK alone
-            return None
-        bad = bytearray(chunk)
-        bad[-5] ^= 0x10  # the CRC's low byte of the data frame that ends the chunk
-        return bytes(bad)
-
     a, b, bench = settled()
-    bench.ab.fault = once(flip_crc)
+    bench.fault(bench.ab, CorruptFrame(-5, 0x10))  # the CRC's low byte of a's next frame
     bench.send(a, change(a))
     bench.run_for(0.5)
     (nak,) = bench.of(b, NakSent)
@@ -97,11 +91,8 @@ def test_1_crc_error_nak_then_same_frame_again() -> None:
 
 
 def test_2_no_complete_frame_within_delta_r_nak_reason_2() -> None:
-    def cut_tail(chunk: bytes) -> bytes | None:
-        return chunk[:-4] if len(chunk) > 11 else None
-
     a, b, bench = settled()
-    bench.ab.fault = once(cut_tail)
+    bench.fault(bench.ab, TruncateFrame(4))  # a's next frame loses its last 4 bytes
     sent_at = bench.now
     bench.send(a, change(a))
     bench.run_for(0.5)
@@ -114,11 +105,8 @@ def test_2_no_complete_frame_within_delta_r_nak_reason_2() -> None:
 
 
 def test_3_lost_ack_timeout_retransmits_same_seq_duplicate_not_redelivered() -> None:
-    def drop_ack(chunk: bytes) -> bytes | None:
-        return b"" if chunk[4:6] == OPS["ACK"].to_bytes(2, "little") and len(chunk) == 11 else None
-
     a, b, bench = settled()
-    bench.ba.fault = once(drop_ack)
+    bench.fault(bench.ba, DropFrame())  # b's next frame: the ACK of a's CHANGE
     bench.send(a, change(a))
     bench.run_for(1.0)
     (rt,) = bench.of(a, Retransmission)
@@ -134,7 +122,7 @@ def test_3_lost_ack_timeout_retransmits_same_seq_duplicate_not_redelivered() -> 
 
 def test_communication_error_after_exactly_three_retransmissions() -> None:
     a, b, bench = settled()
-    bench.ab.cut = True  # a's transmitter dies; its frames never arrive
+    bench.fault(bench.ab, Cut())  # a's transmitter dies; its frames never arrive
     msg = change(a)
     queued_behind = change(a, 4, 0)
     bench.send(a, msg)
@@ -221,14 +209,16 @@ def test_link_down_after_silence_and_up_again_with_full_resync() -> None:
     # default timers (ACK timeout 1.7 s): 3 s of silence comes before a LINK_TEST's 4th failure
     a, b, bench = make_pair(state_a, {1: 0, 2: 1}, config=LinkConfig())
     bench.run_for(0.5)
-    bench.ab.cut = bench.ba.cut = True
+    bench.fault(bench.ab, Cut())
+    bench.fault(bench.ba, Cut())
     bench.run_for(3.6)
     assert bench.of(a, LinkDown)[-1].reason == "silence"
     assert bench.of(b, LinkDown)[-1].reason == "silence"
     assert not a.up and not b.up
     state_a.update({2: 1, 4: 1})  # the field changed while the link was down
     n_info = len(received(bench, b, "ALL_INFO"))
-    bench.ab.cut = bench.ba.cut = False
+    bench.ab.restore()
+    bench.ba.restore()
     bench.run_for(4.0)
     assert a.up and b.up
     assert len(bench.of(a, LinkUp)) == len(bench.of(b, LinkUp)) == 2
@@ -239,11 +229,11 @@ def test_link_down_after_silence_and_up_again_with_full_resync() -> None:
 
 def test_one_sided_communication_error_rebuilds_both_views() -> None:
     a, b, bench = settled()
-    bench.ab.cut = True
+    bench.fault(bench.ab, Cut())
     bench.send(a, change(a))
     bench.run_for(1.2)
     assert bench.of(a, CommunicationError) and bench.of(a, LinkDown) and not bench.of(b, LinkDown)
-    bench.ab.cut = False
+    bench.ab.restore()
     n_a, n_b = len(received(bench, a, "ALL_INFO")), len(received(bench, b, "ALL_INFO"))
     bench.run_for(1.5)
     assert a.up and b.up

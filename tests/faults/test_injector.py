@@ -2,23 +2,32 @@
 
 from __future__ import annotations
 
+import itertools
+import json
 import random
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from ktcs_bench.codec import FrameCodec, get_profile
 from ktcs_bench.errors import UsageError
-from ktcs_bench.tap import (
+from ktcs_bench.faults import (
     BitErrors,
+    ByteLoss,
+    CorruptFrame,
     Cut,
     Delay,
     DropBytes,
     DropFrame,
     DuplicateFrame,
+    Fault,
     FaultInjector,
     InsertGarbage,
+    Noise,
     ReorderFrames,
-    parse_command,
+    TruncateFrame,
+    fault_from_json,
 )
 
 PROFILE = get_profile("ktcs-type1")
@@ -200,19 +209,86 @@ def test_clear_releases_held_frames() -> None:
     assert run(inj, [fs[1]]) == fs[1]
 
 
-def test_control_commands_parse_to_faults() -> None:
-    names = ("ixl", "atc")
-    assert parse_command("ber 1e-3", names).fault == BitErrors(1e-3)
-    assert parse_command("drop-frame ixl->atc", names).fault == DropFrame(1, direction="ixl>atc")
-    assert parse_command("duplicate 2 atc>ixl", names).fault == DuplicateFrame(
-        2, direction="atc>ixl"
+@pytest.mark.parametrize("rate", [1e-3, 1e-2])
+def test_byte_loss_at_about_the_rate(rate: float) -> None:
+    inj = fresh()
+    inj.apply(ByteLoss(rate), T)
+    data = bytes(range(256)) * 800
+    out = run(inj, [data[i : i + 700] for i in range(0, len(data), 700)])
+    lost = len(data) - len(out)
+    assert lost == inj.stats.bytes_dropped
+    assert 0.9 * rate * len(data) < lost < 1.1 * rate * len(data)
+
+
+def test_noise_inserts_bursts_with_false_stx_at_about_the_rate() -> None:
+    rate = 2e-3
+    inj = fresh()
+    inj.apply(Noise(rate), T)
+    data = bytes([0x55]) * 200_000  # no STX in the data: every 0x02 that comes out is noise
+    out = run(inj, [data[i : i + 1000] for i in range(0, len(data), 1000)])
+    assert len(out) - len(data) == inj.stats.garbage_inserted
+    assert out.replace(b"\x55", b"") != b"" and out.count(b"\x55") >= len(data)
+    bursts = rate * len(data)
+    assert 0.8 * bursts * 6.5 < inj.stats.garbage_inserted < 1.2 * bursts * 6.5  # 1..12 bytes
+    assert 0.3 * bursts < out.count(PROFILE.stx.to_bytes(1, "little")) < 0.8 * bursts
+
+
+@given(cuts=st.lists(st.integers(0, 3000), max_size=30), seed=st.integers(0, 2**32))
+def test_random_faults_do_not_depend_on_how_the_stream_is_chunked(
+    cuts: list[int], seed: int
+) -> None:
+    data = bytes(range(256)) * 12
+    outs = []
+    for chunking in ([0, len(data)], sorted({0, len(data), *cuts})):
+        inj = fresh(seed)
+        for fault in (BitErrors(5e-3), ByteLoss(5e-3), Noise(5e-3)):
+            inj.apply(fault, T)
+        chunks = [data[i:j] for i, j in itertools.pairwise(chunking)]
+        outs.append(run(inj, chunks))
+    assert outs[0] == outs[1] and outs[0] != data
+
+
+def test_corrupt_frame_xors_one_byte_of_the_next_frame_only() -> None:
+    fs = frames(3)
+    inj = fresh()
+    inj.apply(CorruptFrame(-5, 0x10), T)
+    out = run(inj, fs, byte_by_byte=True)
+    bad = bytearray(fs[0])
+    bad[-5] ^= 0x10
+    assert out == bytes(bad) + fs[1] + fs[2]
+    assert inj.stats.frames_corrupted == 1
+
+
+def test_truncate_frame_cuts_the_tail_of_the_next_frame_only() -> None:
+    fs = frames(3)
+    inj = fresh()
+    inj.apply(TruncateFrame(4), T)
+    assert run(inj, fs) == fs[0][:-4] + fs[1] + fs[2]
+    assert inj.stats.frames_truncated == 1 and inj.stats.bytes_dropped == 4
+
+
+ALL_FAULTS = [BitErrors(1e-3), ByteLoss(0.5, direction="a>b"), Noise(1e-4, 3), DropFrame(2),
+              DropBytes(7), InsertGarbage(b"\x02\xff"), DuplicateFrame(direction="b>a"),
+              ReorderFrames(), CorruptFrame(-5, 0x10), TruncateFrame(3), Delay(1.5), Cut()]  # fmt: skip
+
+
+@pytest.mark.parametrize("fault", ALL_FAULTS, ids=lambda f: f.verb)
+def test_every_fault_survives_its_json_form(fault: Fault) -> None:
+    as_json = fault.to_json()
+    assert (
+        as_json["cmd"] == fault.verb and fault_from_json(json.loads(json.dumps(as_json))) == fault
     )
-    cmd = parse_command("garbage ixl->atc 02 ff 00", names)
-    assert cmd.fault == InsertGarbage(b"\x02\xff\x00", direction="ixl>atc")
-    assert parse_command("cut", names).fault == Cut()
-    assert parse_command("send atc>ixl 0203", names).data == b"\x02\x03"
-    assert parse_command("subscribe history", names).history
-    for bad in ["", "explode", "ber", "ber x", "ber 2", "drop-frame a->b", "send 02", "cut 3",
-                "drop-frame 0", "garbage ixl->atc zz"]:  # fmt: skip
-        with pytest.raises(UsageError):
-            parse_command(bad, names)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [{}, {"cmd": "explode"}, {"cmd": "ber"}, {"cmd": "ber", "rate": "0.1"}, {"cmd": "ber", "rate": 2},
+     {"cmd": "ber", "rate": True}, {"cmd": "ber", "rate": float("nan")},
+     {"cmd": "drop-frame", "count": 0}, {"cmd": "drop-frame", "count": 1.5},
+     {"cmd": "garbage", "hex": "zz"}, {"cmd": "garbage", "hex": ""}, {"cmd": "garbage", "hex": 2},
+     {"cmd": "corrupt", "at": 3, "mask": 256}, {"cmd": "cut", "direction": 5},
+     {"cmd": "delay", "seconds": -1}, {"cmd": "truncate", "tail": 0}],
+)  # fmt: skip
+def test_bad_json_faults_are_usage_errors(bad: dict[str, object]) -> None:
+    with pytest.raises(UsageError):
+        fault_from_json(bad)
