@@ -20,7 +20,7 @@ from ktcs_bench.charts.model import CodeChart, load_chart
 from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.hextext import Chunk, HexTextParser, text_encoding
 from ktcs_bench.codec.profile import FrameProfile, get_profile, profile_names
-from ktcs_bench.codec.render import BOLD, RESET, json_line, to_json, to_text
+from ktcs_bench.codec.render import BOLD, RESET, json_line, payload, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.errors import UsageError
 
@@ -237,9 +237,9 @@ class _Output:
         for record in records:
             if isinstance(record, Frame):
                 self.frames += 1
-                if record.error is None:
+                if record.error is None and payload(record, profile)[2] is None:
                     self.good += 1
-                else:
+                else:  # a framing error, or a payload that does not parse (JSON: "format")
                     self.failed = True
             else:
                 self.garbage += len(record.raw)

@@ -113,7 +113,8 @@ def to_text(
     opcode, parsed, perr = payload(f, profile)
     lines = []
     verdict = (
-        _paint("CRC OK", GREEN, colour) if f.error is None
+        _paint("CRC OK", GREEN, colour) if f.error is None and perr is None
+        else _paint("CRC OK, ERROR: format", RED, colour) if f.error is None
         else _paint(f"ERROR: {f.error}", RED, colour)
     )  # fmt: skip
     lines.append(

@@ -182,3 +182,13 @@ def test_a_line_too_long_to_hold_is_cut_into_lines_that_read_the_same(
     assert pieces.data == whole.data == data
     assert len(pieces.chunks) == len(whole.chunks) == 1
     assert pieces.chunks[0].direction == whole.chunks[0].direction
+
+
+def test_a_payload_that_does_not_parse_fails_the_same_in_text_and_json() -> None:
+    """A CHANGE whose CRC checks but whose DATA is not whole items is a failed check either way."""
+    frame = "02 02 00 05 02 00 03 00 6f 51 00 00 03"  # CHANGE, 2 item bytes, CRC good
+    text = cli("decode", "--profile", "ktcs-type1", frame)
+    as_json = cli("decode", "--json", "--profile", "ktcs-type1", frame)
+    assert json.loads(as_json.stdout)["error"] == "format"
+    assert "ERROR: format" in text.stdout and "not a multiple of 3" in text.stdout
+    assert text.returncode == as_json.returncode == 1
