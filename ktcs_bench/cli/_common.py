@@ -11,8 +11,8 @@ import sys
 from collections.abc import Callable
 from typing import Any, TextIO
 
-from ktcs_bench.emulator.endpoints import check_port, parse_host_port
 from ktcs_bench.errors import UsageError
+from ktcs_bench.transport.endpoints import check_port, parse_host_port
 
 
 def use_colour(stream: TextIO, flag: bool | None = None) -> bool:

@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     from ktcs_bench.conformance.model import CaseResult
     from ktcs_bench.conformance.runner import SuiteResult, protocol_of, run_suite
     from ktcs_bench.conformance.timing import SuiteTiming
-    from ktcs_bench.emulator.endpoints import parse_endpoint
+    from ktcs_bench.transport.endpoints import parse_endpoint
 
     if args.list or args.list_faults:
         _list() if args.list else _list_faults()

@@ -10,9 +10,9 @@ import ssl
 import sys
 
 from ktcs_bench.cli._common import host_port
-from ktcs_bench.emulator.endpoints import Endpoint, parse_endpoint, parse_links
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.topology import ROLE, load_lab, resolve_lab_path
+from ktcs_bench.transport.endpoints import Endpoint, parse_endpoint, parse_links
 
 KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
 

@@ -21,10 +21,10 @@ from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
-from ktcs_bench.emulator.endpoints import parse_endpoint
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap import TapClient
 from ktcs_bench.tap.recorder import Recorder
+from ktcs_bench.transport.endpoints import parse_endpoint
 
 HELP = "watch a link live: decoded frames, CRC verdicts and ARQ events (via its tap)"
 DESCRIPTION = """\

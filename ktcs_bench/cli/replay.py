@@ -27,11 +27,11 @@ from ktcs_bench.cli._common import duration
 from ktcs_bench.cli.monitor import FramePrinter
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.stream import StreamDecoder
-from ktcs_bench.emulator.endpoints import parse_endpoint
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap import TapClient
 from ktcs_bench.tap.recorder import Recorder
 from ktcs_bench.tap.registry import tap_file
+from ktcs_bench.transport.endpoints import parse_endpoint
 
 HELP = "send captured frames into a pty, serial URL, TCP address or tap; show what comes back"
 DESCRIPTION = """\

@@ -36,8 +36,8 @@ from ktcs_bench.conformance.timing import MeasuredTiming, SuiteTiming
 from ktcs_bench.conformance.type1_cases import TYPE1_CASES
 from ktcs_bench.conformance.type2_cases import TYPE2_CASES
 from ktcs_bench.conformance.wire import Evidence, Inconclusive, Type1Wire, Type2Wire
-from ktcs_bench.emulator.endpoints import Endpoint, parse_endpoint
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
+from ktcs_bench.transport.endpoints import Endpoint, parse_endpoint
 from ktcs_bench.transport.serialport import open_transport
 
 ROLES = ("ixl", "atc", "ctc", "trackside")

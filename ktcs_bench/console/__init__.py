@@ -10,6 +10,6 @@ the CTC server's `on_event`.
 """
 
 from ktcs_bench.console.server import ConsoleServer
-from ktcs_bench.console.trains import EndpointTrains, SpeedDistance, TrainSource
+from ktcs_bench.console.trains import EndpointTrains, TrainSource
 
-__all__ = ["ConsoleServer", "EndpointTrains", "SpeedDistance", "TrainSource"]
+__all__ = ["ConsoleServer", "EndpointTrains", "TrainSource"]

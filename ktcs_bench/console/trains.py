@@ -1,93 +1,24 @@
-"""Speed–distance data for the console: a small provider interface and one implementation.
+"""Speed–distance data for the console: the provider interface and its in-process implementation.
 
-`TrainSource` is what the console asks: which trains there are, and for one train its curves
-(MRSP, EBI, SBI, permitted) over a window around it plus its actual point (front, speed).
-`EndpointTrains` computes that from in-process `TrainEndpoint` objects: the curves of the EBD the
-onboard supervision reads (`TrainEndpoint.curve_set`, every target it supervises, kTCS codes
-included); a process adapter for remote trains only has to implement the two methods. Speeds are km/h here (for display), positions metres.
+`TrainSource` is what the console asks: which trains there are, and for one train its curves and
+actual point (`train.speed_distance.SpeedDistance`). `EndpointTrains` computes them from
+in-process `TrainEndpoint` objects; the CTC process has one over train processes
+(`emulator.ctc.RemoteTrains`): an implementation only has to give the two methods.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from typing import Any, Protocol
-
-import numpy as np
+from typing import Protocol
 
 from ktcs_bench.train.endpoint import TrainEndpoint
-from ktcs_bench.train.units import to_kmh
-
-BEHIND_M = 300.0  # window drawn behind the train's front
-AHEAD_MIN_M = 1500.0  # and at least this far ahead (further when the target lies beyond)
-MAX_POINTS = 400  # samples per curve sent to the page
-SPEED_CAP_KMH = 400.0  # "no limit" (infinite EBD far from any target) is drawn at the top
-
-
-@dataclass(frozen=True)
-class SpeedDistance:
-    train: str
-    x: list[float]  # m
-    curves: dict[str, list[float | None]]  # mrsp, ebi, sbi, permitted: km/h (None = no limit)
-    front_m: float
-    speed_kmh: float
-    target_m: float | None
-    status: str
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "train": self.train,
-            "x": self.x,
-            "curves": self.curves,
-            "front_m": self.front_m,
-            "speed_kmh": self.speed_kmh,
-            "target_m": self.target_m,
-            "status": self.status,
-        }
+from ktcs_bench.train.speed_distance import SpeedDistance, endpoint_speed_distance
 
 
 class TrainSource(Protocol):
     def train_ids(self) -> list[str]: ...
 
     async def speed_distance(self, train: str) -> SpeedDistance | None: ...
-
-
-def _clean(values: np.ndarray[Any, Any]) -> list[float | None]:
-    out: list[float | None] = []
-    for v in values:
-        f = float(v)
-        out.append(round(to_kmh(f), 2) if math.isfinite(f) and to_kmh(f) < SPEED_CAP_KMH else None)
-    return out
-
-
-def endpoint_speed_distance(train_id: str, ep: TrainEndpoint) -> SpeedDistance:
-    """Curves of `ep` as they stand after its last cycle, sampled around its front."""
-    cs = ep.curve_set()
-    front = ep.position.max_safe_front
-    lo = max(float(cs.x[0]), front - BEHIND_M)
-    hi = min(float(cs.x[-1]), max(front + AHEAD_MIN_M, ep.target_point + 100.0))
-    idx = np.flatnonzero((cs.x >= lo) & (cs.x <= hi))
-    if idx.size == 0:
-        idx = np.arange(len(cs.x))
-    step = max(1, int(math.ceil(idx.size / MAX_POINTS)))
-    pick = idx[::step]
-    curves = {
-        "mrsp": _clean(cs.mrsp[pick]),
-        "ebi": _clean(cs.ebi[pick]),
-        "sbi": _clean(cs.sbi[pick]),
-        "permitted": _clean(cs.permitted[pick]),
-    }
-    target = ep.target_point if math.isfinite(ep.target_point) else None
-    return SpeedDistance(
-        train=train_id,
-        x=[round(float(v), 1) for v in cs.x[pick]],
-        curves=curves,
-        front_m=round(float(ep.position.head), 2),
-        speed_kmh=round(to_kmh(ep.state.speed), 2),
-        target_m=target,
-        status=ep.status.value,
-    )
 
 
 class EndpointTrains:
@@ -108,30 +39,3 @@ class EndpointTrains:
     async def speed_distance(self, train: str) -> SpeedDistance | None:
         ep = self._all().get(train)
         return None if ep is None else endpoint_speed_distance(train, ep)
-
-
-class RemoteTrains:
-    """A TrainSource over train processes (`ktcs-bench emulator train`): each is asked over its
-    control port, and computes its curves itself with `endpoint_speed_distance`."""
-
-    def __init__(self) -> None:
-        self._addresses: dict[str, tuple[str, int]] = {}
-
-    def add(self, train: str, host: str, port: int) -> None:
-        self._addresses[train] = (host, port)
-
-    def train_ids(self) -> list[str]:
-        return sorted(self._addresses)
-
-    async def speed_distance(self, train: str) -> SpeedDistance | None:
-        from ktcs_bench.emulator import jsonlines
-
-        address = self._addresses.get(train)
-        if address is None:
-            return None
-        try:
-            answer = await jsonlines.request(*address, {"cmd": "speed_distance"}, timeout=5.0)
-        except (OSError, TimeoutError, ValueError):
-            return None
-        data = answer.get("data")
-        return SpeedDistance(**data) if answer.get("ok") and isinstance(data, dict) else None

@@ -8,8 +8,8 @@ from typing import Any
 
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.emulator.device import IxlPeerDevice
-from ktcs_bench.emulator.endpoints import Endpoint
 from ktcs_bench.station.model import Line
+from ktcs_bench.transport.endpoints import Endpoint
 
 
 class AtcDevice(IxlPeerDevice):

@@ -15,10 +15,10 @@ from collections.abc import Callable, Mapping
 
 from ktcs_bench.charts.model import CodeChart
 from ktcs_bench.emulator import variants
-from ktcs_bench.emulator.endpoints import Endpoint
 from ktcs_bench.errors import KtcsError
 from ktcs_bench.transport.aio import LinkRunner
 from ktcs_bench.transport.base import Transport
+from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.transport.serialport import open_transport
 from ktcs_bench.type1 import (
     CommunicationError,

@@ -15,16 +15,41 @@ import time
 from typing import Any
 
 from ktcs_bench.console.server import ConsoleServer
-from ktcs_bench.console.trains import RemoteTrains
 from ktcs_bench.ctc.desk import Desk
 from ktcs_bench.ctc.model import CtcModel, signal_name
-from ktcs_bench.emulator import variants
+from ktcs_bench.emulator import jsonlines, variants
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
+from ktcs_bench.train.speed_distance import SpeedDistance
 from ktcs_bench.type2.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")
+
+
+class RemoteTrains:
+    """A TrainSource over train processes (`ktcs-bench emulator train`): each is asked over its
+    control port, and computes its curves itself with `endpoint_speed_distance`."""
+
+    def __init__(self) -> None:
+        self._addresses: dict[str, tuple[str, int]] = {}
+
+    def add(self, train: str, host: str, port: int) -> None:
+        self._addresses[train] = (host, port)
+
+    def train_ids(self) -> list[str]:
+        return sorted(self._addresses)
+
+    async def speed_distance(self, train: str) -> SpeedDistance | None:
+        address = self._addresses.get(train)
+        if address is None:
+            return None
+        try:
+            answer = await jsonlines.request(*address, {"cmd": "speed_distance"}, timeout=5.0)
+        except (OSError, TimeoutError, ValueError):
+            return None
+        data = answer.get("data")
+        return SpeedDistance(**data) if answer.get("ok") and isinstance(data, dict) else None
 
 
 class CtcDevice(Device):

@@ -22,9 +22,9 @@ from typing import Any
 from ktcs_bench.charts.generate import station_chart
 from ktcs_bench.emulator import jsonlines
 from ktcs_bench.emulator.codeport import CodePort
-from ktcs_bench.emulator.endpoints import Endpoint
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.station.model import Line
+from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
 
 log = logging.getLogger("ktcs_bench.emulator")

@@ -9,10 +9,10 @@ from typing import Any
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.device import Device
-from ktcs_bench.emulator.endpoints import Endpoint
 from ktcs_bench.ixl.interlocking import Interlocking, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.model import Line
+from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
 from ktcs_bench.type2.ixl_client import IxlClient
 

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ktcs_bench.emulator import jsonlines
-from ktcs_bench.emulator.endpoints import Endpoint
+from ktcs_bench.transport.endpoints import Endpoint
 
 log = logging.getLogger("ktcs_bench.emulator")
 RETRY = 0.5  # s between connection attempts to the rails

@@ -6,9 +6,9 @@ from __future__ import annotations
 from typing import Any
 
 from ktcs_bench.emulator.device import IxlPeerDevice
-from ktcs_bench.emulator.endpoints import Endpoint
 from ktcs_bench.field.trackside import FieldOutput, Trackside
 from ktcs_bench.station.model import Line
+from ktcs_bench.transport.endpoints import Endpoint
 
 
 class TracksideDevice(IxlPeerDevice):

@@ -19,7 +19,6 @@ import math
 from typing import Any
 
 from ktcs_bench.emulator.device import Device
-from ktcs_bench.emulator.endpoints import Endpoint
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
@@ -34,7 +33,9 @@ from ktcs_bench.train.endpoint import (
     TrainEndpoint,
 )
 from ktcs_bench.train.mrsp import Restriction
+from ktcs_bench.train.speed_distance import endpoint_speed_distance
 from ktcs_bench.train.units import kmh
+from ktcs_bench.transport.endpoints import Endpoint
 
 
 def train_line(line: Line) -> LineData:
@@ -180,8 +181,6 @@ class TrainDevice(Device):
             self.release = True
             return {"ok": True}
         if obj.get("cmd") == "speed_distance":  # for the CTC console's speed-distance panel
-            from ktcs_bench.console.trains import endpoint_speed_distance
-
             sd = endpoint_speed_distance(self.config.train_id, self.endpoint)
             return {"ok": True, "data": sd.to_json()}
         return await super().command(obj)

@@ -9,10 +9,10 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench.datafiles import data_dir, load_yaml
-from ktcs_bench.emulator.endpoints import check_port
 from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
+from ktcs_bench.transport.endpoints import check_port
 
 KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
 STATION_KINDS = ("ixl", "atc", "trackside")

@@ -13,9 +13,9 @@ import re
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.emulator.endpoints import check_port
 from ktcs_bench.errors import UsageError
 from ktcs_bench.runtime import private_dir, process_alive, run_dir, this_process
+from ktcs_bench.transport.endpoints import check_port
 
 _ADDRESS = re.compile(r"^(?:tap://)?(?:(?P<host>[\w.:-]+|\[[0-9a-fA-F:]+\]):)?(?P<port>\d{1,5})$")
 

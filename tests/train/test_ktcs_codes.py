@@ -150,9 +150,9 @@ def test_the_train_process_passes_codes_on_as_read_and_stops_on_a_bad_one() -> N
     the 30 after an 80 stays 30 (its meaning is the endpoint's). A code it cannot read — wrong
     shape, not a number, NaN or infinite (Python's json reads both), negative — is no code: the
     train stops where it stands, and says why."""
-    from ktcs_bench.emulator.endpoints import parse_endpoint
     from ktcs_bench.emulator.train import TrainDevice
     from ktcs_bench.station import load_line
+    from ktcs_bench.transport.endpoints import parse_endpoint
 
     line = load_line()
     cfg = TrainConfig("T1", TrainParams(length=100.0), start=300.0, mode="ktcs")

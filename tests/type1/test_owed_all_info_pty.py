@@ -12,9 +12,9 @@ import asyncio
 from ktcs_bench.charts.generate import station_chart
 from ktcs_bench.codec import Frame, StreamDecoder
 from ktcs_bench.emulator.codeport import CodePort
-from ktcs_bench.emulator.endpoints import Endpoint
 from ktcs_bench.station import load_line
 from ktcs_bench.transport import SerialTransport
+from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
 
 from .helpers import CODEC, OPS, PROFILE
