@@ -8,6 +8,12 @@ stop point — the end of the set route (a signal at stop) or the rear of the ne
 circuit. While its Type I link to the IXL is in communication error every track circuit gets the
 most restrictive code.
 
+Occupancy comes from the rails (the track-circuit emulator). When the rails are lost
+(`rails_state(False)`) the ATC knows nothing of where trains are: every track circuit is occupied
+in what it reports to the IXL and in its own codes (all the most restrictive), reports that still
+come are ignored, and after `rails_state(True)` each track circuit stays occupied until the rails
+report it again (SPEC §6.2 invariant 3, §6.4).
+
 How the path ahead of a track circuit is found, in order: a set route through it; a set route
 from the signal it approaches, if that signal shows proceed; the route that last held it (so a
 train keeps its path after the entry signal went back to stop); on the plain line, the traffic
@@ -59,6 +65,7 @@ class WaysideAtc:
         self.occupied: dict[str, bool] = {}  # unknown = occupied
         self.ixl: dict[str, int] = {}  # last IXL->ATC code states; unknown = 0
         self.link_up = False
+        self.rails_up = True  # the occupancy source is there (an adapter with rails says when not)
         self.tc_route: dict[str, str] = {}  # track circuit -> route that last held it
         self._inputs = tuple(c.name for c in station_chart(self.view, "ixl_to_atc").codes)
         self._routes = self.view.station.routes
@@ -71,8 +78,24 @@ class WaysideAtc:
     # ------------------------------------------------------------------ inputs
 
     def set_occupancy(self, occupied: Mapping[str, bool], now: float) -> AtcOutput:
-        """Occupancy of any track circuits of the line (changes or all)."""
-        self.occupied.update({k: bool(v) for k, v in occupied.items()})
+        """Occupancy of any track circuits of the line (changes or all); ignored while the rails
+        are lost."""
+        if self.rails_up:
+            self.occupied.update({k: bool(v) for k, v in occupied.items()})
+        return self._finish(now)
+
+    def rails_state(self, up: bool, now: float) -> AtcOutput:
+        """The rails (the source of occupancy) lost or back. Lost: every track circuit occupied
+        until reported again, the most restrictive code everywhere."""
+        if up != self.rails_up:
+            self.rails_up = up
+            if up:
+                self._event(now, "rails", "rails back: occupancy as the rails report it")
+            else:
+                self.occupied.clear()  # unknown = occupied
+                self._event(
+                    now, "rails", "rails lost: every track circuit occupied, most restrictive code"
+                )
         return self._finish(now)
 
     def receive(self, codes: Mapping[str, int], now: float) -> AtcOutput:
@@ -114,7 +137,7 @@ class WaysideAtc:
         """The code of every track circuit this ATC drives."""
         out: dict[str, AtcCode] = {}
         for t in self.own:
-            if not self.link_up:
+            if not (self.link_up and self.rails_up):
                 out[t.name] = most_restrictive(self.line, self._gradient(t, "up"))
                 continue
             path = self._path(t)
@@ -127,7 +150,7 @@ class WaysideAtc:
     # ------------------------------------------------------------------ code computation
 
     def _occ(self, tc: str) -> bool:
-        return self.occupied.get(tc, True)
+        return not self.rails_up or self.occupied.get(tc, True)
 
     def _on(self, name: str) -> bool:
         return self.ixl.get(name, 0) == 1

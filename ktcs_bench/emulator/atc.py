@@ -1,5 +1,6 @@
 """The wayside ATC process: `atc.WaysideAtc` on a Type I link to its IXL, occupancy in from the
-rails, a code per track circuit out to the rails (the most restrictive on communication error)."""
+rails, a code per track circuit out to the rails (the most restrictive on communication error).
+Until the rails connect, and whenever their connection is lost, every track circuit is occupied."""
 
 from __future__ import annotations
 
@@ -28,9 +29,14 @@ class AtcDevice(IxlPeerDevice):
     def link_changed(self, up: bool) -> None:
         self.apply(self.atc.link_state(up, self.now()))
 
+    def rails_changed(self, up: bool) -> None:
+        self.apply(self.atc.rails_state(up, self.now()))
+
     def from_rails(self, obj: dict[str, Any]) -> None:
         occ = obj.get("occupancy")
         if isinstance(occ, dict):
+            if "full" in obj:  # the rails (back): every track circuit reported
+                self.rails_changed(True)
             self.apply(self.atc.set_occupancy({k: bool(v) for k, v in occ.items()}, self.now()))
             if self.rails is not None and "full" in obj:  # a (re)connection: send every code
                 self.rails.send({"codes": self._wire(self.atc.track_codes())})

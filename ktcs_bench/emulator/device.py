@@ -17,6 +17,7 @@ import signal
 import sys
 import time
 from collections import deque
+from functools import partial
 from typing import Any
 
 from ktcs_bench.charts.generate import station_chart
@@ -200,11 +201,11 @@ class IxlPeerDevice(Device):
             )  # fmt: skip
             if self.port.path:
                 self.ready_info["ptys"] = {"ixl": self.port.path}
-        self.rails = (
-            RailsClient(links["rails"], {"role": self.kind, "name": name}, self.from_rails)
-            if "rails" in links
-            else None
-        )
+        self.rails: RailsClient | None = None
+        if "rails" in links:
+            hello = {"role": self.kind, "name": name}
+            lost = partial(self.rails_changed, False)
+            self.rails = RailsClient(links["rails"], hello, self.from_rails, lost)
 
     def from_ixl(self, codes: dict[str, int]) -> None:
         raise NotImplementedError
@@ -214,6 +215,15 @@ class IxlPeerDevice(Device):
 
     def from_rails(self, obj: dict[str, Any]) -> None:
         raise NotImplementedError
+
+    def rails_changed(self, up: bool) -> None:
+        """The rails (the source of occupancy) lost or back: the device goes fail-safe."""
+        raise NotImplementedError
+
+    async def start(self) -> None:
+        await super().start()
+        if self.rails is not None:
+            self.rails_changed(False)  # nothing is known of occupancy until the rails report it
 
     async def tasks(self) -> list[asyncio.Task[None]]:
         out = [asyncio.ensure_future(self.port.run())] if self.port else []

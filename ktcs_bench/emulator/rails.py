@@ -23,15 +23,18 @@ RETRY = 0.5  # s between connection attempts to the rails
 
 
 class RailsClient:
-    """A client of the field bus that reconnects; `on_message` gets every object from the server."""
+    """A client of the field bus that reconnects; `on_message` gets every object from the server,
+    `on_lost()` (if given) is called when a connection that was up is lost."""
 
     def __init__(
         self,
         endpoint: Endpoint,
         hello: dict[str, Any],
         on_message: Callable[[dict[str, Any]], None],
+        on_lost: Callable[[], None] | None = None,
     ) -> None:
         self.endpoint, self.hello, self.on_message = endpoint, hello, on_message
+        self.on_lost = on_lost
         self.peer: jsonlines.Peer | None = None
         self._last: dict[
             str, dict[str, Any]
@@ -78,4 +81,6 @@ class RailsClient:
                 self.peer.close()
                 self.peer = None
             log.warning("rails connection lost; reconnecting")
+            if self.on_lost is not None:
+                self.on_lost()
             await asyncio.sleep(RETRY)

@@ -1,5 +1,6 @@
 """The trackside I/O process: point machines, signal lamps and track relays (`field.Trackside`)
-on a Type I link to their IXL, with track occupancy from the rails and a fault API."""
+on a Type I link to their IXL, with track occupancy from the rails and a fault API. Until the
+rails connect, and whenever their connection is lost, every track relay reports occupied."""
 
 from __future__ import annotations
 
@@ -27,9 +28,14 @@ class TracksideDevice(IxlPeerDevice):
     def link_changed(self, up: bool) -> None:
         self.apply(self.io.link_state(up, self.now()))
 
+    def rails_changed(self, up: bool) -> None:
+        self.apply(self.io.rails_state(up, self.now()))
+
     def from_rails(self, obj: dict[str, Any]) -> None:
         occ = obj.get("occupancy")
         if isinstance(occ, dict):
+            if "full" in obj:  # the rails (back): every track circuit reported
+                self.rails_changed(True)
             mine = {k: bool(v) for k, v in occ.items() if k in self.io.relays}
             if mine:
                 self.apply(self.io.set_occupancy(mine, self.now()))

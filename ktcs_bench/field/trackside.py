@@ -3,7 +3,9 @@
 Inputs by IXL->IO chart code (`receive`), train occupancy from the track-circuit model
 (`set_occupancy`), link state and `now`; outputs the IO->IXL code changes. When its link to the
 IXL is in communication error the rack puts every signal to stop (the vital outputs drop) and
-leaves the points where they are.
+leaves the points where they are. When the rails (the source of train occupancy) are lost
+(`rails_state(False)`) every track relay reports occupied, whatever it last knew or its faults,
+until the rails are back and report it again.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from ktcs_bench.station.model import StationView
 @dataclass(frozen=True, slots=True)
 class FieldEvent:
     time: float
-    kind: str  # point, signal, fault, link
+    kind: str  # point, signal, fault, link, rails
     text: str
 
 
@@ -43,6 +45,7 @@ class Trackside:
         self.signals = {s.name: SignalHead(s) for s in view.station.lamp_signals}
         self.relays = {t.name: TrackRelay(t.name) for t in view.track_circuits}
         self.link_up = False
+        self.rails_up = True  # the occupancy source is there (an adapter with rails says when not)
         self._sgc: dict[str, dict[str, int]] = {s: {} for s in self.signals}
         self._demand: dict[str, tuple[int, int]] = {p: (1, 0) for p in self.points}
         self._command_names = tuple(c.name for c in station_chart(view, "ixl_to_io").codes)
@@ -89,11 +92,24 @@ class Trackside:
         return self._finish(now)
 
     def set_occupancy(self, occupied: Mapping[str, bool], now: float) -> FieldOutput:
-        """Train occupancy per track circuit (from the track-circuit model); others unchanged."""
+        """Train occupancy per track circuit (from the track-circuit model); others unchanged.
+        Ignored while the rails are lost."""
         for name, occ in occupied.items():
             relay = self.relays.get(name)
-            if relay is not None:
+            if relay is not None and self.rails_up:
                 relay.train = bool(occ)
+        return self._finish(now)
+
+    def rails_state(self, up: bool, now: float) -> FieldOutput:
+        """The rails lost or back. Lost: every track relay occupied until reported again."""
+        if up != self.rails_up:
+            self.rails_up = up
+            if up:
+                self._event(now, "rails", "rails back: track relays as the rails report them")
+            else:
+                for relay in self.relays.values():
+                    relay.train = True  # unknown = occupied
+                self._event(now, "rails", "rails lost: every track circuit occupied")
         return self._finish(now)
 
     def link_state(self, up: bool, now: float) -> FieldOutput:
@@ -173,7 +189,7 @@ class Trackside:
                 out[n.lps(st, name, a)] = int(lit == a)
             out[n.lfi(st, name)] = int(sig.lamp_failure)
         for name, relay in self.relays.items():
-            out[name] = int(relay.occupied)
+            out[name] = int(relay.occupied or not self.rails_up)
         return out
 
     # ------------------------------------------------------------------ internals

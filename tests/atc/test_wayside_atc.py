@@ -153,3 +153,24 @@ def test_unknown_ixl_code_is_logged(line: Line) -> None:
     atc = WaysideAtc(line, 22)
     out = atc.receive({"RLI229999": 1}, 0.0)
     assert "unknown code" in out.events[0].text
+
+
+def test_rails_lost_every_track_circuit_occupied_and_most_restrictive(line: Line) -> None:
+    rig, atc = _wired(line, 20)
+    rig.control("RSC200111")
+    rig.advance(5)
+    atc.receive(rig.atc, 5.0)
+    assert atc.track_codes()["TC2047"].target_speed_kmh > 0
+    assert not any(atc.full_state().values())
+    out = atc.rails_state(False, 6.0)
+    assert dict(out.ixl) == dict.fromkeys(atc.full_state(), 1)  # TC, TTC, IZC: all occupied
+    stop = line.most_restrictive_code
+    for c in atc.track_codes().values():
+        assert (c.code, c.target_speed_kmh, c.target_distance_m) == (stop.code, 0.0, 0.0)
+    assert out.codes and any("rails lost" in e.text for e in out.events)
+    clear = {t.name: False for t in line.all_track_circuits()}
+    assert atc.set_occupancy(clear, 7.0).ixl == []  # a lost source reports nothing
+    assert atc.rails_state(True, 8.0).ixl == []  # back, but nothing reported yet
+    out = atc.set_occupancy(clear, 9.0)
+    assert dict(out.ixl) == dict.fromkeys(atc.full_state(), 0)
+    assert atc.track_codes()["TC2047"].target_speed_kmh > 0

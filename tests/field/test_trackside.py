@@ -109,3 +109,19 @@ def test_link_loss_puts_every_signal_to_stop(io: Trackside) -> None:
 def test_unknown_command_is_logged_and_ignored(io: Trackside) -> None:
     out = io.receive({"XYZ1801": 1}, 0.0)
     assert out.changes == [] and "unknown command" in out.events[0].text
+
+
+def test_rails_lost_every_track_relay_occupied_until_reported_again(io: Trackside) -> None:
+    tcs = sorted(io.relays)
+    io.set_occupancy(dict.fromkeys(tcs, False), 0.0)
+    io.set_occupancy({"TC1855": True}, 0.0)
+    io.fail_track_circuit("TC1856", "failed_clear", 0.0)  # even a relay stuck up
+    out = io.rails_state(False, 1.0)
+    assert dict(out.changes) == {t: 1 for t in tcs if t != "TC1855"}
+    assert any("rails lost" in e.text for e in out.events)
+    assert io.set_occupancy(dict.fromkeys(tcs, False), 2.0).changes == []  # a lost source
+    out = io.rails_state(True, 3.0)  # back, but nothing reported yet: only the relay stuck up
+    assert out.changes == [("TC1856", 0)]  # shows its injected wrong-side failure again
+    out = io.set_occupancy(dict.fromkeys(tcs, False), 4.0)
+    assert dict(out.changes) == {t: 0 for t in tcs if t != "TC1856"}
+    assert all(io.full_state()[t] == 0 for t in tcs)
