@@ -30,14 +30,15 @@ from typing import Any
 
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.emulator import jsonlines
+from ktcs_bench.runtime import read_token
 from ktcs_bench.station.loader import load_line
 
 ROUTES = [("01", "11", "0111"), ("01", "12", "0112")]
 
 
-def req(address: str, obj: dict[str, Any], timeout: float = 60) -> dict[str, Any]:
+def req(address: str, obj: dict[str, Any], token: str, timeout: float = 60) -> dict[str, Any]:
     host, _, port = address.rpartition(":")
-    return asyncio.run(jsonlines.request(host, int(port), obj, timeout=timeout))
+    return asyncio.run(jsonlines.request(host, int(port), obj, timeout=timeout, token=token))
 
 
 def run_lab(routes: int, unpaced: bool) -> list[float]:
@@ -58,9 +59,10 @@ def run_lab(routes: int, unpaced: bool) -> list[float]:
         json.loads(proc.stdout.readline())
         state = json.loads((tmp / "run" / "labs" / "bench" / "lab.json").read_text())
         ctc = state["devices"]["ctc"]["control"]
+        token = read_token(Path(state["token_file"]))  # the lab's: its control ports need it
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
-            st = req(ctc, {"cmd": "show", "station": 18})["summary"]
+            st = req(ctc, {"cmd": "show", "station": 18}, token)["summary"]
             if st["synced"] and not st["occupied"] and st["points"]["31"].startswith("normal"):
                 break
             time.sleep(0.2)
@@ -71,7 +73,9 @@ def run_lab(routes: int, unpaced: bool) -> list[float]:
         for k in range(routes):
             entry, exit_, name = ROUTES[k % 2]
             wants = "normal" if exit_ == "11" else "reverse"
-            answer = req(ctc, {"cmd": "timed_route", "station": 18, "entry": entry, "exit": exit_})
+            answer = req(
+                ctc, {"cmd": "timed_route", "station": 18, "entry": entry, "exit": exit_}, token
+            )
             if not answer.get("ok"):
                 raise SystemExit(f"route {name} refused: {answer}")
             physical = throw if wants != position else 0.0
@@ -85,9 +89,10 @@ def run_lab(routes: int, unpaced: bool) -> list[float]:
             req(
                 ctc,
                 {"cmd": "route", "action": "cancel", "station": 18, "entry": entry, "exit": exit_},
+                token,
             )
             while True:  # released, and the signal back at stop as the CTC sees it
-                summary = req(ctc, {"cmd": "show", "station": 18})["summary"]
+                summary = req(ctc, {"cmd": "show", "station": 18}, token)["summary"]
                 if name not in summary["routes"] and summary["signals"][entry] == "R":
                     break
                 time.sleep(0.05)

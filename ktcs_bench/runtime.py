@@ -7,11 +7,22 @@ another user owns is refused (it could hold a token planted for us).
 
 A process is named by its pid and its start time (clock ticks since boot, /proc/PID/stat): pids
 are reused, so a pid alone left in a state file by a process that died may name a stranger.
+
+Who may operate what runs here: every control port (a device's, a lab's, a tap's) obeys only a
+client that presents its token, a random secret kept in a file only its owner can read (0600).
+A lab's token is `labs/NAME/token`; a device or tap started on its own uses the user's token,
+`token` in the run folder, unless `--token-file` (or $KTCS_BENCH_TOKEN_FILE) names another -- the
+way to operate from another computer is to copy the token file there and name it so. A client
+finds the token by the address it talks to (the labs and taps announced here say which token file
+is theirs), else $KTCS_BENCH_TOKEN_FILE, else the user's token.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import re
+import secrets
 import stat
 import tempfile
 from pathlib import Path
@@ -67,3 +78,104 @@ def process_alive(pid: int, started: int | None = None) -> bool:
 def this_process() -> dict[str, Any]:
     """{"pid", "started"} of the calling process, for a state file."""
     return {"pid": os.getpid(), "started": process_started(os.getpid())}
+
+
+TOKEN_ENV = "KTCS_BENCH_TOKEN_FILE"
+_TOKEN = re.compile(r"[0-9a-f]{32,128}")
+
+
+def user_token_file() -> Path:
+    return run_dir() / "token"
+
+
+def read_token(path: Path) -> str:
+    """The token in `path`; a UsageError if the file is missing, not ours, readable by others or
+    holds no token."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError as exc:
+        raise UsageError(f"token file {path}: {exc.strerror}") from None
+    with os.fdopen(fd, encoding="ascii", errors="replace") as f:
+        st = os.fstat(f.fileno())
+        if st.st_uid != os.getuid():
+            raise UsageError(f"token file {path} belongs to another user: refusing it")
+        if st.st_mode & 0o077:
+            raise UsageError(
+                f"token file {path} may be read by others (mode {st.st_mode & 0o777:o}); "
+                f"`chmod 600 {path}`"
+            )
+        token = f.read(256).strip()
+    if not _TOKEN.fullmatch(token):
+        raise UsageError(f"token file {path} holds no token (64 hex digits)")
+    return token
+
+
+def ensure_token(path: Path) -> str:
+    """The token kept in `path`, made first if there is none: 32 random bytes in hex, in a file
+    of mode 0600 put in place whole (a reader never sees it half written)."""
+    if not path.exists():
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+        except OSError as exc:
+            raise UsageError(f"cannot make token file {path}: {exc.strerror}") from None
+        with os.fdopen(fd, "w", encoding="ascii") as f:
+            f.write(secrets.token_hex(32) + "\n")
+        try:
+            os.link(tmp, path)  # fails if another process made it meanwhile: theirs stands
+        except FileExistsError:
+            pass
+        finally:
+            tmp.unlink()
+    return read_token(path)
+
+
+def server_token(path: str | Path | None = None) -> tuple[str, Path]:
+    """The token a server requires and its file: `path`, else $KTCS_BENCH_TOKEN_FILE, else the
+    user's token file (made, in a private run folder, when missing)."""
+    if path is None and os.environ.get(TOKEN_ENV):
+        path = os.environ[TOKEN_ENV]
+    if path is None:
+        private_dir(run_dir())
+        path = user_token_file()
+    file = Path(path)
+    return ensure_token(file), file
+
+
+def token_file_for(address: tuple[str, int], folder: Path | None = None) -> Path | None:
+    """The token file of the lab or tap announced in the run folder (or `folder`) that serves
+    `address`, if one does."""
+    root = folder if folder is not None else run_dir()
+    want = f"{address[0]}:{address[1]}"
+    for path in [*root.glob("labs/*/lab.json"), *root.glob("taps/*.json")]:
+        try:
+            info = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if not isinstance(info, dict) or not info.get("token_file"):
+            continue
+        found = [info.get("control")]
+        for d in (info.get("devices") or {}).values():
+            found += [d.get("control"), d.get("listen")] if isinstance(d, dict) else []
+        found += [e.get("tap") for e in info.get("links") or () if isinstance(e, dict)]
+        found = [f"{a[0]}:{a[1]}" if isinstance(a, list) and len(a) == 2 else a for a in found]
+        if want in found:
+            return Path(info["token_file"])
+    return None
+
+
+def client_token(address: tuple[str, int] | None = None) -> str | None:
+    """The token to present to `address`: from $KTCS_BENCH_TOKEN_FILE, else the token file of the
+    lab or tap that serves it, else the user's token; None if there is none."""
+    if os.environ.get(TOKEN_ENV):
+        return read_token(Path(os.environ[TOKEN_ENV]))
+    found = token_file_for(address) if address is not None else None
+    if found is not None:
+        return read_token(found)
+    if user_token_file().exists():
+        return read_token(user_token_file())
+    return None
+
+
+def token_matches(given: object, token: str) -> bool:
+    return isinstance(given, str) and secrets.compare_digest(given.encode(), token.encode())

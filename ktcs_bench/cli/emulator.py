@@ -60,6 +60,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="ctc: serve the web console here")  # fmt: skip
     p.add_argument("--tap", action="append", default=[], help="ctc: a tap the console may monitor")
     p.add_argument(
+        "--console-origin", action="append", default=[], metavar="ORIGIN",
+        help="ctc: a web origin (e.g. http://ctc.lab:8020) whose pages may operate through the "
+        "console, besides its own (repeatable)",
+    )  # fmt: skip
+    p.add_argument(
         "--fault", action="append", default=[], metavar="VARIANT",
         help="break one protocol rule on purpose, for the conformance suite to catch "
         "(see `ktcs-bench conformance --list-faults`)",
@@ -75,6 +80,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "(ctc: client certificates are then required)",
     )  # fmt: skip
     p.add_argument("--tls-server-name", help="ixl: the name (or IP) in the CTC's certificate")
+    p.add_argument(
+        "--token-file", metavar="FILE",
+        help="the token its control port requires, kept in FILE (mode 0600; made if missing); "
+        "default: $KTCS_BENCH_TOKEN_FILE, else the user's token in the run folder",
+    )  # fmt: skip
     p.add_argument(
         "--lifeline", type=int, metavar="FD",
         help="stop when this file descriptor (a pipe from the launcher) reaches end of file: "
@@ -175,7 +185,7 @@ def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
         listen = args.listen or ("127.0.0.1", lab.type2_port)
         return CtcDevice(name, line, lab.stations, listen, control=control, console=args.console,
-                         taps=args.tap, faults=faults, allowed_sources=args.allow_source or None,
+                         console_origins=args.console_origin, taps=args.tap, faults=faults, allowed_sources=args.allow_source or None,
                          ssl=tls_context(args, server=True))  # fmt: skip
     if kind == "train":
         from ktcs_bench.emulator.train import TrainDevice
@@ -190,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
         format="%(asctime)s %(name)s %(levelname)s %(message)s",
     )  # fmt: skip
     device = build_device(args)
-    device.lifeline = args.lifeline
+    device.lifeline, device.token_file = args.lifeline, args.token_file
     code: int = asyncio.run(device.run())
     return code
 

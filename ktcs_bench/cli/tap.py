@@ -71,6 +71,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--control", default="127.0.0.1:0", metavar="[HOST:]PORT",
         help="control port address (default 127.0.0.1, any free port)",
     )  # fmt: skip
+    run_p.add_argument(
+        "--token-file", metavar="FILE",
+        help="the token its control port requires, kept in FILE (mode 0600; made if missing); "
+        "default: $KTCS_BENCH_TOKEN_FILE, else the user's token in the run folder",
+    )  # fmt: skip
     run_p.add_argument("--seed", type=int, default=0, help="seed of the fault RNG (default 0)")
     run_p.add_argument(
         "--write", action="append", default=[], metavar="FILE",
@@ -129,7 +134,7 @@ def run_tap(args: argparse.Namespace) -> int:
     names = _names(args.names)
     control = _address(args.control, "--control", any_free=True)
     common: dict[str, Any] = {"names": names, "seed": args.seed, "control": control,
-                              "name": args.name}  # fmt: skip
+                              "name": args.name, "token_file": args.token_file}  # fmt: skip
     profile = get_profile(args.profile or ("ktcs-type1" if args.pty else "ktcs-type2"))
     common["profile"] = profile
     common["writers"] = [

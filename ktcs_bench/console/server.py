@@ -13,12 +13,20 @@ Embedding (e.g. in the CTC emulator process, on its event loop):
 
 It chains itself onto the server's `on_event` (restored on close) and also re-checks the state
 every `POLL_S`, so it needs nothing else from the CTC.
+
+Who may operate through it: a websocket is accepted only from the console's own pages -- its
+Origin is the console's own address (127.0.0.1, localhost or [::1] at its port, the address it
+is bound to, or the IP literal a page reached it by when bound to all interfaces) or one of
+`origins` (the lab file's `console: origins:`) -- so no other web page in the operator's browser
+can set a route. A DNS name is never taken on the page's word (DNS rebinding). The tap feeds
+present the lab's token (`token`, else the one `runtime.client_token` finds).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import json
 import logging
 import time
@@ -27,6 +35,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
@@ -40,6 +49,7 @@ from ktcs_bench.console.trains import EndpointTrains, TrainSource
 from ktcs_bench.ctc.desk import Desk
 from ktcs_bench.ctc.model import Action
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
+from ktcs_bench.runtime import client_token
 from ktcs_bench.tap.registry import resolve_tap
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.type2 import events as ev
@@ -100,6 +110,8 @@ class ConsoleServer:
         trains: TrainSource | Mapping[str, TrainEndpoint] | None = None,
         host: str = "127.0.0.1",
         port: int = 0,
+        origins: Sequence[str] = (),
+        token: str | None = None,
     ) -> None:
         self.desk = desk
         self.ctc = desk.server
@@ -113,6 +125,8 @@ class ConsoleServer:
             self.trains = trains
         self.host = host
         self._port = port
+        self.origins = frozenset(o.rstrip("/").lower() for o in origins)
+        self.token = token
         self.log_entries: deque[dict[str, Any]] = deque(maxlen=LOG_KEEP)
         self._clients: set[_Client] = set()
         self._runner: web.AppRunner | None = None
@@ -262,7 +276,36 @@ class ConsoleServer:
             {"stations": self.snapshot(), "trains": trains, "log": list(self.log_entries)}
         )
 
-    async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
+    def origin_allowed(self, origin: str, host_header: str | None) -> bool:
+        """Whether a page from `origin` may operate (see the module docstring)."""
+        origin = origin.rstrip("/").lower()
+        if origin in self.origins:
+            return True
+        port = self.port
+        hosts = {"127.0.0.1", "localhost", "[::1]"}
+        wildcard = self.host in ("", "0.0.0.0", "::")
+        if not wildcard:
+            hosts.add(f"[{self.host}]" if ":" in self.host else self.host.lower())
+        elif host_header:  # reached by an address of this machine: only an IP literal counts
+            with contextlib.suppress(ValueError):
+                url = urlsplit(f"http://{host_header}")
+                if url.hostname and url.port == port:
+                    ipaddress.ip_address(url.hostname)
+                    hosts.add(url.netloc.lower().rsplit(":", 1)[0])
+        own = {f"http://{h}:{port}" for h in hosts}
+        if port == 80:
+            own |= {f"http://{h}" for h in hosts}
+        return origin in own
+
+    async def _websocket(self, request: web.Request) -> web.StreamResponse:
+        origin = request.headers.get("Origin")
+        if origin is not None and not self.origin_allowed(origin, request.headers.get("Host")):
+            log.warning("console: refused a websocket from %s (Origin %s)", request.remote, origin)
+            return web.Response(
+                status=403,
+                text=f"refused: this console takes operators from its own pages only, not from "
+                f"{origin} (a lab file may allow more under console: origins:)\n",
+            )
         ws = web.WebSocketResponse(heartbeat=20.0)
         await ws.prepare(request)
         client = _Client(ws)
@@ -335,9 +378,13 @@ class ConsoleServer:
             writer: asyncio.StreamWriter | None = None
             try:
                 host, port = resolve_tap(feed.spec) if isinstance(feed.spec, str) else feed.spec
+                token = self.token or client_token((host, port)) or ""
                 reader, writer = await asyncio.open_connection(host, port)
-                writer.write(b"subscribe history\n")
+                writer.write(f"token {token}\nsubscribe history\n".encode())
                 await writer.drain()
+                admitted = (await reader.readline()).decode("utf-8", "replace").strip()
+                if admitted != "ok":
+                    raise PeerError(f"tap answered {admitted!r}")
                 header_line = (await reader.readline()).decode("utf-8", "replace").strip()
                 if not header_line.startswith("ok "):
                     raise PeerError(f"tap answered {header_line!r}")

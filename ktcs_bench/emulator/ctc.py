@@ -66,6 +66,7 @@ class CtcDevice(Device):
         control: tuple[str, int] = ("127.0.0.1", 0),
         ssl: Any = None,
         console: tuple[str, int] | None = None,
+        console_origins: list[str] | None = None,
         taps: list[str] | None = None,
         faults: frozenset[str] = frozenset(),
     ) -> None:
@@ -81,6 +82,7 @@ class CtcDevice(Device):
         )  # fmt: skip
         self.desk = Desk(self.model, self.server)
         self.console_address = console
+        self.console_origins = console_origins or []
         self.taps = taps or []
         self.console: ConsoleServer | None = None
         self.remote_trains: RemoteTrains | None = None
@@ -143,7 +145,13 @@ class CtcDevice(Device):
             host, port = self.console_address
             self.remote_trains = RemoteTrains()
             self.console = ConsoleServer(
-                self.desk, taps=self.taps, trains=self.remote_trains, host=host, port=port
+                self.desk,
+                taps=self.taps,
+                trains=self.remote_trains,
+                host=host,
+                port=port,
+                origins=self.console_origins,
+                token=self.token,
             )
             await self.console.start()
             self.ready_info["console"] = self.console.url

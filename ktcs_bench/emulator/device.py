@@ -24,6 +24,7 @@ from ktcs_bench.charts.generate import station_chart
 from ktcs_bench.emulator import jsonlines
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.rails import RailsClient
+from ktcs_bench.runtime import server_token
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
@@ -43,6 +44,8 @@ class Device:
         self._server: asyncio.Server | None = None
         self.ready_info: dict[str, Any] = {}
         self.lifeline: int | None = None  # fd: end of file there means the launcher is gone
+        self.token_file: str | None = None  # the token its control port requires (runtime)
+        self.token = ""
 
     # -- clock and timers ----------------------------------------------------------------------
     @property
@@ -101,7 +104,7 @@ class Device:
     async def start(self) -> None:
         """Override: open links and servers (call super().start() first)."""
         host, port = self.control_address
-        self._server = await jsonlines.serve(host, port, self._handle)
+        self._server = await jsonlines.serve(host, port, self._handle, token=self.token)
         sock = self._server.sockets[0].getsockname()
         self.ready_info["control"] = f"{sock[0]}:{sock[1]}"
 
@@ -140,6 +143,10 @@ class Device:
         if self.lifeline is not None:
             os.set_blocking(self.lifeline, False)
             loop.add_reader(self.lifeline, self._lifeline_readable)
+        self.token = server_token(self.token_file)[0]
+        rails = getattr(self, "rails", None)
+        if isinstance(rails, RailsClient):  # the rails are the lab's too: same token
+            rails.token = self.token
         try:
             await self.start()
         except OSError as exc:  # a port taken, an address not ours: say so, no traceback

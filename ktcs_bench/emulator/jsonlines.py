@@ -3,16 +3,26 @@
 Not a kTCS protocol -- it carries what the real lab moves by wire and rail (occupancy, codes under
 the antenna, train positions) and operator/control commands. A line is one JSON object; lines are
 bounded (`LIMIT`), a bad line gets `{"error": ...}` back and never ends the connection.
+
+Every server obeys only who holds its token (`runtime`): a connection is admitted by an object
+carrying `"token": TOKEN` (the first, or any later one), and until then every object gets
+`{"ok": false, "refused": true, "error": ...}` back and is not acted on. `request` presents the
+token of the address it talks to, and raises PeerError on a refusal.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import logging
 from collections.abc import Awaitable, Callable
 from typing import Any
 
+from ktcs_bench.errors import PeerError
+from ktcs_bench.runtime import client_token, token_matches
 from ktcs_bench.transport.tcp import open_tcp
+
+log = logging.getLogger("ktcs_bench.control")
 
 LIMIT = 1 << 20  # one line at most 1 MiB: a full status of a large station is a few kB
 
@@ -49,13 +59,30 @@ class Peer:
         self.writer.close()
 
 
+def refusal(why: str) -> dict[str, Any]:
+    return {"ok": False, "refused": True, "error": f"refused: {why}. {WHO_MAY}"}
+
+
+WHO_MAY = (
+    "This port obeys only who presents its lab's token (a file only the lab's owner can read; "
+    "see the README, 'Who may operate a lab')"
+)
+
+
 async def serve(
-    host: str, port: int, handler: Handler, on_close: Callable[[Peer], None] | None = None
+    host: str,
+    port: int,
+    handler: Handler,
+    on_close: Callable[[Peer], None] | None = None,
+    *,
+    token: str,
 ) -> asyncio.Server:
-    """A JSON-lines server: each object goes to `handler`, whose answer (if any) is sent back."""
+    """A JSON-lines server: each object of an admitted connection (see the module docstring) goes
+    to `handler`, whose answer (if any) is sent back."""
 
     async def client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         peer = Peer(reader, writer)
+        admitted = False
         try:
             while True:
                 try:
@@ -65,6 +92,19 @@ async def serve(
                     continue
                 if obj is None:
                     break
+                if "token" in obj:
+                    admitted = token_matches(obj.pop("token"), token)
+                    if not admitted:
+                        log.warning("%s:%s refused %s: wrong token", host, port, peer.address)
+                        peer.send(refusal("wrong token"))
+                        continue
+                    if not obj:
+                        peer.send({"ok": True})
+                        continue
+                if not admitted:
+                    log.warning("%s:%s refused %s: no token", host, port, peer.address)
+                    peer.send(refusal("no token"))
+                    continue
                 answer = await handler(obj, peer)
                 if answer is not None:
                     peer.send(answer)
@@ -90,16 +130,21 @@ async def connect(host: str, port: int) -> Peer:
 
 
 async def request(
-    host: str, port: int, obj: dict[str, Any], timeout: float = 10.0
+    host: str, port: int, obj: dict[str, Any], timeout: float = 10.0, token: str | None = None
 ) -> dict[str, Any]:
-    """One command to a control port, one answer back."""
+    """One command to a control port, one answer back. The token presented is `token`, else the
+    one `runtime.client_token` finds for the address; a refusal is a PeerError."""
+    if token is None:
+        token = client_token((host, port))
     async with asyncio.timeout(timeout):
         peer = await connect(host, port)
         try:
-            peer.send(obj)
+            peer.send({**obj, "token": token} if token else obj)
             answer = await peer.read()
         finally:
             peer.close()
     if answer is None:
         raise ConnectionError(f"{host}:{port} closed without answering")
+    if answer.get("refused"):
+        raise PeerError(f"{host}:{port} {answer.get('error')}")
     return answer

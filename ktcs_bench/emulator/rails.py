@@ -1,7 +1,8 @@
 """The field bus: what the rails carry between the track-circuit emulator and its clients.
 
-The track-circuit emulator serves it (JSON lines over TCP). Clients say who they are first:
-  {"hello": {"role": "atc"|"trackside"|"train"|"observer", "name": ..., "train": id}}
+The track-circuit emulator serves it (JSON lines over TCP, admitting only who presents the lab's
+token, as every control port does). Clients say who they are first:
+  {"hello": {"role": "atc"|"trackside"|"train"|"observer", "name": ..., "train": id}, "token": T}
 then the server sends {"occupancy": {TC: 0|1}} (all on hello, changes after). An ATC sends
 {"codes": {TC: [code, speed_kmh, gradient_permille, target_distance_m]}}; a train sends
 {"position": {"head": m, "tail": m, "track": "1"}} and receives {"code": [...] | null} for the
@@ -25,6 +26,8 @@ RETRY = 0.5  # s between connection attempts to the rails
 class RailsClient:
     """A client of the field bus that reconnects; `on_message` gets every object from the server,
     `on_lost()` (if given) is called when a connection that was up is lost."""
+
+    token: str | None = None  # presented with the hello (the rails are a lab's, like its ports)
 
     def __init__(
         self,
@@ -63,7 +66,7 @@ class RailsClient:
                 await asyncio.sleep(RETRY)
                 continue
             try:
-                self.peer.send({"hello": self.hello})
+                self.peer.send({"hello": self.hello, "token": self.token})
                 for key, value in self._last.items():
                     self.peer.send({key: value})
                 while True:
@@ -73,6 +76,9 @@ class RailsClient:
                         log.warning("rails: %s", exc)
                         continue
                     if obj is None:
+                        break
+                    if obj.get("refused"):  # not our lab's rails, or not our token
+                        log.error("rails at %s: %s", self.endpoint, obj.get("error"))
                         break
                     self.on_message(obj)
             except ConnectionError:

@@ -118,7 +118,9 @@ class TrackCircuitDevice(Device):
     async def start(self) -> None:
         await super().start()
         host, port = self.listen
-        self._server2 = await jsonlines.serve(host, port, self._rails, self._closed)
+        self._server2 = await jsonlines.serve(
+            host, port, self._rails, self._closed, token=self.token
+        )
         sock = self._server2.sockets[0].getsockname()
         self.ready_info["listen"] = f"{sock[0]}:{sock[1]}"
 

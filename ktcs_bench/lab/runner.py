@@ -22,7 +22,7 @@ from ktcs_bench.errors import KtcsError, UsageError
 from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
-from ktcs_bench.runtime import private_dir, this_process
+from ktcs_bench.runtime import private_dir, server_token, this_process
 from ktcs_bench.tap import PtyTap, TcpTap
 from ktcs_bench.tap.link import Tap
 
@@ -42,6 +42,8 @@ class LabRunner:
     crashed: dict[str, int] = field(default_factory=dict)
     notices: list[str] = field(default_factory=list)
     stop_requested: asyncio.Event = field(default_factory=asyncio.Event)
+    token: str = ""  # what every control port of this lab requires (runtime)
+    token_file: Path | None = None
 
     @property
     def dir(self) -> Path:
@@ -55,7 +57,8 @@ class LabRunner:
         d = self.lab.devices[name]
         before = self.children[name].ready if name in self.children else {}
         argv = emulator_argv(d.kind, "--lab", str(self.lab.file), "--name", name,
-                             "--control", before.get("control") or f"{d.host}:0")  # fmt: skip
+                             "--control", before.get("control") or f"{d.host}:0",
+                             "--token-file", str(self.token_file))  # fmt: skip
         if d.station is not None:
             argv += ["--station", str(d.station)]
         if self.unpaced:
@@ -70,6 +73,7 @@ class LabRunner:
                 url = urlsplit(str(before.get("console", "")))
                 port = url.port if url.port is not None else self.lab.console_port
                 argv += ["--console", f"{d.host}:{port}"]
+                argv += [arg for o in self.lab.console_origins for arg in ("--console-origin", o)]
                 argv += [arg for lk in self.lab.links if lk.tap for arg in ("--tap", lk.name)]
         if d.kind == "train" and "train" in d.options:
             argv += ["--train", str(d.options["train"])]
@@ -94,12 +98,12 @@ class LabRunner:
             writers.append(open_writer(str(self.dir / "captures" / f"{link.name}.hex"), link=kind))
         if link.type == "type1":
             tap: Tap = PtyTap(names=names, profile=self.lab.type1_profile, name=link.name,
-                              writers=writers)  # fmt: skip
+                              writers=writers, token_file=self.token_file)  # fmt: skip
         else:
             assert ctc_address is not None
             host = self.lab.devices[link.a].host
             tap = TcpTap((host, 0), ctc_address, names=names, profile=self.lab.type2_profile,
-                         name=link.name, writers=writers)  # fmt: skip
+                         name=link.name, writers=writers, token_file=self.token_file)  # fmt: skip
         tap.start()  # a named tap announces itself in the registry
         return tap
 
@@ -109,6 +113,7 @@ class LabRunner:
         self.notices += await asyncio.to_thread(clean_up_after, self.lab.name)
         private_dir(self.dir / "logs")
         private_dir(self.dir / "captures")
+        self.token, self.token_file = server_token(self.dir / "token")
         self._write_state()  # from now on, whatever kills this lab, the next one can clean up
         lab = self.lab
         rails = None
@@ -165,11 +170,12 @@ class LabRunner:
             for d in self.lab.of_kind("train"):
                 train, ready = str(d.options.get("train", d.name)), self.children[d.name].ready
                 await jsonlines.request(host, int(port),
-                                        {"cmd": "add_train", "train": train, "control": ready["control"]})  # fmt: skip
+                                        {"cmd": "add_train", "train": train, "control": ready["control"]},
+                                        token=self.token)  # fmt: skip
 
     # -- control port and state file ---------------------------------------------------------------
     async def _serve_control(self) -> None:
-        self._control = await jsonlines.serve("127.0.0.1", 0, self._handle)
+        self._control = await jsonlines.serve("127.0.0.1", 0, self._handle, token=self.token)
         host, port = self._control.sockets[0].getsockname()[:2]
         self.control_address = f"{host}:{port}"
 
@@ -179,6 +185,7 @@ class LabRunner:
             "file": str(self.lab.file),
             **this_process(),
             "control": self.control_address,
+            "token_file": str(self.token_file),
             "devices": {
                 n: {"pid": c.proc.pid if c.proc else None, "started": c.started, **c.ready}
                 for n, c in self.children.items()
@@ -253,8 +260,10 @@ class LabRunner:
             return None
         host, _, port = child.ready["control"].rpartition(":")
         try:
-            answer = await jsonlines.request(host, int(port), {"cmd": "status"}, timeout=2.0)
-        except (OSError, TimeoutError, ValueError):
+            answer = await jsonlines.request(
+                host, int(port), {"cmd": "status"}, timeout=2.0, token=self.token
+            )
+        except (OSError, TimeoutError, ValueError, KtcsError):
             return None
         status = answer.get("status")
         return status if isinstance(status, dict) else None

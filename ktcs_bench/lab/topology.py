@@ -4,6 +4,7 @@ the key path and what is wrong."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,7 @@ from ktcs_bench.transport.endpoints import check_port
 
 KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
 STATION_KINDS = ("ixl", "atc", "trackside")
+_ORIGIN = re.compile(r"https?://[^/\s:]+(:\d{1,5})?/?|https?://\[[0-9a-fA-F:]+\](:\d{1,5})?/?")
 ROLE = {"atc": "atc", "trackside": "io", "ctc": "ctc", "ixl": "ixl"}
 
 
@@ -50,6 +52,7 @@ class Lab:
     type2_profile: str = "ktcs-type2"
     type2_port: int = 0
     console_port: int | None = None
+    console_origins: tuple[str, ...] = ()  # web origins besides its own whose pages may operate
     ixl_mode: str = "center"
 
     def of_kind(self, kind: str) -> list[DeviceSpec]:
@@ -175,6 +178,11 @@ def load_lab(path: str | Path | None = None) -> Lab:
     t1 = raw.get("type1") or {}
     t2 = raw.get("type2") or {}
     console = raw.get("console") or {}
+    origins = console.get("origins") or []
+    if not isinstance(origins, list) or not all(
+        isinstance(o, str) and _ORIGIN.fullmatch(o) for o in origins
+    ):
+        raise fail("console.origins", "a list of web origins, e.g. [http://ctc.lab:8020]")
     mode = raw.get("ixl_mode", "center")
     if mode not in ("center", "local"):
         raise fail("ixl_mode", f"must be center or local, not {mode!r}")
@@ -190,6 +198,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         type2_profile=str(t2.get("profile", "ktcs-type2")),
         type2_port=port(t2, "type2.port") or 0,
         console_port=port(console, "console.port"),
+        console_origins=tuple(origins),
         ixl_mode=mode,
     )
     line = lab.load_line()

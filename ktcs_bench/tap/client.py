@@ -9,20 +9,44 @@ from collections.abc import Iterator
 from typing import Any
 
 from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.runtime import client_token
 from ktcs_bench.tap.registry import resolve_tap
 
 
 class TapClient:
-    """`TapClient("st18-ixl-atc").command("cut")`; `for ev in TapClient(addr).subscribe(): ...`."""
+    """`TapClient("st18-ixl-atc").command("cut")`; `for ev in TapClient(addr).subscribe(): ...`.
+    It presents the tap's token first: `token`, else the one `runtime.client_token` finds."""
 
-    def __init__(self, tap: str | tuple[str, int], timeout: float = 5.0) -> None:
+    def __init__(
+        self, tap: str | tuple[str, int], timeout: float = 5.0, token: str | None = None
+    ) -> None:
         self.address = resolve_tap(tap) if isinstance(tap, str) else tap
+        token = token if token is not None else client_token(self.address)
         try:
             self._sock = socket.create_connection(self.address, timeout=timeout)
         except OSError as exc:
             host, port = self.address
             raise PeerError(f"cannot reach the tap's control port {host}:{port}: {exc}") from None
         self._file = self._sock.makefile("rwb")
+        if token:
+            try:
+                self._present(token)
+            except BaseException:
+                self.close()
+                raise
+
+    def _present(self, token: str) -> None:
+        try:
+            self._file.write(f"token {token}\n".encode())
+            self._file.flush()
+        except OSError as exc:
+            raise PeerError(f"tap control port: {exc}") from None
+        reply = self._readline()
+        host, port = self.address
+        if reply.startswith("error refused"):
+            raise PeerError(f"the tap at {host}:{port} {reply[6:]}")
+        if reply != "ok":  # never repeat what it said: it may be our token echoed
+            raise PeerError(f"{host}:{port} is not a tap's control port (no tap answers so)")
 
     def close(self) -> None:
         """Also ends a `subscribe()` blocked in another thread (the socket is shut down first)."""
@@ -55,6 +79,9 @@ class TapClient:
         except OSError as exc:
             raise PeerError(f"tap control port: {exc}") from None
         reply = self._readline()
+        if reply.startswith("error refused"):
+            host, port = self.address
+            raise PeerError(f"the tap at {host}:{port} {reply[6:]}")
         if reply.startswith("error"):
             raise UsageError(f"tap: {reply[6:]}")
         if reply != "ok" and not reply.startswith("ok "):

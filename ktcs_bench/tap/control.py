@@ -12,12 +12,16 @@
     restore [DIR]             end a cut
     clear                     remove every fault (and end a cut)
     send DIR HEX...           inject bytes as if the sender of DIR had written them (replay)
+    token TOKEN               present the tap's token (see below); first, on every connection
     status                    one JSON line: ends, faults, counters
     subscribe [history]       stream the recorded traffic as JSON lines {time, direction, hex},
                               in order with the tap's events {time, event, ...} (fault, send,
                               connected, disconnected)
     help
 DIR is `a->b`, `a>b` or `both` (the default), with the tap's end names (`ixl>atc` works too).
+The control port obeys a connection only once it has presented the tap's token (its lab's, or the
+user's for a tap run on its own; `ktcs-bench` clients find and send it themselves); until then
+every line is answered `error refused: ...` and not acted on.
 Replies are one line: `ok ...` or `error ...`; `subscribe` replies `ok {...}` then streams.
 """
 
@@ -45,6 +49,21 @@ HELP = __doc__.split("\n\n", 1)[1].split("Replies", 1)[0] if __doc__ else ""
 VERBS = ("ber", "drop-frame", "drop-bytes", "garbage", "duplicate", "reorder", "delay", "cut",
          "restore", "clear", "send", "status", "subscribe", "help")  # fmt: skip
 _NUMBER = re.compile(r"^[0-9.eE+-]+$")
+
+
+def token_given(line: str) -> str | None:
+    """The token a `token TOKEN` line presents ("" if none follows); None for any other line."""
+    words = line.split()
+    return (words[1] if len(words) > 1 else "") if words[0].lower() == "token" else None
+
+
+def refusal(given: str | None) -> str:
+    """The reply to a line of a connection not admitted: `given` is the token it presented."""
+    why = "no token" if given is None else "wrong token"
+    return (
+        f"error refused: {why}; this tap obeys only who presents its lab's token first "
+        "(`token TOKEN`; see the README, 'Who may operate a lab')"
+    )
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import asyncio
 import concurrent.futures
 import contextlib
 import json
+import logging
 import os
 import random
 import signal
@@ -27,16 +28,20 @@ import tty
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
 from ktcs_bench.capture.records import CaptureRecord
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.faults import Cut, Fault, FaultInjector
+from ktcs_bench.runtime import server_token, token_matches
 from ktcs_bench.tap import registry
-from ktcs_bench.tap.control import HELP, Command, parse_command
+from ktcs_bench.tap.control import HELP, Command, parse_command, refusal, token_given
 from ktcs_bench.tap.recorder import Recorder
 from ktcs_bench.transport.tcp import open_tcp
+
+log = logging.getLogger("ktcs_bench.tap")
 
 T = TypeVar("T")
 HISTORY = 10_000  # records kept for `records()` and `subscribe history`
@@ -70,6 +75,7 @@ class Tap:
         name: str | None = None,
         writers: Iterable[RecordWriter] = (),
         history: int = HISTORY,
+        token_file: str | Path | None = None,
     ) -> None:
         a, b = names
         if a == b or ">" in a + b or a.endswith("-") or b.endswith("-"):
@@ -86,6 +92,8 @@ class Tap:
         self.recorder = Recorder(self.profile)
         self._control_want = control
         self.control_address: tuple[str, int] | None = None
+        # the token its control port requires (runtime.server_token; the user's by default)
+        self._token, self.token_file = server_token(token_file)
         self._writers = list(writers)
         self._history: deque[CaptureRecord] = deque(maxlen=history)
         self._history_lock = threading.Lock()
@@ -227,6 +235,7 @@ class Tap:
             "protocol": self.profile.protocol,
             "names": list(self.names),
             "control": list(self.control_address) if self.control_address else None,
+            "token_file": str(self.token_file),
             "pid": os.getpid(),
             **self._ends_info(),
         }
@@ -396,6 +405,7 @@ class Tap:
         if task is not None:
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
+        admitted = False
         try:
             while True:
                 line = await reader.readline()
@@ -404,10 +414,19 @@ class Tap:
                 text = line.decode("utf-8", errors="replace").strip()
                 if not text:
                     continue
-                if text.split()[0].lower() == "subscribe":
+                given = token_given(text)
+                if given is not None or not admitted:
+                    admitted = given is not None and token_matches(given, self._token)
+                    reply = "ok" if admitted else refusal(given)
+                    if not admitted:
+                        peer = writer.get_extra_info("peername")
+                        log.warning("tap %s: %s from %s", self.name or "", reply, peer)
+                elif text.split()[0].lower() == "subscribe":
                     await self._serve_subscriber(text, reader, writer)
                     break
-                writer.write((self._execute_line(text) + "\n").encode())
+                else:
+                    reply = self._execute_line(text)
+                writer.write((reply + "\n").encode())
                 await writer.drain()
         except (ConnectionError, OSError, asyncio.CancelledError):
             pass

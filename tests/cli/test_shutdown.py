@@ -11,7 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tests.lab.conftest import start_lab
+from tests.lab.conftest import start_lab, token_for
 
 
 def test_a_device_stopped_with_peers_connected_logs_no_traceback(tmp_path: Path) -> None:
@@ -32,9 +32,11 @@ def test_a_device_stopped_with_peers_connected_logs_no_traceback(tmp_path: Path)
         rails = socket.create_connection((rails_host, int(rails_port)), timeout=10)
         control = socket.create_connection((control_host, int(control_port)), timeout=10)
         with rails, control:
-            rails.sendall(json.dumps({"hello": {"role": "observer", "name": "t"}}).encode() + b"\n")
+            token = token_for(ready["control"])  # the user's: a device run on its own
+            hello = {"hello": {"role": "observer", "name": "t"}, "token": token}
+            rails.sendall(json.dumps(hello).encode() + b"\n")
             assert b"occupancy" in rails.makefile("rb").readline()
-            control.sendall(b'{"cmd": "status"}\n')
+            control.sendall(json.dumps({"cmd": "status", "token": token}).encode() + b"\n")
             assert json.loads(control.makefile("rb").readline())["ok"]
             proc.send_signal(signal.SIGTERM)
             assert proc.wait(timeout=30) == 0

@@ -279,7 +279,8 @@ def test_replay_over_tcp_and_into_a_tap(tmp_path: Path, env: dict[str, str]) -> 
             host, cport = tap.control_address
             try:
                 out = cli("replay", str(req1), "--to", f"tap://{host}:{cport}", "--wait", "0.3",
-                          "--expect", str(exp1), env=env)  # fmt: skip
+                          "--expect", str(exp1),
+                          env={**env, "KTCS_BENCH_TOKEN_FILE": str(tap.token_file)})  # fmt: skip
             finally:
                 stop.set()
                 th.join(5)

@@ -18,17 +18,35 @@ from typing import Any
 import pytest
 
 from ktcs_bench.datafiles import data_dir
+from ktcs_bench.runtime import client_token, read_token, token_file_for
 from tests.console.conftest import browser_context  # noqa: F401 -- headless Chromium, for the console test
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def request(address: str, obj: dict[str, Any], timeout: float = 20.0) -> dict[str, Any]:
-    """One command to a device's JSON-lines control port (plain blocking socket: it works beside
-    any event loop, Playwright's included)."""
+RUN_DIRS: list[Path] = []  # the run folders of the labs started here (their tokens are there)
+
+
+def token_for(address: str) -> str | None:
+    """The token of the port at `address`: its lab's (a lab started here), else the one the
+    package's own clients would present (the user's, for a device run on its own)."""
     host, _, port = address.rpartition(":")
+    for folder in RUN_DIRS:
+        found = token_file_for((host, int(port)), folder)
+        if found is not None:
+            return read_token(found)
+    return client_token((host, int(port)))
+
+
+def request(
+    address: str, obj: dict[str, Any], timeout: float = 20.0, token: str | None = None
+) -> dict[str, Any]:
+    """One command to a device's JSON-lines control port (plain blocking socket: it works beside
+    any event loop, Playwright's included), with the port's token (`token_for`) unless given."""
+    host, _, port = address.rpartition(":")
+    given = token if token is not None else token_for(address)
     with socket.create_connection((host, int(port)), timeout=timeout) as sock:
-        sock.sendall(json.dumps(obj).encode() + b"\n")
+        sock.sendall(json.dumps({**obj, "token": given} if given else obj).encode() + b"\n")
         line = sock.makefile("rb").readline()
     if not line:
         raise ConnectionError(f"{address} closed without answering")
@@ -68,19 +86,27 @@ class RunningLab:
     def lab(self, obj: dict[str, Any]) -> dict[str, Any]:
         return request(self.control, obj, timeout=60)
 
-    def cli(self, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    def cli(
+        self, *args: str, timeout: float = 60, env: dict[str, str] | None = None
+    ) -> subprocess.CompletedProcess[str]:
+        """`ktcs-bench ARGS` against this lab (its run folder), with `env` added."""
         return subprocess.run(
             [sys.executable, "-m", "ktcs_bench.cli.main", *args], capture_output=True, text=True,
-            timeout=timeout, env={**os.environ, "KTCS_BENCH_RUN_DIR": str(self.run_dir)},
+            timeout=timeout,
+            env={**os.environ, "KTCS_BENCH_RUN_DIR": str(self.run_dir), **(env or {})},
         )  # fmt: skip
 
 
-def lab_file(tmp: Path, name: str, extra_devices: str = "", console_port: int = 0) -> Path:
+def lab_file(
+    tmp: Path, name: str, extra_devices: str = "", console_port: int = 0, origins: str = ""
+) -> Path:
     """The shipped reference lab under another name, with the console on `console_port` (default
-    any free port) and `extra_devices`, YAML lines added under `devices:`."""
+    any free port) taking pages from `origins` too (a YAML list), and `extra_devices`, YAML lines
+    added under `devices:`."""
     text = (data_dir("emulators") / "labs" / "reference.yaml").read_text(encoding="utf-8")
     text = text.replace("lab: reference", f"lab: {name}")
     text = text.replace("port: 8020", f"port: {console_port}")
+    text = text.replace("origins: []", f"origins: {origins or '[]'}")
     if extra_devices:
         text = text.replace("\nlinks:\n", f"{extra_devices}\nlinks:\n")
     line = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
@@ -92,12 +118,18 @@ def lab_file(tmp: Path, name: str, extra_devices: str = "", console_port: int = 
 
 @contextlib.contextmanager
 def start_lab(
-    tmp: Path, name: str, extra_devices: str = "", clear: bool = True, console_port: int = 0
+    tmp: Path,
+    name: str,
+    extra_devices: str = "",
+    clear: bool = True,
+    console_port: int = 0,
+    origins: str = "",
 ) -> Iterator[RunningLab]:
     """Start a lab and wait until every station is synced at the CTC in center mode (and, with
     `clear`, the empty line reported clear)."""
     run_dir = tmp / "run"
-    path = lab_file(tmp, name, extra_devices, console_port)
+    RUN_DIRS.append(run_dir)
+    path = lab_file(tmp, name, extra_devices, console_port, origins)
     stderr = open(tmp / f"{name}.stderr", "w")  # noqa: SIM115 -- closed below
     proc = subprocess.Popen(
         [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(path), "--json", "--interval", "5"],

@@ -8,7 +8,7 @@ from typing import Any
 
 from ktcs_bench.station.loader import load_line
 
-from .conftest import RunningLab, request, wait_until
+from .conftest import RunningLab, request, token_for, wait_until
 
 LINE = load_line()
 
@@ -133,8 +133,9 @@ def test_cutting_a_type1_link_gives_most_restrictive_codes_and_signals_to_stop(
         import socket
 
         with socket.create_connection((host, int(port)), timeout=10) as s:
-            s.sendall(b"cut\n")
-            assert s.makefile().readline().startswith("ok")
+            s.sendall(f"token {token_for(tap)}\ncut\n".encode())
+            replies = s.makefile()
+            assert replies.readline() == "ok\n" and replies.readline().startswith("ok")
         try:
             wait_until("IXL puts signal 01 to stop on the ATC link failure",
                        lambda: lab.status("ixl22")["signals"]["01"] == "R", timeout=30)  # fmt: skip
@@ -151,6 +152,7 @@ def test_cutting_a_type1_link_gives_most_restrictive_codes_and_signals_to_stop(
             assert codes
         finally:
             with socket.create_connection((host, int(port)), timeout=10) as s:
-                s.sendall(b"restore\n")
-                s.makefile().readline()
+                s.sendall(f"token {token_for(tap)}\nrestore\n".encode())
+                replies = s.makefile()
+                replies.readline(), replies.readline()
         wait_until("links up again", lambda: lab.status("ixl22")["links"]["atc"], timeout=30)

@@ -264,7 +264,7 @@ def test_tcp_tap_delayed_bytes_die_with_their_connection(echo: EchoServer) -> No
 
 def test_client_refuses_what_is_not_a_tap(echo: EchoServer) -> None:
     """An echo server repeats `status` back: a clear PeerError, not a JSON traceback."""
-    with TapClient(echo.address) as client, pytest.raises(PeerError, match="not a tap's control"):
+    with pytest.raises(PeerError, match="not a tap's control"), TapClient(echo.address) as client:
         client.status()
 
 
