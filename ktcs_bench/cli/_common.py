@@ -37,6 +37,23 @@ def duration(text: str) -> float:
     return value
 
 
+def positive(kind: type[int] | type[float], minimum: float = 1) -> Callable[[str], Any]:
+    """The argparse type of a count or rate (`--baud`, `--count`, `--retry-count`, ...): a finite
+    number of `kind`, at least `minimum` (0 for a count where none is meaningful)."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or not math.isfinite(value) or value < minimum:
+            what = "a whole number" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"must be {what} ≥ {minimum:g}, not {text!r}")
+        return value
+
+    return parse
+
+
 def port(any_free: bool = False) -> Callable[[str], int]:
     """The argparse type of a port option: 1..65535 (`any_free`: 0 too, any free port)."""
 

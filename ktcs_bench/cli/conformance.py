@@ -7,7 +7,7 @@ import ssl
 import sys
 from pathlib import Path
 
-from ktcs_bench.cli._common import duration
+from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.errors import UsageError
 
 HELP = "run the protocol conformance suite against a device (ours or a real one)"
@@ -55,20 +55,26 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--case", action="append", default=[], metavar="NAME", help="run only these")
     p.add_argument("--junit", metavar="FILE", help="write a JUnit XML report here")
     p.add_argument("--json", action="store_true", help="print the results as JSON (with frames)")
-    p.add_argument("--station", type=int, help="station number (sizes the chart; ctc: our IDENT)")
+    p.add_argument(
+        "--station", type=positive(int), help="station number (sizes the chart; ctc: our IDENT)"
+    )
     p.add_argument("--peer", choices=("atc", "io"), default="atc",
                    help="--role ixl on a serial line: which of its links this is")  # fmt: skip
-    p.add_argument("--codes", type=int, help="codes in the device's transmit chart (else from "
+    p.add_argument("--codes", type=positive(int), help="codes in the device's transmit chart (else from "
                    "--station and the lab's charts)")  # fmt: skip
     p.add_argument("--lab", help="lab file for the charts (default: the reference lab)")
     g = p.add_argument_group("timing (defaults: SPEC §3.4 / §4)")
     g.add_argument("--timings", choices=("given", "auto"), default="given",
                    help="given: judge by the figures below (default); auto: measure the device's "
                    "timers first and judge by what was measured")  # fmt: skip
-    g.add_argument("--line-rate", type=float, default=9600.0, help="bit/s of the device's line")
+    g.add_argument(
+        "--line-rate", type=positive(float), default=9600.0, help="bit/s of the device's line"
+    )
     g.add_argument("--unpaced", action="store_true", help="the device does not pace its line "
                    "(an emulator run with --unpaced): wire times count as 0")  # fmt: skip
-    g.add_argument("--longest-frame", type=int, help="DATA bytes of the longest frame (sizes ΔR)")
+    g.add_argument(
+        "--longest-frame", type=positive(int), help="DATA bytes of the longest frame (sizes ΔR)"
+    )
     g.add_argument("--delta-r", type=duration, metavar="S", help="ΔR, the frame timeout")
     g.add_argument("--ack-timeout", type=duration, metavar="S", help="the ACK timeout")
     g.add_argument("--heartbeat-period", "--link-test-period", type=duration, metavar="S",
@@ -76,7 +82,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     g.add_argument(
         "--t-max", type=duration, metavar="S", help="T_MAX: silence before the link is down"
     )
-    g.add_argument("--retry-count", type=int, help="retransmissions before communication error (3)")
+    g.add_argument(
+        "--retry-count",
+        type=positive(int, 0),
+        help="retransmissions before communication error (3)",
+    )
     g.add_argument("--tolerance", type=duration, default=0.75, metavar="S",
                    help="how late a timer may fire and still pass (default 0.75 s)")  # fmt: skip
     t = p.add_argument_group("TLS (Type II, profile type2-tls)")

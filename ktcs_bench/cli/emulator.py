@@ -9,7 +9,7 @@ import logging
 import ssl
 import sys
 
-from ktcs_bench.cli._common import host_port
+from ktcs_bench.cli._common import host_port, positive
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.topology import ROLE, load_lab, resolve_lab_path
 from ktcs_bench.transport.endpoints import Endpoint, parse_endpoint, parse_links
@@ -44,7 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )  # fmt: skip
     p.add_argument("kind", choices=KINDS)
     p.add_argument("--lab", help="lab file or shipped lab name (default: the reference lab)")
-    p.add_argument("--station", type=int, help="station number (ixl, atc, trackside)")
+    p.add_argument("--station", type=positive(int), help="station number (ixl, atc, trackside)")
     p.add_argument("--name", help="device name (default: KIND + station)")
     p.add_argument("--link", action="append", default=[], metavar="PEER=ENDPOINT")
     p.add_argument("--listen", type=host_port(any_free=True),

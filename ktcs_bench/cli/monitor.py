@@ -16,7 +16,7 @@ import serial
 from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
 from ktcs_bench.capture.arq import ArqTracker
 from ktcs_bench.charts.model import CodeChart, load_chart
-from ktcs_bench.cli._common import duration, print_json_line
+from ktcs_bench.cli._common import duration, positive, print_json_line
 from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
@@ -69,9 +69,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--write", action="append", default=[], metavar="CAPTURE",
                    help="also record to CAPTURE.hex or CAPTURE.pcapng (repeatable)")  # fmt: skip
     p.add_argument("--history", action="store_true", help="first show what the tap recorded before")
-    p.add_argument("--count", type=int, help="stop after this many frames")
+    p.add_argument("--count", type=positive(int), help="stop after this many frames")
     p.add_argument("--timeout", type=duration, help="stop after this many seconds")
-    p.add_argument("--baud", type=int, default=9600, help="serial endpoint baud rate (9600)")
+    p.add_argument(
+        "--baud", type=positive(int), default=9600, help="serial endpoint baud rate (9600)"
+    )
     p.set_defaults(handler=run)
 
 

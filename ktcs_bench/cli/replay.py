@@ -23,7 +23,7 @@ from ktcs_bench.capture import (
     reverse_direction,
 )
 from ktcs_bench.charts.model import load_chart
-from ktcs_bench.cli._common import duration
+from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.cli.monitor import FramePrinter
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.stream import StreamDecoder
@@ -84,7 +84,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="S",
         help="with --timing original: cap every silence between frames at S seconds",
     )
-    p.add_argument("--baud", type=int, help="line rate for --timing line and serial ports (9600)")
+    p.add_argument(
+        "--baud", type=positive(int), help="line rate for --timing line and serial ports (9600)"
+    )
     p.add_argument("--wait", type=duration, default=1.0,
                    help="seconds of quiet that end the replay after the last frame (1.0); "
                    "also the step timeout off a terminal")  # fmt: skip

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench.cli._common import positive
 from ktcs_bench.errors import UsageError
 
 HELP = "inject the EN 50159 threats into running links through their taps; report the defences"
@@ -54,7 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--lab", metavar="LAB",
                    help="with --target: the running lab whose devices to read (default: the lab "
                         "that owns the tap); without: the lab file for the small lab's line data")  # fmt: skip
-    p.add_argument("--station", type=int,
+    p.add_argument("--station", type=positive(int),
                    help="the small lab's station (default 18); with --target: the station the "
                         "Type II link carries, if its IDENT is not on the tap's record")  # fmt: skip
     p.add_argument("--threat", action="append", default=[], help="run only these threats")

@@ -263,3 +263,31 @@ def test_every_option_that_takes_seconds_uses_the_one_duration_type() -> None:
     names = {a.option_strings[0] for a in takes_seconds}
     assert {"--for", "--interval", "--timeout", "--wait", "--throw-time", "--delta-r"} <= names
     assert [a.option_strings for a in takes_seconds if a.type is not duration] == []
+
+
+# -- counts and rates: positive, whole where they count ----------------------------------------
+
+COUNT_OPTIONS = [
+    ["monitor", "x", "--count"],
+    ["monitor", "x", "--baud"],
+    ["replay", "x", "--to", "loop://", "--baud"],
+    ["emulator", "atc", "--station"],
+    *[["conformance", "--role", "atc", "--target", "loop://", opt] for opt in (
+        "--line-rate", "--longest-frame", "--codes", "--station")],
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("option", COUNT_OPTIONS, ids=lambda o: f"{o[0]} {o[-1]}")
+@pytest.mark.parametrize("value", ["0", "-3"])
+def test_a_count_or_rate_below_one_is_refused(
+    run_env: dict[str, str], option: list[str], value: str
+) -> None:
+    result = cli(*option, value, env=run_env, timeout=30)
+    assert_refused(result, "argument --", option[-1], f"≥ 1, not {value!r}")
+
+
+def test_retry_count_may_be_zero_but_not_negative(run_env: dict[str, str]) -> None:
+    base = ["conformance", "--role", "atc", "--target", "loop://", "--retry-count"]
+    assert_refused(cli(*base, "-1", env=run_env, timeout=30), "--retry-count", "≥ 0, not '-1'")
+    listed = cli(*base, "0", "--list", env=run_env, timeout=30)
+    assert listed.returncode == 0, listed.stderr
