@@ -4,6 +4,7 @@ the key path and what is wrong."""
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -106,6 +107,17 @@ def load_lab(path: str | Path | None = None) -> Lab:
         except UsageError as exc:
             raise fail(place, str(exc)) from None
 
+    def number(section: dict[str, Any], key: str, default: float, place: str) -> float:
+        """A positive setting (a rate, a size); whole where the default is."""
+        value = section.get(key, default)
+        whole = isinstance(default, int)
+        if isinstance(value, bool) or not isinstance(value, int if whole else (int, float)):
+            value = None
+        if value is None or not math.isfinite(value) or value <= 0:
+            what = "a positive whole number" if whole else "a positive number"
+            raise fail(place, f"must be {what}, not {section.get(key)!r}")
+        return float(value)
+
     if not isinstance(raw, dict):
         raise fail("", "a lab file is a mapping (lab, line, devices, links)")
     for key in ("lab", "line", "devices", "links"):
@@ -175,9 +187,13 @@ def load_lab(path: str | Path | None = None) -> Lab:
             raise fail(place, f"{a} already has a {ROLE[peer]} link ({seen[role_key]})")
         seen[role_key] = str(lk["name"])
         links.append(LinkSpec(str(lk["name"]), typ, a, b, bool(lk.get("tap", True))))
-    t1 = raw.get("type1") or {}
-    t2 = raw.get("type2") or {}
-    console = raw.get("console") or {}
+    sections: dict[str, dict[str, Any]] = {}
+    for key in ("type1", "type2", "console"):
+        section = raw.get(key) or {}
+        if not isinstance(section, dict):
+            raise fail(key, f"must be a mapping of settings, not {section!r}")
+        sections[key] = section
+    t1, t2, console = sections["type1"], sections["type2"], sections["console"]
     origins = console.get("origins") or []
     if not isinstance(origins, list) or not all(
         isinstance(o, str) and _ORIGIN.fullmatch(o) for o in origins
@@ -193,8 +209,12 @@ def load_lab(path: str | Path | None = None) -> Lab:
         devices=devices,
         links=tuple(links),
         type1_profile=str(t1.get("profile", "ktcs-type1")),
-        line_rate=t1.get("line_rate", 9600.0),
-        longest_frame_data=t1.get("longest_frame_data", 132),
+        line_rate=(
+            None
+            if "line_rate" in t1 and t1["line_rate"] is None  # null: unpaced
+            else number(t1, "line_rate", 9600.0, "type1.line_rate")
+        ),  # fmt: skip
+        longest_frame_data=int(number(t1, "longest_frame_data", 132, "type1.longest_frame_data")),
         type2_profile=str(t2.get("profile", "ktcs-type2")),
         type2_port=port(t2, "type2.port") or 0,
         console_port=port(console, "console.port"),

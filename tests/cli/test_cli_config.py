@@ -291,3 +291,22 @@ def test_retry_count_may_be_zero_but_not_negative(run_env: dict[str, str]) -> No
     assert_refused(cli(*base, "-1", env=run_env, timeout=30), "--retry-count", "≥ 0, not '-1'")
     listed = cli(*base, "0", "--list", env=run_env, timeout=30)
     assert listed.returncode == 0, listed.stderr
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ("console:\n", "console: 5\nx:\n", "console: must be a mapping of settings, not 5"),
+        ("type1:\n", "type1: [a]\nx:\n", "type1: must be a mapping of settings, not ['a']"),
+        ("  line_rate: 9600 ", "  line_rate: -9600 ", "type1.line_rate: must be a positive number"),
+        ("  longest_frame_data: 132 ", "  longest_frame_data: 1.5 ",
+         "type1.longest_frame_data: must be a positive whole number, not 1.5"),
+    ],
+    ids=["console-scalar", "type1-list", "line-rate", "longest-frame"],
+)  # fmt: skip
+def test_lab_file_sections_and_settings_of_the_wrong_shape_are_refused(
+    tmp_path: Path, run_env: dict[str, str], old: str, new: str, message: str
+) -> None:
+    lab = shipped_lab(tmp_path, {old: new})
+    result = cli("lab", "up", str(lab), "--for", "5", env=run_env)
+    assert_refused(result, f"{lab}: {message}")
