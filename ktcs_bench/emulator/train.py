@@ -1,5 +1,6 @@
-"""The train process: one `train.TrainEndpoint` (dynamics + onboard ATP + ATO) stepped every 100 ms
-of wall time, in kTCS mode -- its antenna reads the code of the track circuit under its head from
+"""The train process: one `train.TrainEndpoint` (dynamics + onboard ATP + ATO) cycling every
+100 ms of wall time on the loop's clock (`timed.aio.LoopTimer`: the cycle is the endpoint's
+deadline), in kTCS mode -- its antenna reads the code of the track circuit under its head from
 the rails, and its axles (head..tail) occupy track circuits there.
 
 The process passes each code on as read -- located on the line: its track circuit's ends, its
@@ -22,11 +23,13 @@ from ktcs_bench.emulator.device import Device
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
+from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.train.deceleration import GradientProfile
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import (
     CYCLE,
     CycleInputs,
+    CycleOutputs,
     LineData,
     TrackCode,
     TrainConfig,
@@ -78,7 +81,9 @@ class TrainDevice(Device):
         super().__init__(name, control)
         self.line = line
         self.config = config
-        self.endpoint = TrainEndpoint(config, train_line(line))
+        # the first cycle one period after the start, on the train's own time (0 at the start)
+        self.endpoint = TrainEndpoint(config, train_line(line), sense=self._sense, first=CYCLE)
+        self.timer: LoopTimer[CycleOutputs | None] | None = None
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None
@@ -137,24 +142,29 @@ class TrainDevice(Device):
         head = self.endpoint.dynamics.state.position
         return {"head": head, "tail": head - self.config.params.length}
 
-    async def _cycle(self) -> None:
-        loop = asyncio.get_running_loop()
-        start = loop.time()
-        k = 0
+    def _sense(self, now: float) -> CycleInputs:
+        """The cycle's inputs: the code under the antenna, the driver's EB release (once)."""
+        release, self.release = self.release, False
+        return CycleInputs(code=self._code_now(), release_eb=release)
+
+    def _cycled(self, now: float, out: CycleOutputs | None) -> None:
+        if out is None:
+            return
+        self.last = out
+        for e in out.events:
+            self.note(e.kind, e.text)
         self.rails.send({"position": self._position()})
-        while True:
-            k += 1
-            await asyncio.sleep(max(0.0, start + k * CYCLE - loop.time()))
-            now = loop.time() - start
-            release, self.release = self.release, False
-            out = self.endpoint.step(now, CycleInputs(code=self._code_now(), release_eb=release))
-            self.last = out
-            for e in out.events:
-                self.note(e.kind, e.text)
-            self.rails.send({"position": self._position()})
 
     async def tasks(self) -> list[asyncio.Task[None]]:
-        return [asyncio.ensure_future(self.rails.run()), asyncio.ensure_future(self._cycle())]
+        self.rails.send({"position": self._position()})
+        self.timer = LoopTimer(self.endpoint, self._cycled, origin=self.loop.time())
+        self.timer.poke()
+        return [asyncio.ensure_future(self.rails.run())]
+
+    async def close(self) -> None:
+        if self.timer is not None:
+            self.timer.cancel()
+        await super().close()
 
     def status(self) -> dict[str, Any]:
         s = self.endpoint.dynamics.state

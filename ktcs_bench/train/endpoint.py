@@ -14,12 +14,18 @@ what happened (events). Two operating modes:
   speed the train was allowed to enter with (the previous circuit's code) or this code if higher.
   The endpoint owns this reading; a process adapter only passes the code on (`TrackCode.read`).
 
-A process adapter (the live lab) only has to call `step` every `CYCLE` seconds of wall time.
+The cycle is the train's deadline (the `ktcs_bench.timed` shape): `next_deadline()` is the next
+cycle, `first + k·cycle`; `handle_timer(now)` runs it -- reading its inputs through `sense(now)`,
+the antenna, radio and driver's desk sampled at the start of the cycle -- and returns its
+`CycleOutputs` (None when no cycle was due). A driver (the wall clock in the live lab, the virtual
+clock in scenarios) calls it at each deadline; `step(now, inputs)` is the cycle itself, for a
+caller that brings the inputs in hand.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -189,11 +195,27 @@ class CycleOutputs:
     events: tuple[Event, ...]
 
 
-class TrainEndpoint:
-    """One train: plant + ATP + driver/ATO. Step it every CYCLE with an explicit `now`."""
+def _no_inputs(now: float) -> CycleInputs:
+    return CycleInputs()
 
-    def __init__(self, cfg: TrainConfig, line: LineData) -> None:
+
+class TrainEndpoint:
+    """One train: plant + ATP + driver/ATO, cycling every `cycle` s from `first` (see the module
+    docstring); `sense(now)` gives a cycle its inputs."""
+
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        line: LineData,
+        *,
+        sense: Callable[[float], CycleInputs] = _no_inputs,
+        first: float = 0.0,
+        cycle: float = CYCLE,
+    ) -> None:
         self.cfg, self.line = cfg, line
+        self.sense = sense
+        self.first, self.cycle = first, cycle
+        self.cycles = 0
         p = cfg.params
         self.dynamics = TrainDynamics(p, TrainState(position=cfg.start))
         self.estimator = PositionEstimator(
@@ -245,6 +267,17 @@ class TrainEndpoint:
         self._dwell_until = cfg.depart_at
 
     # ------------------------------------------------------------------ the cycle
+
+    def next_deadline(self) -> float:
+        """When the next cycle is due."""
+        return self.first + self.cycles * self.cycle
+
+    def handle_timer(self, now: float) -> CycleOutputs | None:
+        """Run the cycle that is due, with the inputs `sense(now)` reads (None: none was due)."""
+        if now < self.first + self.cycles * self.cycle:
+            return None
+        self.cycles += 1
+        return self.step(now, self.sense(now), self.cycle)
 
     def step(self, now: float, inputs: CycleInputs, dt: float = CYCLE) -> CycleOutputs:
         cfg, p = self.cfg, self.cfg.params

@@ -1,9 +1,10 @@
-"""The asyncio wall-clock driver: runs a `Type1Link` over a `Transport`, honouring its deadlines.
+"""Runs a `Type1Link` over a `Transport` on the asyncio loop: the link's wall-clock adapter.
 
 Owns: `LinkRunner`. It feeds the link what the transport reads (through `loop.add_reader` when the
-transport has an fd, else a small reader thread), calls `handle_timer` at `next_deadline()` with
-`loop.call_at`, and hands `data_to_send()` to the transport after every call. The clock is the
-loop's (monotonic) clock. Events go to `on_event(now, event)` if given, else to the `events` queue.
+transport has an fd, else a small reader thread), leaves the link's deadlines to the one
+wall-clock driver (`ktcs_bench.timed.aio.LoopTimer`), and hands `data_to_send()` to the transport
+after every call. The clock is the loop's (monotonic) clock. Events go to `on_event(now, event)`
+if given, else to the `events` queue.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import contextlib
 import threading
 from collections.abc import Callable
 
+from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport.base import Transport, TransportClosed
 from ktcs_bench.type1 import Event, Message, Type1Link
 
@@ -32,7 +34,7 @@ class LinkRunner:
         self.events: asyncio.Queue[tuple[float, Event]] = asyncio.Queue()
         self.error: BaseException | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._timer: asyncio.TimerHandle | None = None
+        self.timer = LoopTimer(link, lambda now, events: self._after(events, now))
         self._done: asyncio.Future[None] | None = None
         self._thread: threading.Thread | None = None
         self._stop_thread = threading.Event()
@@ -69,14 +71,12 @@ class LinkRunner:
             self._thread = threading.Thread(target=self._reader, name="link-reader", daemon=True)
             self._thread.start()
         try:
-            now = loop.time()
-            self._after(self.link.handle_timer(now), now)
+            self.timer.fire()  # the line is open: the link starts its clock and announces itself
             await self._done
         finally:
             if fd is not None:
                 loop.remove_reader(fd)
-            if self._timer is not None:
-                self._timer.cancel()
+            self.timer.cancel()
             if self._thread is not None:
                 self._stop_thread.set()
                 await asyncio.to_thread(self._thread.join, 2.0)
@@ -113,11 +113,6 @@ class LinkRunner:
             if data:
                 loop.call_soon_threadsafe(self._data, data)
 
-    def _on_timer(self) -> None:
-        self._timer = None
-        now = self._require_loop().time()
-        self._after(self.link.handle_timer(now), now)
-
     def _after(self, events: list[Event], now: float) -> None:
         out = self.link.data_to_send(now)
         if out:
@@ -131,18 +126,7 @@ class LinkRunner:
                 self.on_event(now, event)
             else:
                 self.events.put_nowait((now, event))
-        self._rearm()
-
-    def _rearm(self) -> None:
-        deadline = self.link.next_deadline()
-        timer = self._timer
-        if timer is not None and deadline is not None and timer.when() == deadline:
-            return
-        if timer is not None:
-            timer.cancel()
-        self._timer = None
-        if deadline is not None:
-            self._timer = self._require_loop().call_at(deadline, self._on_timer)
+        self.timer.poke()
 
     def _fail(self, exc: BaseException) -> None:
         self.error = exc

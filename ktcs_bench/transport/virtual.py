@@ -1,9 +1,11 @@
-"""Virtual-clock driver: two `Type1Link`s joined by an in-memory wire, stepped deterministically.
+"""Two `Type1Link`s joined by an in-memory wire on the virtual clock, stepped deterministically.
 
 Owns: `VirtualWire` (one direction of a line: line-rate delays, the line's `FaultInjector`, a
-record of what was sent and what arrived) and `VirtualBench` (two links, two wires and a virtual
-clock that jumps from one due time to the next). The same link objects run here as on ptys;
-nothing here sleeps or reads a clock, so a test runs seconds of line time in milliseconds.
+record of what was sent and what arrived; itself a `Timed` core whose output is the bytes that
+arrive) and `VirtualBench` (two links and two wires on one `ktcs_bench.timed.virtual.VirtualClock`,
+the one virtual-clock driver). The same link objects run here as on ptys; nothing here sleeps or
+reads a clock, so a test runs seconds of line time in milliseconds. A bench's `clock` takes more
+cores (`bench.clock.add(core, sink)`): a whole station can run beside its links.
 
 Bytes leave a link through `data_to_send(now)`, pass the wire's fault injector
 (`ktcs_bench.faults`: cut, bit errors, lost bytes, noise, frame faults, delay -- the same injector
@@ -16,15 +18,13 @@ progressively and ΔR can expire in its middle. `wire.apply(Cut(), now)`, `wire.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.faults import Fault, FaultInjector
+from ktcs_bench.timed.virtual import VirtualClock
 from ktcs_bench.type1 import Event, Message, Type1Link
-
-# Guard against a link whose deadline never moves (a bug): this many timer calls at one instant.
-MAX_CALLS_PER_INSTANT = 10_000
 
 
 @dataclass
@@ -72,13 +72,15 @@ class VirtualWire:
         if self.faults is None or not self.faults.cut:
             self._line(data, now)
 
-    def next_time(self) -> float | None:
+    def next_deadline(self) -> float | None:
+        """When bytes next arrive (or the fault injector releases some)."""
         times = [self._flight[0][0]] if self._flight else []
         if self.faults is not None and (held := self.faults.next_deadline()) is not None:
             times.append(held)
         return min(times) if times else None
 
-    def take(self, now: float) -> bytes:
+    def handle_timer(self, now: float) -> bytes:
+        """The bytes that have arrived at the receiver by `now`."""
         self._release(now)
         out = bytearray()
         while self._flight and self._flight[0][0] <= now:
@@ -107,7 +109,9 @@ class VirtualWire:
 
 
 class VirtualBench:
-    """Links `a` and `b` over two `VirtualWire`s; `events` collects (time, link name, event)."""
+    """Links `a` and `b` over two `VirtualWire`s on a virtual clock -- its own, or `clock`, shared
+    with other benches and cores; `events` collects (time, link name, event). Bytes a link hands
+    out after any call go onto its wire at once."""
 
     def __init__(
         self,
@@ -118,21 +122,30 @@ class VirtualBench:
         faults_ab: FaultInjector | None = None,
         faults_ba: FaultInjector | None = None,
         start: float = 0.0,
+        clock: VirtualClock | None = None,
     ) -> None:
         self.a, self.b = a, b
         self.ab = VirtualWire(a.timers.byte_time, a.profile, piece, faults_ab, seed=1)
         self.ba = VirtualWire(b.timers.byte_time, b.profile, piece, faults_ba, seed=2)
-        self.now = start
+        self.clock = clock if clock is not None else VirtualClock(start)
         self.events: list[tuple[float, str, Event]] = []
-        self._pairs = ((a, self.ab, self.ba), (b, self.ba, self.ab))  # (link, out wire, in wire)
-        for link, _, _ in self._pairs:
-            self._note(link, link.handle_timer(self.now))
-        self._flush()
+        self._out = {id(a): self.ab, id(b): self.ba}
+        # the wires first: an instant's arrivals reach the links before their timers run
+        self.clock.add(self.ab, lambda now, data: self._deliver(b, data, now))
+        self.clock.add(self.ba, lambda now, data: self._deliver(a, data, now))
+        for link in (a, b):
+            self.clock.add(link, self._sink(link))
+        for link in (a, b):  # the line opens: both ends start their clocks
+            self._after(link, link.handle_timer(self.now), self.now)
+
+    @property
+    def now(self) -> float:
+        return self.clock.now
 
     # -- driving -------------------------------------------------------------------------------
     def send(self, link: Type1Link, message: Message) -> None:
         link.send(message, self.now)
-        self._flush()
+        self._after(link, [], self.now)
 
     def inject(self, wire: VirtualWire, data: bytes) -> None:
         """Put raw bytes on a wire now, as if its sender had written them (faults not applied)."""
@@ -142,32 +155,12 @@ class VirtualBench:
         """Set a fault on a wire now (`bench.fault(bench.ab, Cut())`)."""
         wire.apply(fault, self.now)
 
-    def next_time(self) -> float | None:
-        times = [t for t in self._times() if t is not None]
-        return min(times) if times else None
-
-    def step(self) -> bool:
-        """Advance to the next due time and run everything due then; False if nothing is due."""
-        t = self.next_time()
-        if t is None:
-            return False
-        self.now = max(self.now, t)
-        self._run_instant()
-        return True
-
     def run_until(self, t: float, stop: Callable[[], bool] | None = None) -> None:
         """Step until virtual time `t` (or until `stop()` is true after a step)."""
-        while True:
-            nt = self.next_time()
-            if nt is None or nt > t:
-                self.now = max(self.now, t)
-                return
-            self.step()
-            if stop is not None and stop():
-                return
+        self.clock.run_until(t, stop)
 
     def run_for(self, dt: float, stop: Callable[[], bool] | None = None) -> None:
-        self.run_until(self.now + dt, stop)
+        self.clock.run_for(dt, stop)
 
     # -- looking -------------------------------------------------------------------------------
     def of(self, link: Type1Link, *kinds: type) -> list[Event]:
@@ -177,36 +170,15 @@ class VirtualBench:
         ]
 
     # -- internals -----------------------------------------------------------------------------
-    def _times(self) -> Iterable[float | None]:
-        yield self.ab.next_time()
-        yield self.ba.next_time()
-        yield self.a.next_deadline()
-        yield self.b.next_deadline()
+    def _sink(self, link: Type1Link) -> Callable[[float, list[Event]], None]:
+        return lambda now, events: self._after(link, events, now)
 
-    def _run_instant(self) -> None:
-        now = self.now
-        for link, _, inbound in self._pairs:
-            data = inbound.take(now)
-            if data:
-                self._note(link, link.receive_data(data, now))
-        for _ in range(MAX_CALLS_PER_INSTANT):
-            due = [
-                lk for lk, _, _ in self._pairs if (d := lk.next_deadline()) is not None and d <= now
-            ]
-            if not due:
-                break
-            for link in due:
-                self._note(link, link.handle_timer(now))
-            self._flush()
-        else:  # pragma: no cover - a link bug, not a condition of the line
-            raise RuntimeError("a link's deadline does not advance")
-        self._flush()
+    def _deliver(self, link: Type1Link, data: bytes, now: float) -> None:
+        if data:
+            self._after(link, link.receive_data(data, now), now)
 
-    def _flush(self) -> None:
-        for link, out, _ in self._pairs:
-            data = link.data_to_send(self.now)
-            if data:
-                out.put(data, self.now)
-
-    def _note(self, link: Type1Link, events: list[Event]) -> None:
-        self.events.extend((self.now, link.name, e) for e in events)
+    def _after(self, link: Type1Link, events: list[Event], now: float) -> None:
+        self.events.extend((now, link.name, e) for e in events)
+        data = link.data_to_send(now)
+        if data:
+            self._out[id(link)].put(data, now)

@@ -1,7 +1,8 @@
 """The asyncio pump that binds one sans-I/O Type II session to one stream pair.
 
 `SessionPump` only moves bytes between the stream and the session, feeds it the loop's clock,
-honours its deadline with one timer handle and hands its events on; `Waitable` lets the server and
+leaves its deadline to the wall-clock driver (`ktcs_bench.timed.aio.LoopTimer`) and hands its
+events on; `Waitable` lets the server and
 the client offer `wait_until(predicate)`, re-checked after every event. Everything the protocol
 decides is decided in the session (`ctc_side`, `ixl_side`).
 """
@@ -14,6 +15,7 @@ import logging
 import ssl as ssl_module
 from collections.abc import Callable
 
+from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.session import Type2Session
 
@@ -40,8 +42,7 @@ class SessionPump:
         self.writer = writer
         self.on_events = on_events
         self.loop = asyncio.get_running_loop()
-        self._timer: asyncio.TimerHandle | None = None
-        self._timer_at: float | None = None
+        self.timer = LoopTimer(session, lambda now, events: self.feed(events))
 
     def now(self) -> float:
         return self.loop.time()
@@ -56,16 +57,11 @@ class SessionPump:
         if data and not self.writer.is_closing():
             self.writer.write(data)
         if self.session.closed:
-            self._cancel_timer()
+            self.timer.cancel()
             if not self.writer.is_closing():
                 self.writer.close()
             return
-        deadline = self.session.next_deadline()
-        if deadline != self._timer_at:
-            self._cancel_timer()
-            if deadline is not None:
-                self._timer = self.loop.call_at(deadline, self._on_timer)
-                self._timer_at = deadline
+        self.timer.poke()
 
     async def drain(self) -> None:
         """Wait while the socket's send buffer is full (back-pressure for bulk producers)."""
@@ -74,17 +70,6 @@ class SessionPump:
         if self.writer.transport.get_write_buffer_size() > READ_SIZE:
             with contextlib.suppress(ConnectionError, OSError):
                 await self.writer.drain()
-
-    def _cancel_timer(self) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
-        self._timer = None
-        self._timer_at = None
-
-    def _on_timer(self) -> None:
-        self._timer = None
-        self._timer_at = None
-        self.feed(self.session.handle_timer(self.now()))
 
     async def run(self) -> None:
         """Until the session closes or the transport goes away."""
@@ -103,7 +88,7 @@ class SessionPump:
                 self.feed(session.receive_data(data, self.now()))
                 await self.drain()
         finally:
-            self._cancel_timer()
+            self.timer.cancel()
             if not session.closed:
                 self.on_events(session.connection_lost(self.now()))
             self.session.data_to_send()

@@ -1,6 +1,7 @@
-"""The CTC's layers import downwards only, counting imports inside functions too: the CTC device
+"""The layers import downwards only, counting imports inside functions too: the CTC device
 (`emulator`) hosts the console, the console draws the CTC's model, the model reads what the Type II
-server feeds it -- never the other way round."""
+server feeds it -- never the other way round. And the sans-I/O cores reach no I/O or clock module
+at all, through any chain of imports."""
 
 from __future__ import annotations
 
@@ -55,3 +56,75 @@ def test_a_layer_never_reaches_the_ones_above_it(package: str, never: set[str]) 
     graph = package_imports()
     assert package in graph  # the walk saw it
     assert not reaches(graph, package) & never
+
+
+# -- the sans-I/O cores --------------------------------------------------------------------------
+
+IO_AND_CLOCKS = {"asyncio", "time", "socket", "serial", "threading", "select", "selectors", "ssl",
+                 "subprocess", "signal"}  # fmt: skip
+"""What a sans-I/O core must never import, even through another module: I/O and clocks."""
+
+CORES = ("codec", "type1", "type2.session", "type2.ctc_side", "type2.ixl_side", "faults",
+         "station", "ixl", "field", "atc", "train", "scenario", "timed")  # fmt: skip
+"""The cores fed bytes/events and an explicit `now` (a package: every module in it)."""
+
+ADAPTERS = {"ktcs_bench.timed.aio"}
+"""Modules inside a core package that are its drivers' adapters, not the core."""
+
+
+def module_imports() -> dict[str, set[str]]:
+    """module -> every module its import statements load (wherever they stand in the file,
+    and the packages above each: importing a.b.c runs a/__init__ and a/b/__init__ first)."""
+    out: dict[str, set[str]] = {}
+    for path in ROOT.rglob("*.py"):
+        parts = ("ktcs_bench", *path.relative_to(ROOT).with_suffix("").parts)
+        is_package = parts[-1] == "__init__"
+        module = ".".join(parts[:-1] if is_package else parts)
+        here = module if is_package else module.rpartition(".")[0]
+        loads: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names: list[str] = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    up = here.split(".")[: len(here.split(".")) - node.level + 1]
+                    base = ".".join([*up, base] if base else up)
+                names = [base] + [f"{base}.{a.name}" for a in node.names]
+            for name in names:
+                bits = name.split(".")
+                loads.update(".".join(bits[: k + 1]) for k in range(len(bits)))
+        out[module] = loads
+    if "ktcs_bench" in out:
+        out["ktcs_bench"] = set()  # its __init__ is ours to read: it imports nothing of note
+    return out
+
+
+def io_reached(graph: dict[str, set[str]], start: str) -> list[list[str]]:
+    """Import chains from `start` to a module of `IO_AND_CLOCKS`."""
+    found: list[list[str]] = []
+    seen = {start}
+    todo = [[start]]
+    while todo:
+        chain = todo.pop()
+        for name in sorted(graph.get(chain[-1], set())):
+            if name in IO_AND_CLOCKS:
+                found.append([*chain, name])
+            elif name in graph and name not in seen:
+                seen.add(name)
+                todo.append([*chain, name])
+    return found
+
+
+def test_the_sans_io_cores_import_no_io_or_clock_module() -> None:
+    graph = module_imports()
+    cores = [
+        m
+        for m in graph
+        if any(m == f"ktcs_bench.{c}" or m.startswith(f"ktcs_bench.{c}.") for c in CORES)
+        and m not in ADAPTERS
+    ]
+    assert len(cores) > 40  # the walk found the cores' modules
+    bad = {m: io_reached(graph, m) for m in cores}
+    assert not {m: chains[0] for m, chains in bad.items() if chains}
