@@ -64,16 +64,7 @@ class VirtualClock:
 
     def step(self) -> bool:
         """Jump to the next deadline and run that instant; False when no core has one."""
-        t = self.next_time()
-        if t is None:
-            return False
-        self._run_instant(t)
-        return True
-
-    def _run_instant(self, t: float) -> None:
-        if t > self.now:
-            self.now = t
-        self.run_due()
+        return self._instant(None)
 
     def run_due(self) -> None:
         """Run every core due at `now`, pass after pass, until none is."""
@@ -84,23 +75,40 @@ class VirtualClock:
             ]
             if not due:
                 return
-            for e in due:
-                out = e.core.handle_timer(now)
-                if e.sink is not None:
-                    e.sink(now, out)
+            self._call(due, now)
         raise RuntimeError(f"a core's deadline does not move past {now}")  # pragma: no cover
 
     def run_until(self, t: float, stop: Callable[[], bool] | None = None) -> None:
         """Run every instant up to and including `t` (or until `stop()` holds after one); the
         clock then reads `t` (or the instant it stopped at)."""
-        while True:
-            nt = self.next_time()
-            if nt is None or nt > t:
-                self.now = max(self.now, t)
-                return
-            self._run_instant(nt)
+        while self._instant(t):
             if stop is not None and stop():
                 return
+        self.now = max(self.now, t)
 
     def run_for(self, dt: float, stop: Callable[[], bool] | None = None) -> None:
         self.run_until(self.now + dt, stop)
+
+    def _instant(self, limit: float | None) -> bool:
+        """Jump to the earliest deadline (if not beyond `limit`) and run that instant: its first
+        pass from the same look at the deadlines that found it, then `run_due`."""
+        entries = self._entries
+        deadlines = [e.core.next_deadline() for e in entries]
+        t = min((d for d in deadlines if d is not None), default=None)
+        if t is None or (limit is not None and t > limit):
+            return False
+        if t > self.now:
+            self.now = t
+        now = self.now
+        self._call(
+            [e for e, d in zip(entries, deadlines, strict=True) if d is not None and d <= now], now
+        )
+        self.run_due()
+        return True
+
+    @staticmethod
+    def _call(due: list[_Entry], now: float) -> None:
+        for e in due:
+            out = e.core.handle_timer(now)
+            if e.sink is not None:
+                e.sink(now, out)
