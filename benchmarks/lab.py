@@ -29,9 +29,9 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench.datafiles import data_dir
-from ktcs_bench.emulator import jsonlines
 from ktcs_bench.runtime import read_token
 from ktcs_bench.station.loader import load_line
+from ktcs_bench.transport import jsonlines
 
 ROUTES = [("01", "11", "0111"), ("01", "12", "0112")]
 

@@ -47,6 +47,9 @@ __all__ = [
 class CaptureWriter(Protocol):
     def write(self, record: CaptureRecord) -> None: ...
 
+    def set_endpoint(self, name: str, host: str, port: int) -> None:
+        """The real address of end `name` for the records that follow (a TCP tap knows it)."""
+
     def close(self) -> None: ...
 
 
@@ -71,6 +74,10 @@ class PcapngWriter:
         self._stream.write(self.encoder.encode(record))
         self._stream.flush()
 
+    def set_endpoint(self, name: str, host: str, port: int) -> None:
+        """The real address of Type II end `name` for the packets that follow."""
+        self.encoder.set_endpoint(name, host, port)
+
     def close(self) -> None:
         self._stream.flush()
         if self._close_stream:
@@ -85,6 +92,9 @@ class _Closing:
 
     def write(self, record: CaptureRecord) -> None:
         self.writer.write(record)
+
+    def set_endpoint(self, name: str, host: str, port: int) -> None:
+        self.writer.set_endpoint(name, host, port)
 
     def close(self) -> None:
         self.writer.close()

@@ -109,6 +109,9 @@ class HexLogWriter:
         self._stream.write(format_line(record, self._start or 0.0))
         self._stream.flush()
 
+    def set_endpoint(self, name: str, host: str, port: int) -> None:
+        """A hex log names the ends by direction only: their addresses are not kept."""
+
     def close(self) -> None:
         if not self._header_done:
             self._stream.write(format_header(self._start, self._profile, self._link))

@@ -130,8 +130,15 @@ class PcapngEncoder:
         self._started = False
 
     def set_endpoint(self, name: str, host: str, port: int) -> None:
-        """The real address of a Type II endpoint (before its first packet)."""
-        self._endpoints[name] = (host, port)
+        """The real address of a Type II endpoint, for the packets that follow. An address the
+        synthesised IPv4 packets cannot carry (IPv6, a host name) keeps the synthesised one."""
+        try:
+            ip = ipaddress.ip_address(host)
+        except ValueError:
+            return
+        v4 = ip if isinstance(ip, ipaddress.IPv4Address) else ip.ipv4_mapped
+        if v4 is not None and 0 <= port <= 0xFFFF:
+            self._endpoints[name] = (str(v4), port)
 
     def start(self) -> bytes:
         self._started = True

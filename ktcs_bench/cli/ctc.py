@@ -11,8 +11,8 @@ import time
 from typing import Any
 
 from ktcs_bench.cli._common import host_port
-from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.transport import jsonlines
 
 HELP_TEXT = """\
 commands:

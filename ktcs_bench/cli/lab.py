@@ -10,9 +10,9 @@ import sys
 from typing import Any
 
 from ktcs_bench.cli._common import duration
-from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
+from ktcs_bench.transport import jsonlines
 
 EPILOG = """\
 examples:

@@ -12,6 +12,7 @@ from ktcs_bench.codec.profile import get_profile
 from ktcs_bench.errors import UsageError
 from ktcs_bench.tap import PtyTap, Tap, TapClient, TcpTap
 from ktcs_bench.tap.control import HELP as CONTROL_HELP
+from ktcs_bench.tap.control import parse_command
 from ktcs_bench.tap.registry import known_taps, parse_tap_address
 
 HELP = "run a recording, fault-injecting tap on a link; command a running tap"
@@ -20,7 +21,8 @@ A tap sits between the two ends of a link, records both directions with timestam
 monitors, and injects faults on command.
   --pty              create two pty pairs; end A opens the first path, end B the second
   --tcp LISTEN TARGET  listen on LISTEN; each connection is forwarded to TARGET
-The tap prints its pty paths / addresses and its control port; `tap fault` sends it commands.
+The tap prints its pty paths / addresses and its control port; `tap fault` sends it commands
+(the words below, sent as the JSON lines every control port of the bench speaks).
 """
 EPILOG = (
     """\
@@ -132,6 +134,7 @@ def _print_info(tap: Tap, as_json: bool) -> None:
 
 def run_tap(args: argparse.Namespace) -> int:
     names = _names(args.names)
+    faults = [parse_command(command, names) for command in args.fault]  # refused before the start
     control = _address(args.control, "--control", any_free=True)
     common: dict[str, Any] = {"names": names, "seed": args.seed, "control": control,
                               "name": args.name, "token_file": args.token_file}  # fmt: skip
@@ -149,14 +152,12 @@ def run_tap(args: argparse.Namespace) -> int:
             _address(args.tcp[1], "TARGET"),
             **common,
         )
-    for path in args.write:
-        tap._writers.append(open_writer(path, link=tap.profile.protocol, profile=tap.profile.name))
 
     def ready(t: Tap) -> None:
-        for command in args.fault:
-            reply = t.execute(command)
-            if reply.startswith("error"):
-                print(f"ktcs-bench: tap: {command}: {reply}", file=sys.stderr)
+        for cmd in faults:
+            answer = t.execute(cmd.to_json())
+            if not answer.get("ok"):
+                print(f"ktcs-bench: tap: {cmd.words()}: {answer.get('error')}", file=sys.stderr)
         _print_info(t, args.json)
 
     tap.run(ready)

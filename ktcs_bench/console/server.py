@@ -52,6 +52,7 @@ from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.runtime import client_token
 from ktcs_bench.tap.registry import resolve_tap
 from ktcs_bench.train.endpoint import TrainEndpoint
+from ktcs_bench.transport import jsonlines
 from ktcs_bench.type2 import events as ev
 
 log = logging.getLogger("ktcs_bench.console")
@@ -375,20 +376,15 @@ class ConsoleServer:
         """Subscribe to the tap's control port; decode and keep its frames; retry when it goes."""
         feed = self.taps[index]
         while True:
-            writer: asyncio.StreamWriter | None = None
+            peer: jsonlines.Peer | None = None
             try:
                 host, port = resolve_tap(feed.spec) if isinstance(feed.spec, str) else feed.spec
                 token = self.token or client_token((host, port)) or ""
-                reader, writer = await asyncio.open_connection(host, port)
-                writer.write(f"token {token}\nsubscribe history\n".encode())
-                await writer.drain()
-                admitted = (await reader.readline()).decode("utf-8", "replace").strip()
-                if admitted != "ok":
-                    raise PeerError(f"tap answered {admitted!r}")
-                header_line = (await reader.readline()).decode("utf-8", "replace").strip()
-                if not header_line.startswith("ok "):
-                    raise PeerError(f"tap answered {header_line!r}")
-                header = json.loads(header_line[3:])
+                peer = await jsonlines.connect(host, port)
+                peer.send({"cmd": "subscribe", "history": True, "token": token})
+                header = await peer.read()
+                if not (header and header.get("ok") is True):
+                    raise PeerError(f"tap answered {header!r}")
                 profile = get_profile(str(header.get("profile", "ktcs-type1")))
                 names = header.get("names")
                 feed.status = f"tap {header.get('tap') or feed.label}: {profile.name}" + (
@@ -396,10 +392,9 @@ class ConsoleServer:
                 )
                 self._tap_push(index, [])
                 while True:
-                    line = await reader.readline()
-                    if not line:
+                    item = await peer.read()
+                    if item is None:
                         raise PeerError("the tap closed its control port")
-                    item = json.loads(line)
                     if "hex" in item:
                         entries = self._render(feed, item, profile)
                     else:
@@ -417,8 +412,8 @@ class ConsoleServer:
                 feed.status = f"tap {feed.label}: {exc}"
                 self._tap_push(index, [])
             finally:
-                if writer is not None:
-                    writer.close()
+                if peer is not None:
+                    peer.close()
             await asyncio.sleep(TAP_RETRY_S)
 
     def _chart_for(self, feed: _TapFeed, frame: Frame, profile: FrameProfile) -> CodeChart | None:

@@ -17,11 +17,12 @@ from typing import Any
 from ktcs_bench.console.server import ConsoleServer
 from ktcs_bench.ctc.desk import Desk
 from ktcs_bench.ctc.model import CtcModel, signal_name
-from ktcs_bench.emulator import jsonlines, variants
+from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
 from ktcs_bench.train.speed_distance import SpeedDistance
+from ktcs_bench.transport import jsonlines
 from ktcs_bench.type2.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")

@@ -21,11 +21,11 @@ from functools import partial
 from typing import Any
 
 from ktcs_bench.charts.generate import station_chart
-from ktcs_bench.emulator import jsonlines
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.runtime import server_token
 from ktcs_bench.station.model import Line
+from ktcs_bench.transport import jsonlines
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
 

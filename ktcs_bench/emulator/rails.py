@@ -16,7 +16,7 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from ktcs_bench.emulator import jsonlines
+from ktcs_bench.transport import jsonlines
 from ktcs_bench.transport.endpoints import Endpoint
 
 log = logging.getLogger("ktcs_bench.emulator")

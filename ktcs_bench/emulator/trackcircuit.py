@@ -8,9 +8,9 @@ from typing import Any
 
 from ktcs_bench.atc.codes import AtcCode
 from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
-from ktcs_bench.emulator import jsonlines
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.station.model import Line
+from ktcs_bench.transport import jsonlines
 
 
 class TrackCircuitDevice(Device):

@@ -1,4 +1,9 @@
-"""A blocking client for a tap's control port: send commands, or subscribe to its traffic."""
+"""A blocking client for a tap's control port: send commands, or subscribe to its traffic.
+
+The port speaks JSON lines (`control.py`); `command()` takes the words a person types and sends
+their JSON, `request()` sends JSON as it is. The client presents the tap's token first
+(`{"token": TOKEN}`, answered `{"ok": true}`), as every client of a control port does.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +15,7 @@ from typing import Any
 
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.runtime import client_token
+from ktcs_bench.tap.control import Command, parse_command
 from ktcs_bench.tap.registry import resolve_tap
 
 
@@ -36,16 +42,12 @@ class TapClient:
                 raise
 
     def _present(self, token: str) -> None:
-        try:
-            self._file.write(f"token {token}\n".encode())
-            self._file.flush()
-        except OSError as exc:
-            raise PeerError(f"tap control port: {exc}") from None
-        reply = self._readline()
+        self._send({"token": token})
+        answer = self._read()
         host, port = self.address
-        if reply.startswith("error refused"):
-            raise PeerError(f"the tap at {host}:{port} {reply[6:]}")
-        if reply != "ok":  # never repeat what it said: it may be our token echoed
+        if answer.get("refused"):
+            raise PeerError(f"the tap at {host}:{port} {answer.get('error')}")
+        if answer != {"ok": True}:  # never repeat what it said: it may be our token echoed
             raise PeerError(f"{host}:{port} is not a tap's control port (no tap answers so)")
 
     def close(self) -> None:
@@ -61,36 +63,14 @@ class TapClient:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _readline(self) -> str:
+    def _read(self) -> dict[str, Any]:
         try:
             line = self._file.readline()
         except OSError as exc:
             raise PeerError(f"tap control port: {exc}") from None
         if not line:
             raise PeerError("the tap closed its control port")
-        return line.decode("utf-8", errors="replace").rstrip("\n")
-
-    def command(self, line: str) -> str:
-        """Send one command; the reply without its `ok ` prefix. Raises UsageError on `error`,
-        PeerError when what answers is not a tap."""
-        try:
-            self._file.write(line.strip().encode() + b"\n")
-            self._file.flush()
-        except OSError as exc:
-            raise PeerError(f"tap control port: {exc}") from None
-        reply = self._readline()
-        if reply.startswith("error refused"):
-            host, port = self.address
-            raise PeerError(f"the tap at {host}:{port} {reply[6:]}")
-        if reply.startswith("error"):
-            raise UsageError(f"tap: {reply[6:]}")
-        if reply != "ok" and not reply.startswith("ok "):
-            raise PeerError(self._not_a_tap(reply))
-        return reply[3:]
-
-    def _not_a_tap(self, reply: str) -> str:
-        host, port = self.address
-        return f"{host}:{port} is not a tap's control port (it answered {reply[:60]!r})"
+        return self._json(line.decode("utf-8", errors="replace"))
 
     def _json(self, text: str) -> dict[str, Any]:
         try:
@@ -101,14 +81,61 @@ class TapClient:
             raise PeerError(self._not_a_tap(text))
         return obj
 
+    def _not_a_tap(self, reply: object) -> str:
+        host, port = self.address
+        return f"{host}:{port} is not a tap's control port (it answered {str(reply)[:60]!r})"
+
+    def _send(self, obj: dict[str, Any]) -> None:
+        try:
+            self._file.write(json.dumps(obj, separators=(",", ":")).encode() + b"\n")
+            self._file.flush()
+        except OSError as exc:
+            raise PeerError(f"tap control port: {exc}") from None
+
+    def request(self, obj: dict[str, Any]) -> dict[str, Any]:
+        """One JSON command, its answer. Raises UsageError when the tap refuses it, PeerError
+        when what answers is not a tap."""
+        self._send(obj)
+        answer = self._read()
+        if answer.get("ok") is True:
+            return answer
+        if answer.get("refused"):
+            host, port = self.address
+            raise PeerError(f"the tap at {host}:{port} {answer.get('error')}")
+        if answer.get("ok") is False and isinstance(answer.get("error"), str):
+            raise UsageError(f"tap: {answer['error']}")
+        raise PeerError(self._not_a_tap(json.dumps(answer)))
+
+    def command(self, line: str) -> str:
+        """Send one command given as words (`ber 1e-3 ixl>atc`); what it did, as words (the
+        status as JSON, the help as text)."""
+        cmd = parse_command(line)
+        if cmd.verb == "subscribe":
+            raise UsageError("subscribe: use TapClient.subscribe()")
+        answer = self.request(cmd.to_json())
+        if cmd.verb == "status":
+            return json.dumps(self._status(answer))
+        if cmd.verb == "help":
+            return str(answer.get("help", ""))
+        return str(answer.get("command", cmd.words()))
+
+    def _status(self, answer: dict[str, Any]) -> dict[str, Any]:
+        status = answer.get("status")
+        if not (isinstance(status, dict) and isinstance(status.get("directions"), dict)):
+            raise PeerError(self._not_a_tap(json.dumps(answer)))  # a device's port, say
+        return status
+
     def status(self) -> dict[str, Any]:
-        return self._json(self.command("status"))
+        return self._status(self.request({"cmd": "status"}))
 
     def subscribe(
         self, history: bool = False, timeout: float | None = None
     ) -> Iterator[dict[str, Any]]:
         """The header ({profile, names, ...}) first, then one dict per record or event."""
-        header = self._json(self.command("subscribe history" if history else "subscribe"))
+        header = self.request(Command("subscribe", history=history).to_json())
+        if not isinstance(header.get("names"), list) or "profile" not in header:
+            raise PeerError(self._not_a_tap(json.dumps(header)))
+        header.pop("ok")
         self._sock.settimeout(timeout)
         yield header
         while True:

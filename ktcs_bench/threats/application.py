@@ -13,11 +13,11 @@ from typing import Any
 
 from ktcs_bench.charts.generate import station_chart
 from ktcs_bench.charts.model import CodeChart
-from ktcs_bench.emulator import jsonlines
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.state import lab_dir, running_labs
 from ktcs_bench.lab.topology import load_lab
 from ktcs_bench.station.model import Line
+from ktcs_bench.transport import jsonlines
 
 ASK_TIMEOUT = 5.0
 

@@ -1,9 +1,11 @@
 """Adapters that bind sans-I/O links to wires and clocks (SPEC §2, §3).
 
 Owns: the `Transport` shape (base.py), pty pairs and pyserial URLs with line-rate pacing
-(serialport.py), TCP connections (tcp.py), a Type I link run over a transport on the asyncio loop
-(aio.py), two links joined by an in-memory wire on the virtual clock (virtual.py) and endpoints and
-ports as a user writes them (endpoints.py). The clocks' drivers themselves are `ktcs_bench.timed`.
+(serialport.py), TCP connections (tcp.py), JSON lines over asyncio streams -- the bench's own
+control ports and field bus, devices' and taps' alike (jsonlines.py) --, a Type I link run over a
+transport on the asyncio loop (aio.py), two links joined by an in-memory wire on the virtual clock
+(virtual.py) and endpoints and ports as a user writes them (endpoints.py). The clocks' drivers
+themselves are `ktcs_bench.timed`.
 Must not contain protocol rules (they live in `ktcs_bench.type1`) nor fault logic (the wire's
 faults are `ktcs_bench.faults`' injector). Must not import what stands above it: tap/, emulator/,
 lab/, console/, cli/.

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from ktcs_bench.codec import FrameCodec, get_profile
-from ktcs_bench.emulator import jsonlines
+from ktcs_bench.transport import jsonlines
 
 from .conftest import Proc, cli, free_port
 

@@ -41,14 +41,6 @@ def conversation(address: str, lines: list[dict[str, Any]]) -> list[dict[str, An
         return [json.loads(replies.readline()) for _ in lines]
 
 
-def tap_conversation(address: str, lines: list[str]) -> list[str]:
-    host, _, port = address.rpartition(":")
-    with socket.create_connection((host, int(port)), timeout=20) as sock:
-        sock.sendall("".join(line + "\n" for line in lines).encode())
-        replies = sock.makefile("r")
-        return [replies.readline().rstrip("\n") for _ in lines]
-
-
 def refused(answer: dict[str, Any], why: str) -> bool:
     return answer.get("refused") is True and answer["ok"] is False and why in answer["error"]
 
@@ -94,16 +86,17 @@ def test_lab_port_refuses_and_the_device_lives_on(lab: RunningLab) -> None:
 
 
 def test_tap_port_refuses_until_the_token_is_presented(lab: RunningLab) -> None:
+    """A tap's control port is the devices' JSON-lines server: the same token check."""
     tap = lab.links["st18-atc"]["tap"]
-    replies = tap_conversation(
-        tap, ["cut", f"token {OTHER_TOKEN}", "cut", f"token {token_for(tap)}", "status"]
+    cut = {"cmd": "cut"}
+    none, wrong, still, admitted, status = conversation(
+        tap, [cut, {**cut, "token": OTHER_TOKEN}, cut, {"token": token_for(tap)}, {"cmd": "status"}]
     )
-    assert replies[0].startswith("error refused: no token")
-    assert replies[1].startswith("error refused: wrong token")
-    assert replies[2].startswith("error refused: no token")  # a wrong token admits nothing
-    assert replies[3] == "ok"
-    status = json.loads(replies[4][3:])
-    assert not any(d["cut"] for d in status["directions"].values()), "a refused cut was applied"
+    assert refused(none, "no token") and refused(wrong, "wrong token")
+    assert refused(still, "no token")  # a wrong token admits nothing
+    assert admitted == {"ok": True}
+    directions = status["status"]["directions"].values()
+    assert not any(d["cut"] for d in directions), "a refused cut was applied"
     run = lab.cli("tap", "status", "st18-atc")
     assert run.returncode == 0 and json.loads(run.stdout)["name"] == "st18-atc", run.stderr
 

@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from ktcs_bench.station.loader import load_line
+from ktcs_bench.tap import TapClient
 
 from .conftest import RunningLab, request, token_for, wait_until
 
@@ -130,12 +131,8 @@ def test_cutting_a_type1_link_gives_most_restrictive_codes_and_signals_to_stop(
         stop = LINE.most_restrictive_code.code
         tap = lab.links["st22-atc"]["tap"]
         host, _, port = tap.rpartition(":")
-        import socket
-
-        with socket.create_connection((host, int(port)), timeout=10) as s:
-            s.sendall(f"token {token_for(tap)}\ncut\n".encode())
-            replies = s.makefile()
-            assert replies.readline() == "ok\n" and replies.readline().startswith("ok")
+        with TapClient((host, int(port)), timeout=10, token=token_for(tap)) as client:
+            assert client.command("cut") == "cut"
         try:
             wait_until("IXL puts signal 01 to stop on the ATC link failure",
                        lambda: lab.status("ixl22")["signals"]["01"] == "R", timeout=30)  # fmt: skip
@@ -151,8 +148,6 @@ def test_cutting_a_type1_link_gives_most_restrictive_codes_and_signals_to_stop(
             )
             assert codes
         finally:
-            with socket.create_connection((host, int(port)), timeout=10) as s:
-                s.sendall(f"token {token_for(tap)}\nrestore\n".encode())
-                replies = s.makefile()
-                replies.readline(), replies.readline()
+            with TapClient((host, int(port)), timeout=10, token=token_for(tap)) as client:
+                client.command("restore")
         wait_until("links up again", lambda: lab.status("ixl22")["links"]["atc"], timeout=30)

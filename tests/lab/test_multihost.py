@@ -90,7 +90,7 @@ class Hosts:
 
     def ask(self, host: str, name: str, obj: dict[str, Any]) -> dict[str, Any]:
         """A control-port request made from inside `host`'s namespace (it may be cut off)."""
-        code = ("import asyncio, json, sys; from ktcs_bench.emulator import jsonlines; "
+        code = ("import asyncio, json, sys; from ktcs_bench.transport import jsonlines; "
                 "h, _, p = sys.argv[1].rpartition(':'); "
                 "print(json.dumps(asyncio.run(jsonlines.request(h, int(p), json.loads(sys.argv[2])))))")  # fmt: skip
         out = subprocess.run(

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
+import shutil
 import socket
+import subprocess
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -14,9 +17,12 @@ import serial
 
 from ktcs_bench.capture import open_writer, read_capture
 from ktcs_bench.codec import FrameCodec, get_profile
-from ktcs_bench.errors import PeerError
+from ktcs_bench.emulator.device import Device
+from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.faults import BitErrors, Delay, DropFrame
+from ktcs_bench.runtime import read_token, server_token
 from ktcs_bench.tap import PtyTap, TapClient, TcpTap
+from ktcs_bench.transport import jsonlines
 
 CODEC1 = FrameCodec(get_profile("ktcs-type1"))
 CODEC2 = FrameCodec(get_profile("ktcs-type2"))
@@ -277,3 +283,123 @@ def test_tap_creation_failure_leaves_nothing_open() -> None:
     finally:
         busy.close()
     assert os.path.exists("/proc/self/fd")
+
+
+def test_tcp_tap_pcapng_carries_the_real_addresses_of_both_ends(
+    echo: EchoServer, tmp_path: Path
+) -> None:
+    """Read back by tshark: each packet goes between the address the station connected from and
+    the target's address, both ways -- not addresses made up for the capture."""
+    path = tmp_path / "t2.pcapng"
+    with TcpTap(("127.0.0.1", 0), echo.address, names=("ixl", "ctc"),
+                writers=[open_writer(path, link="type2")]) as tap:  # fmt: skip
+        assert isinstance(tap, TcpTap) and tap.listen_address is not None
+        fs = [CODEC2.encode(k, 0x40, b"", 0) for k in range(2)]
+        with socket.create_connection(tap.listen_address, timeout=5) as s:
+            station = s.getsockname()[:2]
+            s.sendall(b"".join(fs))
+            assert recv_exactly(s, sum(map(len, fs))) == b"".join(fs)
+            wait_until(lambda: len(tap.records()) == 4)
+    tshark = shutil.which("tshark")
+    assert tshark is not None, "tshark is not installed (Debian: apt-get install -y tshark)"
+    home = tmp_path / "home"
+    home.mkdir()
+    done = subprocess.run(
+        [tshark, "-r", str(path), "-T", "fields", "-e", "ip.src", "-e", "tcp.srcport",
+         "-e", "ip.dst", "-e", "tcp.dstport", "-e", "frame.comment"],
+        capture_output=True, text=True, timeout=120, env={**os.environ, "HOME": str(home)},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    rows = [line.split("\t") for line in done.stdout.splitlines()]
+    ends = {"ixl": (station[0], str(station[1])), "ctc": (echo.address[0], str(echo.address[1]))}
+    assert len(rows) == 4
+    for src, sport, dst, dport, comment in rows:
+        a, b = comment.split(">")
+        assert ((src, sport), (dst, dport)) == (ends[a], ends[b]), comment
+
+
+def test_control_port_speaks_the_devices_json_lines(
+    pty_link: tuple[PtyTap, serial.Serial, serial.Serial],
+) -> None:
+    """The request helper the bench uses for every device's control port works on a tap's, the
+    token check included: nothing is acted on before the token; a bad line is answered and the
+    connection goes on."""
+    tap, a, b = pty_link
+    assert tap.control_address is not None
+    host, port = tap.control_address
+    token = read_token(tap.token_file)
+
+    async def talk() -> list[dict[str, object]]:
+        answers = [await jsonlines.request(host, port, {"cmd": "status"}, token=token)]
+        answers.append(await jsonlines.request(
+            host, port, {"cmd": "ber", "rate": 0.5, "direction": "atc>ixl"}, token=token))  # fmt: skip
+        peer = await jsonlines.connect(host, port)
+        try:
+            for obj in ({"cmd": "clear"}, {"cmd": "clear", "token": "0" * 64}, {"token": token}):
+                peer.send(obj)
+                answers.append(await peer.read() or {})
+            answers.append(await jsonlines.request(host, port, {"cmd": "status"}, token=token))
+            for line in (b"not json\n", b'{"cmd": "explode"}\n', b'{"cmd": "clear"}\n'):
+                peer.writer.write(line)
+                answers.append(await peer.read() or {})
+        finally:
+            peer.close()
+        return answers
+
+    status, ber, before, wrong, admitted, then, bad, unknown, clear = asyncio.run(talk())
+    assert status["ok"] is True and isinstance(status["status"], dict)
+    assert status["status"]["paths"] == tap.paths
+    assert ber == {"ok": True, "command": "ber 0.5 atc>ixl"}
+    assert before["refused"] is True and wrong["refused"] is True and admitted == {"ok": True}
+    assert then["status"]["directions"]["atc>ixl"]["ber"] == 0.5  # the refused clears did nothing
+    assert "error" in bad and unknown["ok"] is False and "unknown command" in str(unknown["error"])
+    assert clear == {"ok": True, "command": "clear"}
+    assert tap.status()["directions"]["atc>ixl"]["ber"] == 0.0
+
+
+def test_a_subscriber_that_leaves_is_dropped(
+    pty_link: tuple[PtyTap, serial.Serial, serial.Serial],
+) -> None:
+    tap, a, b = pty_link
+    assert tap.control_address is not None
+    with TapClient(tap.control_address) as ctl:
+        sub = TapClient(tap.control_address)
+        next(sub.subscribe())
+        wait_until(lambda: ctl.status()["subscribers"] == 1)
+        sub.close()
+        wait_until(lambda: ctl.status()["subscribers"] == 0)
+
+
+def test_client_refuses_a_devices_control_port() -> None:
+    """A device answers `status` too, but it is not a tap: a clear PeerError."""
+    ready = threading.Event()
+    box: dict[str, object] = {}
+
+    def serve() -> None:
+        async def main() -> None:
+            device = Device("atc18")
+            device.token = server_token()[0]  # the user's, as a device started alone has
+            await device.start()
+            box["address"], box["stop"] = device.ready_info["control"], asyncio.Event()
+            box["loop"] = asyncio.get_running_loop()
+            ready.set()
+            await box["stop"].wait()  # type: ignore[attr-defined]
+            await device.close()
+
+        asyncio.run(main())
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    try:
+        assert ready.wait(10)
+        host, _, port = str(box["address"]).rpartition(":")
+        with TapClient((host, int(port))) as client:
+            with pytest.raises(PeerError, match="not a tap's control"):
+                client.status()
+            with pytest.raises(UsageError, match="unknown command"):
+                client.command("ber 1e-3")
+    finally:
+        loop = box.get("loop")
+        if isinstance(loop, asyncio.AbstractEventLoop):
+            loop.call_soon_threadsafe(box["stop"].set)  # type: ignore[attr-defined]
+        thread.join(10)

@@ -1,8 +1,9 @@
 """JSON lines over asyncio streams: the bench's own control and field-bus framing.
 
 Not a kTCS protocol -- it carries what the real lab moves by wire and rail (occupancy, codes under
-the antenna, train positions) and operator/control commands. A line is one JSON object; lines are
-bounded (`LIMIT`), a bad line gets `{"error": ...}` back and never ends the connection.
+the antenna, train positions) and operator/control commands: every device's control port and every
+tap's speak it. A line is one JSON object; lines are bounded (`LIMIT`), a bad line gets
+`{"error": ...}` back and never ends the connection.
 
 Every server obeys only who holds its token (`runtime`): a connection is admitted by an object
 carrying `"token": TOKEN` (the first, or any later one), and until then every object gets

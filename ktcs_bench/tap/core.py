@@ -1,0 +1,211 @@
+"""The tap itself, sans-I/O: bytes and `now` in; deliveries, records, events and a deadline out.
+
+`TapCore` sits between the two ends of one link. `receive(direction, data, now)` takes what an end
+wrote, `execute(command, now)` a control command (a fault, `restore`, `clear`, `send`),
+`handle_timer(now)` runs what is due at `next_deadline()`. Each returns a `TapOutput`:
+    deliveries  (direction, bytes) for the receiving end of that direction, in order
+    records     the frames that passed (CaptureRecord, time = when the last byte passed)
+    events      the subscriber stream, in the order things happened: one {time, direction, hex}
+                per record and {time, event, ...} per fault command, `send` and the carrier
+                coming and going (`connected`, `disconnected`, ... as the adapter reports them)
+A `FaultInjector` per direction (`ktcs_bench.faults`) corrupts the bytes, a `Recorder` frames what
+was delivered, the last HISTORY records are kept, and each `Subscription` gets every event (up to
+SUBSCRIBER_QUEUE waiting; the excess is counted as missed). Nothing here reads a clock, sleeps or
+touches a file descriptor: the adapters (pty.py, tcp.py) and the runner (runner.py) do.
+"""
+
+from __future__ import annotations
+
+import random
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from ktcs_bench.capture.records import CaptureRecord
+from ktcs_bench.codec.profile import FrameProfile
+from ktcs_bench.errors import UsageError
+from ktcs_bench.faults import Cut, FaultInjector
+from ktcs_bench.tap.control import Command
+from ktcs_bench.tap.recorder import Recorder
+
+HISTORY = 10_000  # records kept for `records()` and `subscribe history`
+SUBSCRIBER_QUEUE = 10_000  # events waiting for one slow subscriber before it misses some
+
+
+def record_event(record: CaptureRecord) -> dict[str, Any]:
+    return {"time": record.time, "direction": record.direction, "hex": record.data.hex()}
+
+
+@dataclass
+class TapOutput:
+    deliveries: list[tuple[str, bytes]] = field(default_factory=list)
+    records: list[CaptureRecord] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    link_cut: bool = False  # the whole link was cut: an adapter that carries connections drops them
+
+    def __bool__(self) -> bool:
+        return bool(self.deliveries or self.records or self.events or self.link_cut)
+
+
+class Subscription:
+    """One subscriber's share of the event stream, waiting to be taken."""
+
+    def __init__(self, limit: int = SUBSCRIBER_QUEUE) -> None:
+        self.limit = limit
+        self.missed = 0
+        self._queue: deque[dict[str, Any]] = deque()
+
+    def push(self, event: dict[str, Any]) -> None:
+        if len(self._queue) < self.limit:
+            self._queue.append(event)
+        else:
+            self.missed += 1
+
+    def take(self) -> list[dict[str, Any]]:
+        out = list(self._queue)
+        self._queue.clear()
+        return out
+
+
+class TapCore:
+    def __init__(
+        self,
+        names: tuple[str, str],
+        profile: FrameProfile,
+        *,
+        seed: int = 0,
+        history: int = HISTORY,
+    ) -> None:
+        a, b = names
+        if a == b or ">" in a + b or a.endswith("-") or b.endswith("-"):
+            raise UsageError(f"tap end names must differ and contain no '>': {names}")
+        self.names = (a, b)
+        self.profile = profile
+        self.directions = (f"{a}>{b}", f"{b}>{a}")
+        rng = random.Random(seed)
+        self.injectors = {
+            d: FaultInjector(profile, random.Random(rng.getrandbits(64))) for d in self.directions
+        }
+        self.recorder = Recorder(profile)
+        self.cut_all = False  # `cut` with no direction, until `restore` (all) or `clear`
+        self.history: deque[CaptureRecord] = deque(maxlen=history)
+        self._subscriptions: list[Subscription] = []
+
+    # -- what comes in -------------------------------------------------------------------------
+    def receive(self, direction: str, data: bytes, now: float) -> TapOutput:
+        """`data` written by the sending end of `direction` ("a>b")."""
+        self.injectors[direction].feed(data, now)
+        return self._pump(now, TapOutput())
+
+    def execute(self, cmd: Command, now: float) -> tuple[dict[str, Any], TapOutput]:
+        """A command that changes the link: a fault, `restore`, `clear` or `send`. Its answer
+        ({"ok": true, "command": WORDS}) and what it caused; UsageError when it cannot be done."""
+        out = TapOutput()
+        if cmd.direction is not None and cmd.direction not in self.directions:
+            raise UsageError(f"this tap has directions {', '.join(self.directions)}")
+        targets = list(self.directions) if cmd.direction is None else [cmd.direction]
+        words = cmd.words()
+        event = "fault"
+        if cmd.fault is not None:
+            for d in targets:
+                self.injectors[d].apply(cmd.fault, now)
+            if isinstance(cmd.fault, Cut) and cmd.direction is None:
+                self.cut_all = out.link_cut = True
+        elif cmd.verb == "clear":
+            for inj in self.injectors.values():
+                inj.clear(now)
+            self.cut_all = False
+        elif cmd.verb == "restore":
+            for d in targets:
+                self.injectors[d].restore()
+            if cmd.direction is None:
+                self.cut_all = False
+            words = "restore"
+        elif cmd.verb == "send":
+            assert cmd.direction is not None
+            self.injectors[cmd.direction].feed(cmd.data, now)
+            event = "send"
+        else:
+            raise UsageError(f"{cmd.verb}: not a command that changes the link")
+        self._emit(out, {"time": now, "event": event, "command": words})
+        return {"ok": True, "command": words}, self._pump(now, out)
+
+    def note(self, now: float, event: str, **detail: Any) -> TapOutput:
+        """An event of the carrier the adapter saw (`refused`, `target-failed`), into the stream."""
+        out = TapOutput()
+        self._emit(out, {"time": now, "event": event, **detail})
+        return out
+
+    def connected(self, now: float, peer: tuple[str, int]) -> TapOutput:
+        """A new connection carries the link: what the recorder holds of the old one is out."""
+        out = TapOutput()
+        self._publish(out, self.recorder.flush())
+        self._emit(out, {"time": now, "event": "connected", "peer": list(peer)})
+        return out
+
+    def disconnected(self, now: float, reason: str) -> TapOutput:
+        """The connection that carried the link is gone: nothing queued for it (delayed, held
+        for a frame fault) reaches the next one."""
+        out = TapOutput()
+        for inj in self.injectors.values():
+            inj.discard()
+        self._emit(out, {"time": now, "event": "disconnected", "reason": reason})
+        return out
+
+    def handle_timer(self, now: float) -> TapOutput:
+        return self._pump(now, TapOutput())
+
+    def next_deadline(self) -> float | None:
+        times = [inj.next_deadline() for inj in self.injectors.values()]
+        times.append(self.recorder.next_deadline())
+        due = [t for t in times if t is not None]
+        return min(due) if due else None
+
+    def close(self) -> TapOutput:
+        """The tap stops: what the recorder still holds, as it stands."""
+        out = TapOutput()
+        self._publish(out, self.recorder.flush())
+        return out
+
+    # -- subscribers -----------------------------------------------------------------------------
+    def subscribe(self, history: bool = False, limit: int = SUBSCRIBER_QUEUE) -> Subscription:
+        sub = Subscription(limit)
+        if history:
+            for r in self.history:
+                sub.push(record_event(r))
+        self._subscriptions.append(sub)
+        return sub
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        if sub in self._subscriptions:
+            self._subscriptions.remove(sub)
+
+    # -- looking -----------------------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        return {
+            "cut": self.cut_all,
+            "records": len(self.history),
+            "subscribers": len(self._subscriptions),
+            "directions": {d: inj.describe() for d, inj in self.injectors.items()},
+        }
+
+    # -- internals ---------------------------------------------------------------------------------
+    def _pump(self, now: float, out: TapOutput) -> TapOutput:
+        for d, inj in self.injectors.items():
+            data = inj.poll(now)
+            if data:
+                out.deliveries.append((d, data))
+                self._publish(out, self.recorder.feed(d, data, now))
+        self._publish(out, self.recorder.poll(now))
+        return out
+
+    def _publish(self, out: TapOutput, records: list[CaptureRecord]) -> None:
+        for r in records:
+            self.history.append(r)
+            out.records.append(r)
+            self._emit(out, record_event(r))
+
+    def _emit(self, out: TapOutput, event: dict[str, Any]) -> None:
+        out.events.append(event)
+        for sub in self._subscriptions:
+            sub.push(event)
