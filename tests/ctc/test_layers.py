@@ -50,6 +50,9 @@ def reaches(graph: dict[str, set[str]], start: str) -> set[str]:
         ("ctc", {"emulator", "console"}),
         ("type2", {"ctc", "console", "emulator"}),
         ("train", {"console", "emulator"}),
+        ("faults", {"transport", "tap", "type1", "type2", "emulator"}),
+        ("transport", {"tap", "emulator", "lab", "console", "threats", "cli"}),
+        ("tap", {"type2", "emulator", "lab", "console", "threats", "cli"}),
     ],
 )
 def test_a_layer_never_reaches_the_ones_above_it(package: str, never: set[str]) -> None:
