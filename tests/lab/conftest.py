@@ -124,12 +124,15 @@ def start_lab(
     clear: bool = True,
     console_port: int = 0,
     origins: str = "",
+    path: Path | None = None,
 ) -> Iterator[RunningLab]:
     """Start a lab and wait until every station is synced at the CTC in center mode (and, with
-    `clear`, the empty line reported clear)."""
+    `clear`, the empty line reported clear). The lab is the reference lab renamed `name`
+    (`lab_file`), or the lab file at `path` (whose lab must be called `name`)."""
     run_dir = tmp / "run"
     RUN_DIRS.append(run_dir)
-    path = lab_file(tmp, name, extra_devices, console_port, origins)
+    if path is None:
+        path = lab_file(tmp, name, extra_devices, console_port, origins)
     stderr = open(tmp / f"{name}.stderr", "w")  # noqa: SIM115 -- closed below
     proc = subprocess.Popen(
         [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(path), "--json", "--interval", "5"],
