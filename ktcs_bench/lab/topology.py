@@ -107,8 +107,10 @@ def load_lab(path: str | Path | None = None) -> Lab:
         except UsageError as exc:
             raise fail(place, str(exc)) from None
 
-    def number(section: dict[str, Any], key: str, default: float, place: str) -> float:
-        """A positive setting (a rate, a size); whole where the default is."""
+    def number(section: dict[str, Any], key: str, default: float, place: str) -> float | None:
+        """A positive setting (a rate, a size), whole where the default is; null stays None."""
+        if key in section and section[key] is None:
+            return None
         value = section.get(key, default)
         whole = isinstance(default, int)
         if isinstance(value, bool) or not isinstance(value, int if whole else (int, float)):
@@ -117,6 +119,9 @@ def load_lab(path: str | Path | None = None) -> Lab:
             what = "a positive whole number" if whole else "a positive number"
             raise fail(place, f"must be {what}, not {section.get(key)!r}")
         return float(value)
+
+    def whole(value: float | None) -> int | None:
+        return None if value is None else int(value)
 
     if not isinstance(raw, dict):
         raise fail("", "a lab file is a mapping (lab, line, devices, links)")
@@ -209,12 +214,9 @@ def load_lab(path: str | Path | None = None) -> Lab:
         devices=devices,
         links=tuple(links),
         type1_profile=str(t1.get("profile", "ktcs-type1")),
-        line_rate=(
-            None
-            if "line_rate" in t1 and t1["line_rate"] is None  # null: unpaced
-            else number(t1, "line_rate", 9600.0, "type1.line_rate")
-        ),  # fmt: skip
-        longest_frame_data=int(number(t1, "longest_frame_data", 132, "type1.longest_frame_data")),
+        line_rate=number(t1, "line_rate", 9600.0, "type1.line_rate"),  # null: unpaced
+        # null: the profile's maximum DATA length
+        longest_frame_data=whole(number(t1, "longest_frame_data", 132, "type1.longest_frame_data")),
         type2_profile=str(t2.get("profile", "ktcs-type2")),
         type2_port=port(t2, "type2.port") or 0,
         console_port=port(console, "console.port"),
