@@ -205,7 +205,7 @@ def _stream_records(
             now = time.time()
             if data:
                 yield from recorder.feed("rx", data, now)
-            yield from recorder.poll(now)
+            yield from recorder.handle_timer(now)
         yield from recorder.flush()
     finally:
         if sock is not None:

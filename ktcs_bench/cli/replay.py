@@ -179,7 +179,7 @@ class StreamTarget(Target):
             now = time.time()
             for rec in self._recorder.feed(self._reply_dir, data, now) if data else []:
                 self.replies.put(rec)
-            for rec in self._recorder.poll(now):
+            for rec in self._recorder.handle_timer(now):
                 self.replies.put(rec)
         for rec in self._recorder.flush():
             self.replies.put(rec)

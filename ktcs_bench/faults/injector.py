@@ -1,8 +1,9 @@
 """The fault injector of one direction of a line, sans-I/O: bytes and `now` in, bytes out later.
 
-A `FaultInjector` sits on one direction of a link. `feed(data, now)` takes what the sender wrote;
-`poll(now)` returns what the receiver gets by `now`; `next_deadline()` says when to poll again
-(a delayed byte, or a frame held for a frame-aware fault). It never sleeps or reads a clock; its
+A `FaultInjector` sits on one direction of a link. `feed(data, now)` takes what the sender wrote
+(and returns nothing: it only queues); `handle_timer(now)` returns what the receiver gets by
+`now`; `next_deadline()` says when that changes (a delayed byte, or a frame held for a
+frame-aware fault) -- the timer shape of every core (`ktcs_bench.timed`). It never sleeps or reads a clock; its
 randomness comes from the `random.Random` it is given, so a seed replays the same errors.
 
 Faults, applied in this order:
@@ -443,8 +444,8 @@ class FaultInjector:
             self._frame_stage(rec.raw, isinstance(rec, Frame) and rec.error is None, now)
         self._maybe_stop_framing(now)
 
-    def poll(self, now: float) -> bytes:
-        """What the receiver gets by `now`."""
+    def handle_timer(self, now: float) -> bytes:
+        """What the receiver gets by `now` (call after every `feed` and at `next_deadline()`)."""
         if self._decoder is not None and self._decoder.buffered:
             if now - self._last_in >= self.hold_timeout:
                 for rec in self._decoder.close():

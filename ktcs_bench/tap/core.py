@@ -192,11 +192,11 @@ class TapCore:
     # -- internals ---------------------------------------------------------------------------------
     def _pump(self, now: float, out: TapOutput) -> TapOutput:
         for d, inj in self.injectors.items():
-            data = inj.poll(now)
+            data = inj.handle_timer(now)
             if data:
                 out.deliveries.append((d, data))
                 self._publish(out, self.recorder.feed(d, data, now))
-        self._publish(out, self.recorder.poll(now))
+        self._publish(out, self.recorder.handle_timer(now))
         return out
 
     def _publish(self, out: TapOutput, records: list[CaptureRecord]) -> None:

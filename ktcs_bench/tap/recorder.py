@@ -2,7 +2,8 @@
 
 Sans-I/O. Each direction is framed with the `StreamDecoder` of the link's profile, so a record is
 one frame (or one span of garbage); a partial frame is reported as it stands once the direction
-has been idle for `idle_flush` seconds. A record's time is when its last byte passed the tap.
+has been idle for `idle_flush` seconds (`handle_timer(now)` at `next_deadline()`: the timer shape
+of `ktcs_bench.timed`). A record's time is when its last byte passed the tap.
 """
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ class Recorder:
         d.total += len(data)
         return [CaptureRecord(now, direction, r.raw) for r in d.decoder.feed(data)]
 
-    def poll(self, now: float) -> list[CaptureRecord]:
+    def handle_timer(self, now: float) -> list[CaptureRecord]:
+        """A direction idle for `idle_flush` with a partial frame: that frame, as it stands."""
         out: list[CaptureRecord] = []
         for name, d in self._dirs.items():
             if d.decoder.buffered and now - d.last >= self.idle_flush:

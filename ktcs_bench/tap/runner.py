@@ -3,8 +3,9 @@
 `Tap` is what the adapters (pty.py, tcp.py) share. It runs an asyncio loop -- in a thread of its
 own after `start()` (library use, tests, `lab up`), or in the caller's thread with `run()` (the
 `ktcs-bench tap run` process) -- and does the I/O the core asks for: it hands deliveries to the
-adapter, writes records to the capture writers, arms one timer for the core's next deadline,
-serves the control port and announces a named tap in the registry. The public methods are
+adapter, writes records to the capture writers, leaves the core's deadlines to the wall-clock
+driver (`ktcs_bench.timed.aio.LoopTimer`; the core's clock is the loop's, set to epoch time when
+the tap starts, since records carry epoch times), serves the control port and announces a named tap in the registry. The public methods are
 thread-safe.
 
 The control port (127.0.0.1, any free port unless told) is the JSON-lines server the devices'
@@ -34,6 +35,7 @@ from ktcs_bench.runtime import server_token
 from ktcs_bench.tap import registry
 from ktcs_bench.tap.control import HELP, Command, parse_command
 from ktcs_bench.tap.core import HISTORY, Subscription, TapCore, TapOutput
+from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport import jsonlines
 
 T = TypeVar("T")
@@ -74,7 +76,7 @@ class Tap:
         self._ready = threading.Event()
         self._error: BaseException | None = None
         self._stop_event: asyncio.Event | None = None
-        self._timer: asyncio.TimerHandle | None = None
+        self.timer = LoopTimer(self.core, lambda now, out: self._apply(out))
         self._tasks: set[asyncio.Task[Any]] = set()
         self._closing = False
 
@@ -128,6 +130,7 @@ class Tap:
     async def _main(self, on_ready: Callable[[Tap], None] | None, signals: bool) -> None:
         loop = asyncio.get_running_loop()
         self._loop = loop
+        self.timer.origin = loop.time() - time.time()  # the core's `now`: epoch time, monotonic
         self._loop_thread = threading.get_ident()
         self._stop_event = asyncio.Event()
         server: asyncio.Server | None = None
@@ -159,8 +162,7 @@ class Tap:
                 registry.withdraw(self.name)
             if server is not None:
                 server.close()
-            if self._timer is not None:
-                self._timer.cancel()
+            self.timer.cancel()
             for wake in self._wakes.values():
                 wake.set()  # subscribers see the tap closing and end their streams
             # everything else on this loop is the tap's: connections, readers, subscribers
@@ -278,7 +280,7 @@ class Tap:
     # -- inside the loop ---------------------------------------------------------------------
     def _now(self) -> float:
         """Records carry epoch times (captures, monitors on other machines)."""
-        return time.time()
+        return self.timer.now()
 
     def _command(self, cmd: Command) -> dict[str, Any]:
         answer, out = self.core.execute(cmd, self._now())
@@ -313,22 +315,8 @@ class Tap:
         if out.events:
             for wake in self._wakes.values():
                 wake.set()
-        self._arm()
-
-    def _arm(self) -> None:
-        if self._loop is None or self._closing:
-            return
-        deadline = self.core.next_deadline()
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-        if deadline is not None:
-            delay = max(0.0, deadline - self._now()) + 0.001
-            self._timer = self._loop.call_later(delay, self._on_timer)
-
-    def _on_timer(self) -> None:
-        self._timer = None
-        self._apply(self.core.handle_timer(self._now()))
+        if not self._closing:
+            self.timer.poke()
 
     # -- the control port ------------------------------------------------------------------------
     async def _handle(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any] | None:

@@ -95,7 +95,7 @@ class VirtualWire:
     def _release(self, now: float) -> None:
         """What the fault injector lets through by `now` goes onto the line."""
         if self.faults is not None:
-            data = self.faults.poll(now)
+            data = self.faults.handle_timer(now)
             if data:
                 self._line(data, now)
 

@@ -48,7 +48,7 @@ def run(
         pieces = [c[i : i + 1] for i in range(len(c))] if byte_by_byte else [c]
         for p in pieces:
             inj.feed(p, now)
-            out += inj.poll(now)
+            out += inj.handle_timer(now)
     return bytes(out)
 
 
@@ -125,7 +125,7 @@ def test_garbage_between_frames_passes_while_framing() -> None:
     inj.apply(DropFrame(direction=None), T)
     junk = b"\xff\x00\x02\x09"
     out = run(inj, [junk, fs[0], fs[1]])
-    out += inj.poll(T + 1)  # idle: whatever was held is released
+    out += inj.handle_timer(T + 1)  # idle: whatever was held is released
     assert out == junk + fs[1]
 
 
@@ -136,7 +136,7 @@ def test_partial_frame_is_released_after_the_hold_timeout() -> None:
     assert run(inj, [fs[0][:5]]) == b""
     deadline = inj.next_deadline()
     assert deadline is not None and deadline > T
-    assert inj.poll(deadline) == fs[0][:5]
+    assert inj.handle_timer(deadline) == fs[0][:5]
 
 
 def test_drop_bytes_and_insert_garbage() -> None:
@@ -144,7 +144,7 @@ def test_drop_bytes_and_insert_garbage() -> None:
     inj.apply(DropBytes(3), T)
     assert run(inj, [b"abcdef"]) == b"def"
     inj.apply(InsertGarbage(b"\x02\xff\x00"), T)
-    assert inj.poll(T) == b"\x02\xff\x00"
+    assert inj.handle_timer(T) == b"\x02\xff\x00"
     assert run(inj, [b"gh"]) == b"gh"
 
 
@@ -152,12 +152,12 @@ def test_delay_keeps_order_and_releases_late() -> None:
     inj = fresh()
     inj.apply(Delay(0.5), T)
     inj.feed(b"one", T)
-    assert inj.poll(T + 0.4) == b""
+    assert inj.handle_timer(T + 0.4) == b""
     assert inj.next_deadline() == pytest.approx(T + 0.5)
     inj.apply(Delay(0.0), T + 0.45)
     inj.feed(b"two", T + 0.45)  # must not overtake "one"
-    assert inj.poll(T + 0.46) == b""
-    assert inj.poll(T + 0.5) == b"onetwo"
+    assert inj.handle_timer(T + 0.46) == b""
+    assert inj.handle_timer(T + 0.5) == b"onetwo"
 
 
 def test_discard_drops_what_is_queued_for_a_lost_connection() -> None:
@@ -167,11 +167,11 @@ def test_discard_drops_what_is_queued_for_a_lost_connection() -> None:
     inj.apply(DuplicateFrame(), T)
     inj.feed(frames(1)[0][:4], T)  # half a frame held by the frame stage
     inj.discard()
-    assert inj.poll(T + 1.0) == b"" and inj.next_deadline() is None
+    assert inj.handle_timer(T + 1.0) == b"" and inj.next_deadline() is None
     assert inj.stats.bytes_dropped == 5 + 4
     fresh_frame = frames(1, 7)[0]
     inj.feed(fresh_frame, T + 1.0)  # the faults themselves still apply to the next connection
-    assert inj.poll(T + 1.2) == b"" and inj.poll(T + 1.5) == fresh_frame * 2
+    assert inj.handle_timer(T + 1.2) == b"" and inj.handle_timer(T + 1.5) == fresh_frame * 2
 
 
 def test_what_was_thrown_away_holds_nothing_back() -> None:
@@ -187,7 +187,7 @@ def test_what_was_thrown_away_holds_nothing_back() -> None:
             inj.restore()
         inj.clear(T + 1.0)
         inj.feed(b"fresh", T + 1.0)
-        assert inj.poll(T + 1.0) == b"fresh", lose
+        assert inj.handle_timer(T + 1.0) == b"fresh", lose
 
 
 def test_cut_and_restore() -> None:
@@ -205,7 +205,7 @@ def test_clear_releases_held_frames() -> None:
     inj.apply(ReorderFrames(), T)
     assert run(inj, [fs[0]]) == b""
     inj.clear(T)
-    assert inj.poll(T) == fs[0]
+    assert inj.handle_timer(T) == fs[0]
     assert run(inj, [fs[1]]) == fs[1]
 
 
