@@ -28,7 +28,7 @@ from ktcs_bench.cli.monitor import FramePrinter
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.errors import PeerError, UsageError
-from ktcs_bench.tap import TapClient
+from ktcs_bench.tap.client import TapClient
 from ktcs_bench.tap.recorder import Recorder
 from ktcs_bench.tap.registry import tap_file
 from ktcs_bench.transport.endpoints import parse_endpoint

@@ -10,10 +10,13 @@ from typing import Any
 from ktcs_bench.capture import open_writer
 from ktcs_bench.codec.profile import get_profile
 from ktcs_bench.errors import UsageError
-from ktcs_bench.tap import PtyTap, Tap, TapClient, TcpTap
+from ktcs_bench.tap.client import TapClient
 from ktcs_bench.tap.control import HELP as CONTROL_HELP
 from ktcs_bench.tap.control import parse_command
+from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.registry import known_taps, parse_tap_address
+from ktcs_bench.tap.runner import Tap
+from ktcs_bench.tap.tcp import TcpTap
 
 HELP = "run a recording, fault-injecting tap on a link; command a running tap"
 DESCRIPTION = """\

@@ -22,7 +22,9 @@ from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
 from ktcs_bench.runtime import private_dir, server_token, this_process
-from ktcs_bench.tap import PtyTap, Tap, TcpTap
+from ktcs_bench.tap.pty import PtyTap
+from ktcs_bench.tap.runner import Tap
+from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.transport import jsonlines
 
 log = logging.getLogger("ktcs_bench.lab")

@@ -1,32 +1,19 @@
 """Taps: record, decode and corrupt the traffic of one link (SPEC §1, §7).
 
 Owns: the sans-I/O tap (`TapCore`, core.py: the fault injectors of both directions, the recorder,
-the history and the subscribers' event stream), the runner that binds it to an asyncio loop, the
-wall clock and a JSON-lines control port (`Tap`, runner.py), its two adapters (`PtyTap`, pty.py;
-`TcpTap`, tcp.py), the command words and their JSON (control.py), the client of a control port
-(client.py), the recorder (recorder.py) and the registry of named taps (registry.py). The faults
-themselves are `ktcs_bench.faults`; core.py, control.py and recorder.py touch no socket, pty or
-clock.
+the history and the subscribers' event stream), the command words and their JSON (control.py) and
+the recorder (recorder.py) -- what this package's own namespace offers, and all of it free of I/O
+and clocks -- and, each in its own module: the runner that binds the core to an asyncio loop, the
+wall clock and a JSON-lines control port (`runner.Tap`), its two adapters (`pty.PtyTap`,
+`tcp.TcpTap`), the client of a control port (`client.TapClient`) and the registry of named taps
+(registry.py). The faults themselves are `ktcs_bench.faults`.
 Must not touch: the protocol state machines (type1/, type2/) -- a tap only moves bytes. Must not
-import what stands above it: emulator/, lab/, console/, threats/, cli/.
+import what stands above it: emulator/, lab/, console/, threats/, cli/. This file imports no
+adapter, so that importing the core loads no socket, pty, loop or clock.
 """
 
-from ktcs_bench.tap.client import TapClient
 from ktcs_bench.tap.control import Command, parse_command
-from ktcs_bench.tap.core import TapCore, TapOutput
-from ktcs_bench.tap.pty import PtyTap
+from ktcs_bench.tap.core import Subscription, TapCore, TapOutput
 from ktcs_bench.tap.recorder import Recorder
-from ktcs_bench.tap.runner import Tap
-from ktcs_bench.tap.tcp import TcpTap
 
-__all__ = [
-    "Command",
-    "PtyTap",
-    "Recorder",
-    "Tap",
-    "TapClient",
-    "TapCore",
-    "TapOutput",
-    "TcpTap",
-    "parse_command",
-]
+__all__ = ["Command", "Recorder", "Subscription", "TapCore", "TapOutput", "parse_command"]

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from ktcs_bench.codec import Frame, FrameCodec, StreamDecoder
 from ktcs_bench.conformance.timing import SuiteTiming
 from ktcs_bench.errors import UsageError
-from ktcs_bench.tap import TcpTap
+from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.threats.application import Application
 from ktcs_bench.threats.report import ThreatResult, not_run
 from ktcs_bench.threats.wire import WireTap, wait_for

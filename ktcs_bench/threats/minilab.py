@@ -12,7 +12,8 @@ from pathlib import Path
 from ktcs_bench.errors import PeerError
 from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
-from ktcs_bench.tap import PtyTap, TcpTap
+from ktcs_bench.tap.pty import PtyTap
+from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.threats.application import Application, host_port
 from ktcs_bench.threats.campaign import Target
 from ktcs_bench.threats.wire import WireTap, wait_for

@@ -17,7 +17,7 @@ from typing import Any
 from ktcs_bench.codec import Frame, StreamDecoder, get_profile
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.errors import PeerError, UsageError
-from ktcs_bench.tap import TapClient
+from ktcs_bench.tap.client import TapClient
 
 STREAM_LIMIT = 200_000  # events kept; a campaign reads a few thousand
 

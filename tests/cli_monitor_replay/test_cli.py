@@ -260,7 +260,7 @@ def test_replay_over_tcp_and_into_a_tap(tmp_path: Path, env: dict[str, str]) -> 
     assert all(r["op_name"] == "HEARTBEAT" and r["crc_ok"] for r in rows)
 
     # the same frames into a tap whose end b is a pty echo
-    from ktcs_bench.tap import PtyTap
+    from ktcs_bench.tap.pty import PtyTap
 
     with PtyTap(names=("ixl", "atc")) as tap:
         assert isinstance(tap, PtyTap) and tap.control_address is not None

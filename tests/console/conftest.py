@@ -23,7 +23,7 @@ from ktcs_bench.ctc.desk import Desk
 from ktcs_bench.ctc.model import CtcModel
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.loader import load_line
-from ktcs_bench.tap import TcpTap
+from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import CycleInputs, LineData, TrainConfig, TrainEndpoint
 from ktcs_bench.train.mrsp import Restriction

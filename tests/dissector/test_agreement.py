@@ -19,7 +19,8 @@ from ktcs_bench.codec.profile import get_profile
 from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.faults import BitErrors, InsertGarbage
-from ktcs_bench.tap import PtyTap, TcpTap
+from ktcs_bench.tap.pty import PtyTap
+from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.transport.aio import LinkRunner
 from ktcs_bench.transport.serialport import SerialTransport
 from ktcs_bench.type1 import LinkConfig, LinkUp, Type1Link

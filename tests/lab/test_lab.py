@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from ktcs_bench.station.loader import load_line
-from ktcs_bench.tap import TapClient
+from ktcs_bench.tap.client import TapClient
 
 from .conftest import RunningLab, request, token_for, wait_until
 

@@ -21,7 +21,9 @@ from ktcs_bench.emulator.device import Device
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.faults import BitErrors, Delay, DropFrame
 from ktcs_bench.runtime import read_token, server_token
-from ktcs_bench.tap import PtyTap, TapClient, TcpTap
+from ktcs_bench.tap.client import TapClient
+from ktcs_bench.tap.pty import PtyTap
+from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.transport import jsonlines
 
 CODEC1 = FrameCodec(get_profile("ktcs-type1"))

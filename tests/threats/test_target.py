@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from ktcs_bench.tap import TapClient
+from ktcs_bench.tap.client import TapClient
 from tests.conformance.conftest import CLI, Proc, cli, spawn  # noqa: F401 -- the fixture
 from tests.tap.test_taps import EchoServer
 

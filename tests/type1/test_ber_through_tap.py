@@ -12,7 +12,7 @@ from collections import Counter
 from typing import Any
 
 from ktcs_bench.faults import BitErrors, DropBytes, InsertGarbage
-from ktcs_bench.tap import PtyTap
+from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.transport.aio import LinkRunner
 from ktcs_bench.transport.serialport import SerialTransport
 from ktcs_bench.type1 import CommunicationError, LinkConfig, LinkDown, MessageReceived, Type1Link
