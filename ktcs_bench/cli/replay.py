@@ -102,7 +102,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(handler=run)
 
 
-class Target:
+class ReplayTarget:
     """Where frames go; replies arrive framed, as capture records, on `replies`."""
 
     def __init__(self) -> None:
@@ -124,7 +124,7 @@ class Target:
         self._thread.start()
 
 
-class StreamTarget(Target):
+class StreamTarget(ReplayTarget):
     """A pty, a pyserial URL, or a TCP address: a byte stream both ways."""
 
     def __init__(self, spec: str, profile: FrameProfile, reply_dir: str, baud: int) -> None:
@@ -192,7 +192,7 @@ class StreamTarget(Target):
             self._port.close()
 
 
-class TapTarget(Target):
+class TapTarget(ReplayTarget):
     """A running tap: frames are injected with `send DIR HEX`; replies come from `subscribe`."""
 
     def __init__(self, spec: str, send_dir: str | None) -> None:
@@ -316,7 +316,7 @@ def run(args: argparse.Namespace) -> int:
                          f"(it has {', '.join(capture.directions)})")  # fmt: skip
     expect = read_capture(args.expect) if args.expect else None
     header: dict[str, Any] = {}
-    target: Target
+    target: ReplayTarget
     if _is_tap(args.to):
         spec = args.to.removeprefix("tap://").removeprefix("tap:")
         tap_target = TapTarget(spec, send_dir)

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from ktcs_bench.threats import (
         THREATS,
         Application,
-        Target,
+        ThreatTarget,
         WireTap,
         find_in_labs,
         run_campaign,
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
                 app = find_in_labs(wire.name, lab_name)
                 if wire.protocol == "type1" and app.readable and app.device != dut:
                     app = Application()  # the bench reads IXLs: a Type I DUT that is not one
-                targets.append(Target(wire, dut, app, station=args.station))
+                targets.append(ThreatTarget(wire, dut, app, station=args.station))
             chosen = args.threat or None
             protocols = {t.tap.protocol for t in targets}
             missing = [n for n in chosen or [] if THREATS[n][0] not in protocols]

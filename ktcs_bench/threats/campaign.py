@@ -30,7 +30,7 @@ NOT_OBSERVED = "not observed (the device's state cannot be read: not one of our 
 
 
 @dataclass
-class Target:
+class ThreatTarget:
     """A tapped link under attack. `dut`: the tap end that receives the injected frames (Type I)
     or the CTC (Type II); `app`: its devices' state, when readable; `station` (Type II): the
     station the link carries, for the masquerade."""
@@ -104,7 +104,7 @@ def _outcome(app_ok: bool | None, good: str, bad: str, wire: str) -> tuple[str, 
 
 
 # -- Type I ---------------------------------------------------------------------------------------
-def repetition(t: Target) -> ThreatResult:
+def repetition(t: ThreatTarget) -> ThreatResult:
     """The tap repeats the peer's next frame; when that is an ACK (not a delivery), again."""
     twice: Frame | None = None
     skipped = 0
@@ -138,7 +138,7 @@ def repetition(t: Target) -> ThreatResult:
                         outcome, safe, ev)  # fmt: skip
 
 
-def deletion(t: Target) -> ThreatResult:
+def deletion(t: ThreatTarget) -> ThreatResult:
     before = t.data_seqs()
     mark = t.tap.act(f"drop-frame 1 {t.toward}")
     time.sleep(2 * t.timing.link_test_period + 0.5)  # a LINK_TEST or an ACK is due by then
@@ -186,7 +186,7 @@ def deletion(t: Target) -> ThreatResult:
                         retx and down and asked, outcome, safe, ev)  # fmt: skip
 
 
-def insertion(t: Target) -> ThreatResult:
+def insertion(t: ThreatTarget) -> ThreatResult:
     seqs = t.data_seqs()
     seq = ((seqs[-1] if seqs else 0) + 100) % 256
     code, value, label = t.probe()
@@ -210,7 +210,7 @@ def insertion(t: Target) -> ThreatResult:
                         asked and answered, outcome, safe, ev)  # fmt: skip
 
 
-def corruption(t: Target) -> ThreatResult:
+def corruption(t: ThreatTarget) -> ThreatResult:
     profile = t.tap.profile
     code, value, _ = t.probe()
     frame = bytearray(FrameCodec(profile).encode_message(0x77, "CHANGE",
@@ -231,11 +231,11 @@ def corruption(t: Target) -> ThreatResult:
 
 
 # -- Type II --------------------------------------------------------------------------------------
-def _synced(t: Target) -> bool | None:
+def _synced(t: ThreatTarget) -> bool | None:
     return t.app.views_agree() if t.app.ctc is not None else None
 
 
-def resequencing(t: Target) -> ThreatResult:
+def resequencing(t: ThreatTarget) -> ThreatResult:
     mark = t.tap.act(f"reorder {t.toward}")
     asked = t.tap.wait_frame(mark, t.back, lambda f: f.ok and t.op(f) == "REQUEST_ALL",
                              2 * t.timing.heartbeat_period + 3.0)  # fmt: skip
@@ -252,7 +252,7 @@ def resequencing(t: Target) -> ThreatResult:
                                f"full state sent: {'yes' if dumped else 'no'}"])  # fmt: skip
 
 
-def delay(t: Target) -> ThreatResult:
+def delay(t: ThreatTarget) -> ThreatResult:
     hold = t.timing.t2_t_max + 2.0
     mark = t.tap.act(f"delay {hold:g} {t.toward}")
     limit = t.timing.t2_t_max + t.timing.tolerance + 4.0
@@ -278,7 +278,7 @@ def delay(t: Target) -> ThreatResult:
                         "shown link down", closed and again, outcome, safe, ev)  # fmt: skip
 
 
-def _connected_station(t: Target) -> int | None:
+def _connected_station(t: ThreatTarget) -> int | None:
     if t.station is not None:
         return t.station
     opcode = t.tap.profile.opcodes.by_name.get("IDENT")
@@ -305,7 +305,7 @@ def _impostor(address: tuple[str, int], codec: FrameCodec, station: int) -> list
             if isinstance(f, Frame) and f.op == ident]  # fmt: skip
 
 
-def masquerade(t: Target) -> ThreatResult:
+def masquerade(t: ThreatTarget) -> ThreatResult:
     station = _connected_station(t)
     target = t.tap.info.get("target")
     if t.tap.kind != "tcp" or not target:
@@ -349,7 +349,7 @@ def masquerade(t: Target) -> ThreatResult:
                         refused and kept and logged is not False, outcome, safe, ev)  # fmt: skip
 
 
-def settle(t: Target, timeout: float = 15.0) -> bool:
+def settle(t: ThreatTarget, timeout: float = 15.0) -> bool:
     """Wait until the link is healthy again before the next threat: the devices' state when it can
     be read, else traffic seen both ways."""
     if t.tap.protocol == "type2" and t.app.ctc is not None:
@@ -363,7 +363,7 @@ def settle(t: Target, timeout: float = 15.0) -> bool:
                     timeout)  # fmt: skip
 
 
-def _steady(t: Target) -> bool:
+def _steady(t: ThreatTarget) -> bool:
     """Type II seen from the wire alone: one connection, traffic both ways and no connect or
     disconnect for two heartbeat periods (a reconnecting station is not yet a target)."""
     mark = t.tap.mark()
@@ -373,7 +373,7 @@ def _steady(t: Target) -> bool:
     return bool(traffic and not churn and t.tap.status().get("connected"))
 
 
-ThreatFn = Callable[[Target], ThreatResult]
+ThreatFn = Callable[[ThreatTarget], ThreatResult]
 THREATS: dict[str, tuple[str, ThreatFn]] = {
     "repetition": ("type1", repetition),
     "deletion": ("type1", deletion),
@@ -386,9 +386,9 @@ THREATS: dict[str, tuple[str, ThreatFn]] = {
 
 
 def run_campaign(
-    targets: list[Target],
+    targets: list[ThreatTarget],
     names: list[str] | None = None,
-    before_each: Callable[[Target], object] = settle,
+    before_each: Callable[[ThreatTarget], object] = settle,
     progress: Callable[[str], None] | None = None,
 ) -> list[ThreatResult]:
     """Each chosen threat against the first target of its protocol; a threat with no such target
@@ -412,6 +412,6 @@ def run_campaign(
     return out
 
 
-def _clear(t: Target) -> None:
+def _clear(t: ThreatTarget) -> None:
     with contextlib.suppress(Exception):
         t.tap.act("clear", timeout=2.0)

@@ -15,7 +15,7 @@ from ktcs_bench.lab.topology import load_lab, resolve_lab_path
 from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.threats.application import Application, host_port
-from ktcs_bench.threats.campaign import Target
+from ktcs_bench.threats.campaign import ThreatTarget
 from ktcs_bench.threats.wire import WireTap, wait_for
 
 READY_TIMEOUT = 15.0
@@ -84,14 +84,14 @@ class ThreatLab:
         return bool(s and v and s["links"].get("atc") and s["links"].get("ctc")
                     and self.app.settled(s) and v["summary"]["synced"])  # fmt: skip
 
-    def targets(self) -> list[Target]:
+    def targets(self) -> list[ThreatTarget]:
         """The Type I link (device under test: the IXL) and the Type II link (the CTC)."""
         out = []
         for tap, dut in ((self.t1, "ixl"), (self.t2, "ctc")):
             assert tap.control_address is not None
             wire = WireTap(tap.control_address)
             self.wires.append(wire)
-            out.append(Target(wire, dut, self.app, station=self.station))
+            out.append(ThreatTarget(wire, dut, self.app, station=self.station))
         return out
 
     def close(self) -> None:
