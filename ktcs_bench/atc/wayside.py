@@ -27,8 +27,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from ktcs_bench.atc.codes import AtcCode, braking_speed_kmh, most_restrictive, quantise
-from ktcs_bench.charts import names as n
-from ktcs_bench.charts.generate import station_chart, totalisers
+from ktcs_bench.codes import names as n
+from ktcs_bench.codes.names import Function as F
+from ktcs_bench.codes.stations import StationCodes
 from ktcs_bench.station.model import Direction, Interval, Line, Route, TrackCircuit
 
 MAX_ROUTES_AHEAD = 4  # a path never chains more routes than a station has in a row
@@ -67,9 +68,9 @@ class WaysideAtc:
         self.link_up = False
         self.rails_up = True  # the occupancy source is there (an adapter with rails says when not)
         self.tc_route: dict[str, str] = {}  # track circuit -> route that last held it
-        self._inputs = tuple(c.name for c in station_chart(self.view, "ixl_to_atc").codes)
+        self.codes = StationCodes(self.view)
+        self._inputs = self.codes.names("ixl_to_atc")
         self._routes = self.view.station.routes
-        self._totalisers = totalisers(self.view)
         self.log: list[AtcEvent] = []
         self._events: list[AtcEvent] = []
         self._sent = self.full_state()
@@ -106,8 +107,9 @@ class WaysideAtc:
                 continue
             before = self.ixl.get(name, 0)
             self.ixl[name] = int(state)
-            if name.startswith("RLI") and state and not before:
-                route = self.view.station.route(name[3 + len(str(self.st)) :])
+            code = self.codes.parse_code(name)
+            if code is not None and code.function is F.RLI and state and not before:
+                route = self.view.station.route(code.object)
                 for t in route.track_circuits:
                     self.tc_route[t] = route.name
         return self._finish(now)
@@ -127,8 +129,8 @@ class WaysideAtc:
     def full_state(self) -> dict[str, int]:
         """Every ATC->IXL chart code: TC, TTC, IZC (1 occupied)."""
         out = {t.name: int(self._occ(t.name)) for t in self.own}
-        for name, half in self._totalisers:
-            out[name] = int(any(self._occ(t) for t in half))
+        for ttc in self.codes.totalisers:
+            out[ttc.name] = int(any(self._occ(t) for t in ttc.track_circuits))
         for iv in self.view.intervals:
             out[n.izc(iv.name)] = int(any(self._occ(t) for t in iv.track_circuits))
         return out

@@ -1,6 +1,6 @@
 """`ktcs-bench chart generate|check`: code charts from station data, and their consistency check.
 
-Thin front over `ktcs_bench.charts.generate`. `check` exits 1 when a chart disagrees with the
+Thin front over `ktcs_bench.charts` (`files.generate`, `check.check_charts`). `check` exits 1 when a chart disagrees with the
 station data or the emulators (unknown, duplicate, missing or misordered codes), 0 when all agree.
 """
 
@@ -10,7 +10,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ktcs_bench.charts.generate import check_charts, generate
+from ktcs_bench.charts.check import check_charts
+from ktcs_bench.charts.files import generate
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.station.loader import load_line

@@ -16,12 +16,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-from ktcs_bench.charts.model import CodeChart, load_chart
+from ktcs_bench.charts.files import load_chart
 from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.hextext import Chunk, HexTextParser, text_encoding
 from ktcs_bench.codec.profile import FrameProfile, get_profile, profile_names
 from ktcs_bench.codec.render import BOLD, RESET, json_line, payload, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.errors import UsageError
 
 HELP = "decode hex frames (console captures, hex dumps, hex logs) into fields and CRC verdicts"

@@ -15,12 +15,13 @@ import serial
 
 from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
 from ktcs_bench.capture.arq import ArqTracker
-from ktcs_bench.charts.model import CodeChart, load_chart
+from ktcs_bench.charts.files import load_chart
 from ktcs_bench.cli._common import duration, positive, print_json_line
 from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap.client import TapClient
 from ktcs_bench.tap.recorder import Recorder

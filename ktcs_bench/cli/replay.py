@@ -22,7 +22,7 @@ from ktcs_bench.capture import (
     read_capture,
     reverse_direction,
 )
-from ktcs_bench.charts.model import load_chart
+from ktcs_bench.charts.files import load_chart
 from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.cli.monitor import FramePrinter
 from ktcs_bench.codec.profile import FrameProfile, get_profile

@@ -1,10 +1,11 @@
 """In-process stations for the console's demo and tests: a real interlocking + trackside over TCP.
 
-`RigIxl` is an `IxlApplication` (Type II) around `ixl.rig.StationRig` -- the real `Interlocking`
-wired to the real `Trackside` -- run on the asyncio loop's clock: controls go to the interlocking,
-a ticker walks the rig through its deadlines (point throws, timed releases) and every change of
-the IXL->CTC picture is pushed to the CTC as INDICATION changes. It is an adapter for people
-without the full multi-process lab, not the lab's IXL emulator.
+`RigIxl` serves `ixl.rig.StationRig` -- the real `Interlocking` wired to the real `Trackside` --
+over Type II, run on the asyncio loop's clock: its binding (`binding.ControlLink`, the IXL
+emulator's own) is the Type II application, controls go to the interlocking by name, a ticker
+walks the rig through its deadlines (point throws, timed releases) and every change the
+interlocking gives the CTC is pushed as INDICATION changes. It is an adapter for people without
+the full multi-process lab, not the lab's IXL emulator.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import asyncio
 import contextlib
 from dataclasses import replace
 
+from ktcs_bench.binding import ControlLink
+from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.rig import StationRig
@@ -43,28 +46,34 @@ class RigIxl:
     """One station's interlocking + trackside, reachable over Type II once `start()`ed."""
 
     def __init__(self, line: Line, station: int, *, mode: Mode = Mode.CENTER) -> None:
-        self.rig = StationRig(line.view(station), mode=mode)
-        self.indications = self.rig.ixl.charts["ixl_to_ctc"]  # the interlocking's own charts
-        self.controls = self.rig.ixl.charts["ctc_to_ixl"]
+        view = line.view(station)
+        self.rig = StationRig(view, mode=mode)
+        self.link = ControlLink(
+            *link_charts(view, "ixl_to_ctc"), lambda: self.rig.ctc, self._control,
+            int(Reason.UNKNOWN_CODE),
+        )  # fmt: skip
+        self.rig.on_ctc = self._indicate
         self.station = station
         self.client: IxlClient | None = None
         self._t0 = 0.0
-        self._sent: dict[str, int] = dict(self.rig.ctc)
         self._ticker: asyncio.Task[None] | None = None
 
-    # -- IxlApplication ------------------------------------------------------------------------
+    # -- the application the Type II client serves ---------------------------------------------
     def full_state(self) -> list[tuple[int, int]]:
-        self._sent = dict(self.rig.ctc)
-        return sorted((self.indications.number_of(k), v) for k, v in self.rig.ctc.items())
+        return self.link.full_state()
 
     def on_control(self, code: int, value: int) -> tuple[bool, int]:
         self._catch_up()
-        name = self.controls.name_of(code)
-        if name is None:
-            return False, int(Reason.UNKNOWN_CODE)
+        return self.link.on_control(code, value)
+
+    def _control(self, name: str, value: int) -> tuple[bool, int]:
         result = self.rig.control(name, value)
-        self.push()
         return result.accepted, int(result.reason)
+
+    def _indicate(self, changes: list[tuple[str, int]]) -> None:
+        items = self.link.send(changes)
+        if items and self.client is not None:
+            self.client.indicate(items)
 
     # -- driving it ----------------------------------------------------------------------------
     def start(self, host: str, port: int) -> IxlClient:
@@ -87,21 +96,11 @@ class RigIxl:
         """A train on (or off) a track circuit, as the ATC would report it."""
         self._catch_up()
         self.rig.occupy(tc, occupied)
-        self.push()
 
     def local(self, action: str) -> None:
         """The local operator's panel: "grant" / "refuse" a center-mode request, "take" control."""
         self._catch_up()
         self.rig.take(self.rig.ixl.local(action, self.rig.now))
-        self.push()
-
-    def push(self) -> None:
-        changes = [(k, v) for k, v in self.rig.ctc.items() if self._sent.get(k) != v]
-        if not changes:
-            return
-        self._sent.update(changes)
-        if self.client is not None:
-            self.client.indicate((self.indications.number_of(k), v) for k, v in changes)
 
     def _catch_up(self) -> None:
         now = asyncio.get_running_loop().time() - self._t0
@@ -112,4 +111,3 @@ class RigIxl:
         while True:
             await asyncio.sleep(TICK_S)
             self._catch_up()
-            self.push()

@@ -39,11 +39,11 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
-from ktcs_bench.charts.model import CodeChart
 from ktcs_bench.codec.frame import Frame
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import to_text
 from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.console.diagram import build
 from ktcs_bench.console.trains import EndpointTrains, TrainSource
 from ktcs_bench.ctc.desk import Desk

@@ -2,7 +2,7 @@
 commands as control codes (pure: no sockets, no clock).
 
 `StationModel` pairs one station's data with its two Type II code charts, both derived from the
-station data (`charts.generate.station_chart`, as the IXL derives its own), and reads an
+station data (`codes.stations.station_chart`, as the IXL derives its own), and reads an
 indication table once (`read`) into mode, routes, track circuits, points, signals and traffic
 directions. Two renderings of that one reading: `picture` (what the web console draws) and
 `summary` (what `ktcs-bench ctc show` and `lab status` print). Operator commands become `Action`s:
@@ -20,9 +20,9 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from ktcs_bench.charts import names as n
-from ktcs_bench.charts.generate import station_chart
-from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.codes import names as n
+from ktcs_bench.codes.chart import CodeChart
+from ktcs_bench.codes.stations import station_chart
 from ktcs_bench.ctc.tables import IndicationTable, IndicationTables
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line, Station, StationView

@@ -18,11 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench import __version__
-from ktcs_bench.charts.model import CodeChart
 from ktcs_bench.codec.crc import CrcSpec
 from ktcs_bench.codec.opcodes import FieldSpec, Opcode
 from ktcs_bench.codec.profile import DEFAULT_PROFILE, FrameProfile
 from ktcs_bench.codec.stream import GARBAGE_HOLD
+from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.errors import UsageError
 
 DATA_MARK = "-- @KTCS_DATA@"

@@ -15,13 +15,13 @@ from ktcs_bench.transport.endpoints import Endpoint
 
 class AtcDevice(IxlPeerDevice):
     kind = "atc"
-    tx_chart, rx_chart = "atc_to_ixl", "ixl_to_atc"
+    tx_chart = "atc_to_ixl"
 
     def __init__(
         self, name: str, line: Line, station: int, links: dict[str, Endpoint], **kwargs: Any
     ) -> None:
         self.atc = WaysideAtc(line, station)
-        super().__init__(name, line, station, links, self.atc.full_state(), **kwargs)
+        super().__init__(name, line, station, links, self.atc.full_state, **kwargs)
 
     def from_ixl(self, codes: dict[str, int]) -> None:
         self.apply(self.atc.receive(codes, self.now()))

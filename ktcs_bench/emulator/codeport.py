@@ -1,10 +1,11 @@
 """A Type I link that carries one code chart each way, as named states (SPEC §3.3–3.5).
 
-Outgoing: the device's full state of its transmit chart; `update(changes)` sends CHANGE items
-(Sequence, status) for what changed, and REQUEST_ALL from the peer is answered with ALL_INFO from
-the same table (the link's state provider). Incoming: CHANGE and ALL_INFO become {name: state} for
-the receive chart. Link up / communication error are passed on so the application reacts
-fail-safe. The link logic itself is `type1.Type1Link`; this is only the chart <-> frame binding.
+Outgoing: `update(changes)` sends the core's code changes as CHANGE items (Sequence, status), and
+REQUEST_ALL from the peer is answered with ALL_INFO from the binding's table (the link's state
+provider). Incoming: CHANGE and ALL_INFO become {name: state}. Link up / communication error are
+passed on so the application reacts fail-safe. Names, numbers, the table and what is owed after an
+outage are the `binding.LinkBinding`'s; the link logic is `type1.Type1Link`; this runs them on a
+serial endpoint or a pty.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import asyncio
 import logging
 from collections.abc import Callable, Mapping
 
-from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.binding import LinkBinding
 from ktcs_bench.emulator import variants
 from ktcs_bench.errors import KtcsError
 from ktcs_bench.transport.aio import LinkRunner
@@ -40,9 +41,7 @@ class CodePort:
         self,
         name: str,
         endpoint: Endpoint,
-        tx_chart: CodeChart,
-        rx_chart: CodeChart,
-        state: Mapping[str, int],
+        binding: LinkBinding,
         on_codes: Callable[[dict[str, int]], None],
         on_link: Callable[[bool], None],
         profile: str = "ktcs-type1",
@@ -51,8 +50,7 @@ class CodePort:
         faults: frozenset[str] = frozenset(),
     ) -> None:
         self.name = name
-        self.tx_chart, self.rx_chart = tx_chart, rx_chart
-        self.state = {c.name: int(state.get(c.name, 0)) for c in tx_chart.codes}
+        self.binding = binding
         self.on_codes, self.on_link, self.on_event = on_codes, on_link, on_event
         self.profile, self.config, self.faults = profile, config, faults
         self.endpoint = endpoint
@@ -64,11 +62,18 @@ class CodePort:
         if endpoint.kind == "pty":  # made now, so the path can be printed before the peer starts
             self.transport = open_transport("pty", name, self.link.config.line_rate)
             self.path = getattr(self.transport, "path", None)
-        self.up = False
         self.runner: LinkRunner | None = None
         self.frames_in = 0
         self._stopping = False
-        self._unsent: set[str] = set()
+
+    @property
+    def up(self) -> bool:
+        return self.binding.up
+
+    @property
+    def state(self) -> dict[str, int]:
+        """What the link carries: every transmit code's state."""
+        return self.binding.sent()
 
     def _new_link(self) -> Type1Link:
         return variants.type1_link(
@@ -96,7 +101,7 @@ class CodePort:
                     self.transport.close()
                     self.transport = None
             if self.up:
-                self.up = False
+                self.binding.link_down()
                 self.on_link(False)
             self.link = self._new_link()
             await asyncio.sleep(REOPEN)
@@ -107,30 +112,20 @@ class CodePort:
             self.runner.stop()
 
     def update(self, changes: Mapping[str, int] | list[tuple[str, int]]) -> None:
-        """Record changes of the transmit chart and send them as CHANGE frames (if the link is up;
-        otherwise the next REQUEST_ALL carries them)."""
+        """Send the core's code changes as CHANGE frames (while the link is down the binding owes
+        them: the peer may already hold an ALL_INFO older than these)."""
         pairs = changes.items() if isinstance(changes, Mapping) else changes
-        items = []
-        for name, value in pairs:
-            if name in self.state and self.state[name] != int(value):
-                self.state[name] = int(value)
-                items.append([self.tx_chart.number_of(name), int(value)])
-        if not items:
-            return
-        if not self.up or self.runner is None:
-            # the peer may already hold an ALL_INFO older than this: send these when the link is up
-            self._unsent.update(self.tx_chart.name_of(code) or "" for code, _ in items)
-            return
-        self._send_items(items)
+        self._send_items(self.binding.send(pairs))
 
-    def _send_items(self, items: list[list[int]]) -> None:
-        assert self.runner is not None
+    def _send_items(self, items: list[tuple[int, int]]) -> None:
+        if not items or self.runner is None:
+            return
         for k in range(0, len(items), MAX_ITEMS):
-            self.runner.send(self.link.message("CHANGE", items=items[k : k + MAX_ITEMS]))
+            chunk = [list(item) for item in items[k : k + MAX_ITEMS]]
+            self.runner.send(self.link.message("CHANGE", items=chunk))
 
     def _statuses(self, start: int, count: int) -> bytes:
-        values = [self.state[c.name] for c in self.tx_chart.codes]
-        return bytes(values[start : start + count])
+        return bytes(self.binding.statuses()[start : start + count])
 
     def _event(self, now: float, event: Event) -> None:
         if self.on_event is not None:
@@ -139,41 +134,24 @@ class CodePort:
             self.frames_in += 1
             name = event.message.name
             if name == "CHANGE":
-                out = {}
-                for code, value in event.fields.get("items", []):
-                    cname = self.rx_chart.name_of(code)
-                    if cname is None:
-                        log.warning(
-                            "%s: CHANGE for code %d not in %s", self.name, code, self.rx_chart.name
-                        )
-                    else:
-                        out[cname] = value
+                out, unknown = self.binding.received(event.fields.get("items", []))
+                for code in unknown:
+                    log.warning("%s: CHANGE for code %d not in %s", self.name, code,
+                                self.binding.rx.name)  # fmt: skip
                 if out:
                     self.on_codes(out)
             elif name == "ALL_INFO":
-                statuses = event.fields.get("statuses", [])
-                full = {
-                    c.name: statuses[c.number - 1]
-                    for c in self.rx_chart.codes
-                    if c.number <= len(statuses)
-                }
-                self.on_codes(full)
+                self.on_codes(self.binding.received_all(event.fields.get("statuses", [])))
         elif isinstance(event, LinkUp):
-            self.up = True
             log.info("%s: link up", self.name)
-            if self._unsent and self.runner is not None:
-                names, self._unsent = self._unsent, set()
-                self._send_items(
-                    [[self.tx_chart.number_of(n), self.state[n]] for n in sorted(names) if n]
-                )
+            self._send_items(self.binding.link_up())
             self.on_link(True)
         elif isinstance(event, LinkDown | CommunicationError):
             # what was queued (CHANGE, or the ALL_INFO answering the peer's REQUEST_ALL) was
             # discarded, and the peer may not have noticed the outage: push everything on recovery
-            self._unsent.update(self.state)
             if self.up:
                 log.warning("%s: link down (%s)", self.name, type(event).__name__)
-            self.up = False
+            self.binding.link_down()
             self.on_link(False)
 
 

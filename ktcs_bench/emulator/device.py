@@ -17,10 +17,12 @@ import signal
 import sys
 import time
 from collections import deque
+from collections.abc import Callable, Mapping
 from functools import partial
 from typing import Any
 
-from ktcs_bench.charts.generate import station_chart
+from ktcs_bench.binding import LinkBinding
+from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.runtime import server_token
@@ -177,11 +179,11 @@ class Device:
 
 class IxlPeerDevice(Device):
     """A station device on a Type I link to its IXL (`--link ixl=...`) and on the rails
-    (`--link rails=...`): the wayside ATC and the trackside I/O. Subclasses name their charts and
-    react to codes from the IXL, the link state and the rails."""
+    (`--link rails=...`): the wayside ATC and the trackside I/O. Subclasses name the chart they
+    send (`tx_chart`; they read the link back), give their core's state of it, and react to codes
+    from the IXL, the link state and the rails."""
 
     tx_chart = ""  # e.g. "atc_to_ixl"
-    rx_chart = ""  # e.g. "ixl_to_atc"
 
     def __init__(
         self,
@@ -189,7 +191,7 @@ class IxlPeerDevice(Device):
         line: Line,
         station: int,
         links: dict[str, Endpoint],
-        state: dict[str, int],
+        state: Callable[[], Mapping[str, int]],
         *,
         type1: LinkConfig | None = None,
         type1_profile: str = "ktcs-type1",
@@ -197,13 +199,12 @@ class IxlPeerDevice(Device):
         faults: frozenset[str] = frozenset(),
     ) -> None:
         super().__init__(name, control)
-        view = line.view(station)
         self.station = station
         self.port: CodePort | None = None
         if "ixl" in links:
+            binding = LinkBinding(*link_charts(line.view(station), self.tx_chart), state)
             self.port = CodePort(
-                f"{name}-ixl", links["ixl"], station_chart(view, self.tx_chart),
-                station_chart(view, self.rx_chart), state, self.from_ixl, self.link_changed,
+                f"{name}-ixl", links["ixl"], binding, self.from_ixl, self.link_changed,
                 type1_profile, type1, faults=faults,
             )  # fmt: skip
             if self.port.path:

@@ -1,16 +1,22 @@
 """The IXL process: one station's `Interlocking` bound to its Type I links (ATC, trackside I/O)
-and its Type II link to the CTC (as a client that reconnects with back-off)."""
+and its Type II link to the CTC (as a client that reconnects with back-off). Each link's codes go
+through its binding (`binding.LinkBinding`; `ControlLink` for the CTC's controls): the
+interlocking takes and gives code names only."""
 
 from __future__ import annotations
 
 import asyncio
+from functools import partial
 from typing import Any
 
+from ktcs_bench.binding import ControlLink, LinkBinding
+from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.ixl.interlocking import Interlocking, IxlOutput
 from ktcs_bench.ixl.modes import Mode
+from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
@@ -37,35 +43,37 @@ class IxlDevice(Device):
     ) -> None:
         super().__init__(name, control)
         self.station = station
-        self.ixl = Interlocking(line.view(station), mode=mode, tc_sources=("atc",))
-        charts = self.ixl.charts
-        self.ctc_chart = charts["ixl_to_ctc"]
+        view = line.view(station)
+        self.ixl = Interlocking(view, mode=mode, tc_sources=("atc",))
         self.ports: dict[str, CodePort] = {}
-        for role, tx, rx in (("atc", "ixl_to_atc", "atc_to_ixl"), ("io", "ixl_to_io", "io_to_ixl")):
+        for role in ("atc", "io"):
             if role in links:
+                state = partial(self.ixl.full_state, role)
+                binding = LinkBinding(*link_charts(view, f"ixl_to_{role}"), state)
                 self.ports[role] = CodePort(
-                    f"{name}-{role}", links[role], charts[tx], charts[rx],
-                    self.ixl.full_state(role), self._codes_from(role), self._link_of(role),
-                    type1_profile, type1, faults=faults,
+                    f"{name}-{role}", links[role], binding, self._codes_from(role),
+                    self._link_of(role), type1_profile, type1, faults=faults,
                 )  # fmt: skip
                 if self.ports[role].path:
                     self.ready_info.setdefault("ptys", {})[role] = self.ports[role].path
+        # the application the Type II client serves: full states, controls by number
+        self.ctc_link = ControlLink(
+            *link_charts(view, "ixl_to_ctc"), partial(self.ixl.full_state, "ctc"),
+            self._control, int(Reason.UNKNOWN_CODE), self._unknown_control,
+        )  # fmt: skip
         self.ctc_endpoint = links.get("ctc")
         self.client: IxlClient | None = None
         self.faults, self.ssl, self.server_hostname = faults, ssl, server_hostname
 
-    # -- the application the Type II client serves --------------------------------------------
-    def full_state(self) -> list[tuple[int, int]]:
-        state = self.ixl.full_state("ctc")
-        return [(c.number, state.get(c.name, 0)) for c in self.ctc_chart.codes]
-
-    def on_control(self, code: int, value: int) -> tuple[bool, int]:
-        out = self.ixl.control(code, value, self.now())
-        result = out.results[0] if out.results else None
+    # -- the CTC's controls, by name -------------------------------------------------------------
+    def _control(self, name: str, value: int) -> tuple[bool, int]:
+        out = self.ixl.control(name, value, self.now())
+        result = out.results[0]
         self.apply(out)
-        if result is None:
-            return False, 6
         return result.accepted, int(result.reason)
+
+    def _unknown_control(self, code: int, value: int) -> None:
+        self.note("control", f"ctc: unknown control code {code} rejected")
 
     # -- plumbing --------------------------------------------------------------------------------
     def _codes_from(self, role: str):  # type: ignore[no-untyped-def]
@@ -84,8 +92,10 @@ class IxlDevice(Device):
         for role, changes in (("atc", out.atc), ("io", out.io)):
             if changes and role in self.ports:
                 self.ports[role].update(changes)
-        if out.ctc and self.client is not None:
-            self.client.indicate([(self.ctc_chart.number_of(n), v) for n, v in out.ctc])
+        if out.ctc:
+            items = self.ctc_link.send(out.ctc)
+            if items and self.client is not None:
+                self.client.indicate(items)
         for e in out.events:
             self.note(e.kind, e.text)
         self.arm(self.ixl.next_deadline())
@@ -99,7 +109,7 @@ class IxlDevice(Device):
         ep = self.ctc_endpoint
         if ep is not None:
             self.client = variants.ixl_client(
-                self.faults, self.station, ep.host, ep.port, self, ssl=self.ssl,
+                self.faults, self.station, ep.host, ep.port, self.ctc_link, ssl=self.ssl,
                 server_hostname=self.server_hostname,
             )  # fmt: skip
             self.client.start()
@@ -126,13 +136,17 @@ class IxlDevice(Device):
             "points": {n: ixl.detection(n) for n in ixl.points},
             "signals": {n: ixl.aspect(n) for n in ixl.signals},
             "occupied": [t for t in ixl.tc_names if ixl.occupied(t)],
-            "ctc_state": dict(self.full_state()),
+            "ctc_state": dict(self.ctc_link.full_state()),
         }
 
     async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
-        if obj.get("cmd") == "control":  # the local panel
-            out = self.ixl.local_control(obj["code"], int(obj.get("value", 1)), self.now())
+        if obj.get("cmd") == "control":  # the local panel: a code by name (or by number)
+            code = obj["code"]
+            name = self.ctc_link.control_name(code) if isinstance(code, int) else str(code)
+            if name is None:
+                return {"ok": False, "reason": int(Reason.UNKNOWN_CODE)}
+            out = self.ixl.local_control(name, int(obj.get("value", 1)), self.now())
             self.apply(out)
-            r = out.results[0] if out.results else None
-            return {"ok": bool(r and r.accepted), "reason": int(r.reason) if r else 6}
+            r = out.results[0]
+            return {"ok": r.accepted, "reason": int(r.reason)}
         return await super().command(obj)

@@ -14,13 +14,13 @@ from ktcs_bench.transport.endpoints import Endpoint
 
 class TracksideDevice(IxlPeerDevice):
     kind = "trackside"
-    tx_chart, rx_chart = "io_to_ixl", "ixl_to_io"
+    tx_chart = "io_to_ixl"
 
     def __init__(
         self, name: str, line: Line, station: int, links: dict[str, Endpoint], **kwargs: Any
     ) -> None:
         self.io = Trackside(line.view(station))
-        super().__init__(name, line, station, links, self.io.full_state(), **kwargs)
+        super().__init__(name, line, station, links, self.io.full_state, **kwargs)
 
     def from_ixl(self, codes: dict[str, int]) -> None:
         self.apply(self.io.receive(codes, self.now()))

@@ -1,6 +1,6 @@
 """The trackside I/O rack of one station: the IO end of the IXL's Type I relay-I/O link.
 
-Inputs by IXL->IO chart code (`receive`), train occupancy from the track-circuit model
+Inputs by IXL->IO code name (`receive`), train occupancy from the track-circuit model
 (`set_occupancy`), link state and `now`; outputs the IO->IXL code changes. When its link to the
 IXL is in communication error the rack puts every signal to stop (the vital outputs drop) and
 leaves the points where they are. When the rails (the source of train occupancy) are lost
@@ -13,8 +13,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ktcs_bench.charts import names as n
-from ktcs_bench.charts.generate import station_chart
+from ktcs_bench.codes import names as n
+from ktcs_bench.codes.names import Function as F
+from ktcs_bench.codes.stations import StationCodes
 from ktcs_bench.field import points as point_faults
 from ktcs_bench.field import relays as relay_faults
 from ktcs_bench.field.points import PointMachine
@@ -48,7 +49,8 @@ class Trackside:
         self.rails_up = True  # the occupancy source is there (an adapter with rails says when not)
         self._sgc: dict[str, dict[str, int]] = {s: {} for s in self.signals}
         self._demand: dict[str, tuple[int, int]] = {p: (1, 0) for p in self.points}
-        self._command_names = tuple(c.name for c in station_chart(view, "ixl_to_io").codes)
+        self.codes = StationCodes(view)
+        self._command_names = self.codes.names("ixl_to_io")
         self._events: list[FieldEvent] = []
         self.log: list[FieldEvent] = []
         self._sent = self.full_state()
@@ -57,28 +59,21 @@ class Trackside:
 
     def receive(self, codes: Mapping[str, int], now: float) -> FieldOutput:
         """IXL->IO code changes (or a full state): point demands PNC/PRC, lamp commands SGC."""
-        st = self.st
         touched: set[str] = set()
         moved: set[str] = set()  # points acted on once the whole message is read
         for name, state in codes.items():
-            kind, obj = name[:3], name[3 + len(str(st)) :]
-            if kind in ("PNC", "PRC") and obj in self.points:
+            code = self.codes.parse_code(name)
+            kind, obj = (code.function, code.object) if code is not None else (None, "")
+            if kind in (F.PNC, F.PRC) and obj in self.points:
                 demand = (
-                    int(state) if kind == "PNC" else self._level(obj, "PNC"),
-                    int(state) if kind == "PRC" else self._level(obj, "PRC"),
+                    int(state) if kind is F.PNC else self._level(obj, "PNC"),
+                    int(state) if kind is F.PRC else self._level(obj, "PRC"),
                 )
                 self._demand[obj] = demand
                 moved.add(obj)
-            elif kind == "SGC":
-                for sig in self.signals.values():
-                    prefix = n.sgc(st, sig.signal.name, "")
-                    aspect = name[len(prefix) :]
-                    if name.startswith(prefix) and aspect in sig.signal.aspects:
-                        self._sgc[sig.signal.name][aspect] = int(state)
-                        touched.add(sig.signal.name)
-                        break
-                else:
-                    self._event(now, "fault", f"unknown command {name!r} ignored")
+            elif kind is F.SGC and obj in self.signals and code is not None:
+                self._sgc[obj][code.aspect] = int(state)
+                touched.add(obj)
             else:
                 self._event(now, "fault", f"unknown command {name!r} ignored")
         for p in sorted(moved):

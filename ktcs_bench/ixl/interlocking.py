@@ -1,6 +1,6 @@
-"""The station interlocking (SPEC §6.2), sans-I/O: inputs by chart code, outputs by chart code.
+"""The station interlocking (SPEC §6.2), sans-I/O: inputs by code name, outputs by code name.
 
-Inputs: CTC controls (`control`, by code name or number), local-panel actions (`local`), Type I
+Inputs: CTC controls (`control`, by code name), local-panel actions (`local`), Type I
 code changes from the ATC and the trackside (`receive`), link up/down (`link_state`) and timers
 (`tick`). Every call takes `now` (seconds) and returns an `IxlOutput`: indication changes for the
 CTC chart, code changes for the IXL->ATC and IXL->IO charts, control results, events and the next
@@ -17,9 +17,9 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
-from ktcs_bench.charts import names as n
-from ktcs_bench.charts.generate import station_chart
-from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.codes import names as n
+from ktcs_bench.codes.names import Function as F
+from ktcs_bench.codes.stations import StationCodes
 from ktcs_bench.ixl.modes import Mode, ModeControl
 from ktcs_bench.ixl.points import BITS, Detection, PointState
 from ktcs_bench.ixl.reasons import Reason
@@ -29,7 +29,7 @@ from ktcs_bench.station.loader import onward
 from ktcs_bench.station.model import Direction, Interval, PointPosition, Route, StationView
 
 LINKS = ("atc", "io")
-CHART_OF = {"ctc": "ixl_to_ctc", "atc": "ixl_to_atc", "io": "ixl_to_io"}
+OUTPUTS = ("ctc", "atc", "io")  # the IXL->CTC, IXL->ATC and IXL->IO charts
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,8 +41,7 @@ class Event:
 
 @dataclass(frozen=True, slots=True)
 class ControlResult:
-    name: str | None  # None when the code number is not in the chart
-    number: int | None
+    name: str | None  # None when the CTC->IXL chart has no such control
     accepted: bool
     reason: Reason
 
@@ -92,34 +91,30 @@ class Interlocking:
         self._points_in = {p.name: p.track_circuits for p in st.points}
         self._proceed_before: dict[str, bool] = dict.fromkeys(self.signals, False)
         self._noticed: set[str] = set()
-        self.charts: dict[str, CodeChart] = {
-            k: station_chart(view, k)
-            for k in ("ixl_to_ctc", "ctc_to_ixl", "ixl_to_atc", "ixl_to_io", "atc_to_ixl")
-        }
-        self.charts["io_to_ixl"] = station_chart(view, "io_to_ixl")
-        self._controls = {c.name for c in self.charts["ctc_to_ixl"].codes}
+        self.codes = StationCodes(view)
+        self._controls = set(self.codes.names("ctc_to_ixl"))
         self._inputs = {
-            "atc": {c.name for c in self.charts["atc_to_ixl"].codes},
-            "io": {c.name for c in self.charts["io_to_ixl"].codes},
+            "atc": set(self.codes.names("atc_to_ixl")),
+            "io": set(self.codes.names("io_to_ixl")),
         }
         self.log: list[Event] = []
         self._log_limit = log_limit
         self._events: list[Event] = []
         self._results: list[ControlResult] = []
         self._evaluate(0.0)
-        self._sent = {k: self.full_state(k) for k in CHART_OF}
+        self._sent = {k: self.full_state(k) for k in OUTPUTS}
         self._events.clear()
 
     # ------------------------------------------------------------------ public inputs
 
-    def control(self, code: str | int, value: int, now: float) -> IxlOutput:
-        """A CTC control (Type II CONTROL item): code name or chart number, and its value."""
-        self._results.append(self._control(code, value, now, source="ctc"))
+    def control(self, name: str, value: int, now: float) -> IxlOutput:
+        """A CTC control (Type II CONTROL item): the code's name and its value."""
+        self._results.append(self._control(name, value, now, source="ctc"))
         return self._finish(now)
 
-    def local_control(self, code: str | int, value: int, now: float) -> IxlOutput:
+    def local_control(self, name: str, value: int, now: float) -> IxlOutput:
         """The same controls from the local panel: accepted only in local mode."""
-        self._results.append(self._control(code, value, now, source="local"))
+        self._results.append(self._control(name, value, now, source="local"))
         return self._finish(now)
 
     def local(self, action: str, now: float) -> IxlOutput:
@@ -173,11 +168,10 @@ class Interlocking:
         return min((d for d in due if d is not None), default=None)
 
     def control_names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.charts["ctc_to_ixl"].codes)
+        return self.codes.names("ctc_to_ixl")
 
     def input_names(self, link: str) -> tuple[str, ...]:
-        chart = "atc_to_ixl" if link == "atc" else "io_to_ixl"
-        return tuple(c.name for c in self.charts[chart].codes)
+        return self.codes.names("atc_to_ixl" if link == "atc" else "io_to_ixl")
 
     def occupied(self, tc: str) -> bool:
         """Occupancy as the interlocking takes it (fail-safe: unknown or link down = occupied)."""
@@ -210,45 +204,37 @@ class Interlocking:
 
     # ------------------------------------------------------------------ controls
 
-    def _control(self, code: str | int, value: int, now: float, source: str) -> ControlResult:
-        chart = self.charts["ctc_to_ixl"]
-        if isinstance(code, int):
-            name = chart.name_of(code)
-            number: int | None = code
-        else:
-            name = code if code in self._controls else None
-            number = chart.number_of(code) if name is not None else None
-        if name is None:
-            self._event(now, "control", f"{source}: unknown control code {code!r} rejected")
-            return ControlResult(None, number, False, Reason.UNKNOWN_CODE)
-        reason = self._dispatch(name, value, now, source)
+    def _control(self, name: str, value: int, now: float, source: str) -> ControlResult:
+        code = self.codes.parse_code(name) if name in self._controls else None
+        if code is None:
+            self._event(now, "control", f"{source}: unknown control code {name!r} rejected")
+            return ControlResult(None, False, Reason.UNKNOWN_CODE)
+        reason = self._dispatch(code.function, code.object, value, now, source)
         verdict = "accepted" if reason is Reason.NONE else f"rejected: {reason.text}"
         self._event(now, "control", f"{source}: {name}={value} {verdict}")
-        return ControlResult(name, number, reason is Reason.NONE, reason)
+        return ControlResult(name, reason is Reason.NONE, reason)
 
-    def _dispatch(self, name: str, value: int, now: float, source: str) -> Reason:
-        st = self.st
-        if name == n.cmq(st):
+    def _dispatch(self, kind: F, obj: str, value: int, now: float, source: str) -> Reason:
+        if kind is F.CMQ:
             if value and self.modes.request_center(now):
                 self._event(now, "mode", "center mode requested (CMR): awaiting local operator")
             return Reason.NONE
-        if name == n.lmq(st):
+        if kind is F.LMQ:
             if value and self.modes.mode is Mode.CENTER and self.modes.to_local():
                 self._event(now, "mode", "CTC handed the station back to local mode")
             return Reason.NONE
         wanted = Mode.CENTER if source == "ctc" else Mode.LOCAL
         if self.modes.mode is not wanted:
             return Reason.NOT_IN_CENTER_MODE
-        kind, obj = name[:3], name[3 + len(str(st)) :]
-        if kind in ("RSC", "RCC"):
+        if kind in (F.RSC, F.RCC):
             if not value:
                 return Reason.NONE
-            return self._set_route(obj, now) if kind == "RSC" else self._cancel_route(obj, now)
-        if kind in ("SNC", "SRC"):
+            return self._set_route(obj, now) if kind is F.RSC else self._cancel_route(obj, now)
+        if kind in (F.SNC, F.SRC):
             if not value:
                 return Reason.NONE
-            return self._move_point(obj, "normal" if kind == "SNC" else "reverse", now)
-        if kind == "SSC":
+            return self._move_point(obj, "normal" if kind is F.SNC else "reverse", now)
+        if kind is F.SSC:
             sig = self.signals[obj]
             if sig.stop_held != bool(value):
                 sig.stop_held = bool(value)
@@ -356,37 +342,33 @@ class Interlocking:
     # ------------------------------------------------------------------ inputs
 
     def _apply_input(self, link: str, name: str, state: int, now: float) -> None:
-        st = self.st
-        if name in self.tc_names:
+        code = self.codes.parse_code(name)
+        assert code is not None  # every name of the link's chart has a meaning
+        kind, obj = code.function, code.object
+        if kind is F.TC:
             self.tc_reports[link][name] = state
             return
-        kind = name[:3]
         if link == "atc":
-            if kind == "IZC":
-                iv = name[3:]
-                before = self.izc.get(iv, 1)
-                self.izc[iv] = state
+            if kind is F.IZC:
+                before = self.izc.get(obj, 1)
+                self.izc[obj] = state
                 if state and not before:
-                    self._infer_direction(self.intervals[iv], now)
-            elif kind == "TTC":
+                    self._infer_direction(self.intervals[obj], now)
+            elif kind is F.TTC:
                 self.ttc[name] = state
             return
-        obj = name[3 + len(str(st)) :]
         if kind in BITS:
-            self.points[obj].bits[kind] = state
-        elif kind == "LFI":
+            self.points[obj].bits[kind.value] = state
+        elif kind is F.LFI:
             sig = self.signals[obj]
             if sig.lamp_failed != bool(state):
                 sig.lamp_failed = bool(state)
                 if state:
                     self._event(now, "fault", f"signal {obj}: lamp failure reported")
-        elif kind == "LPS":
-            for s in self.signals.values():
-                prefix = n.lps(st, s.signal.name, "")
-                if name.startswith(prefix) and name[len(prefix) :] in s.signal.aspects:
-                    s.lamp_bits[name[len(prefix) :]] = state
-                    s.lamp_reported = True
-                    break
+        elif kind is F.LPS:
+            lamp = self.signals[obj]
+            lamp.lamp_bits[code.aspect] = state
+            lamp.lamp_reported = True
 
     def _interval_occupied(self, iv: Interval) -> bool:
         if not self.link_up["atc"] or self.izc.get(iv.name, 1) != 0:
@@ -408,7 +390,7 @@ class Interlocking:
     def _finish(self, now: float) -> IxlOutput:
         self._evaluate(now)
         out = IxlOutput(results=self._results, events=self._events)
-        for kind in CHART_OF:
+        for kind in OUTPUTS:
             state = self.full_state(kind)
             last = self._sent[kind]
             changes = [(k, v) for k, v in state.items() if last.get(k) != v]

@@ -2,12 +2,16 @@
 
 For deterministic virtual-time runs and tests: code changes pass between the two objects at once
 (as over a perfect Type I link), track occupancy is fed as the ATC would report it, and `advance`
-walks virtual time through every deadline. No I/O, no clock.
+walks virtual time through every deadline. `ctc` is the CTC's picture, kept by the IXL->CTC
+changes, which are also handed to `on_ctc` as they come (a Type II link to a real CTC). No I/O,
+no clock.
 """
 
 from __future__ import annotations
 
-from ktcs_bench.charts import names as n
+from collections.abc import Callable
+
+from ktcs_bench.codes import names as n
 from ktcs_bench.field.trackside import Trackside
 from ktcs_bench.ixl.interlocking import ControlResult, Event, Interlocking, IxlOutput
 from ktcs_bench.ixl.modes import Mode
@@ -24,6 +28,7 @@ class StationRig:
         self.ctc = self.ixl.full_state("ctc")  # the CTC's picture, kept by indication changes
         self.atc = self.ixl.full_state("atc")  # what the ATC is told
         self.events: list[Event] = []
+        self.on_ctc: Callable[[list[tuple[str, int]]], None] | None = None
         self.io.link_state(True, now)
         self.take(self.ixl.link_state("io", True, now))
         self.take(self.ixl.link_state("atc", True, now))
@@ -81,6 +86,8 @@ class StationRig:
     def take(self, out: IxlOutput) -> None:
         self.events += out.events
         self.ctc.update(out.ctc)
+        if out.ctc and self.on_ctc is not None:
+            self.on_ctc(out.ctc)
         self.atc.update(out.atc)
         if out.io:
             self.from_field(self.io.receive(dict(out.io), self.now).changes)

@@ -499,7 +499,7 @@ def write_line(n: int, out: Path, force: bool = False) -> list[Path]:
 
     A folder that already holds anything is refused (UsageError) unless `force`; then the files
     of an earlier generated line are removed first (nothing else is touched)."""
-    from ktcs_bench.charts.generate import generate
+    from ktcs_bench.charts.files import generate
 
     files = line_files(n)
     if out.exists() and not out.is_dir():

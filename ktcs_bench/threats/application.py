@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.charts.generate import station_chart
-from ktcs_bench.charts.model import CodeChart
+from ktcs_bench.codes.chart import CodeChart
+from ktcs_bench.codes.names import Function
+from ktcs_bench.codes.stations import StationCodes, station_chart
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.state import lab_dir, running_labs
 from ktcs_bench.lab.topology import load_lab
@@ -50,9 +51,14 @@ class Application:
     def of_station(cls, line: Line, station: int, role: str = "atc", **kw: Any) -> Application:
         view = line.view(station)
         rx = station_chart(view, f"{role}_to_ixl")
-        guarded = (
-            tuple(c.name for c in rx.codes if c.name.startswith("TC")) if role == "atc" else ()
-        )
+        guarded: tuple[str, ...] = ()
+        if role == "atc":  # the track circuits: unsafe (occupied) while the ATC link is lost
+            codes = StationCodes(view)
+            guarded = tuple(
+                c.name
+                for c in rx.codes
+                if (m := codes.parse_code(c.name)) and m.function is Function.TC
+            )
         return cls(station=station, role=role, rx_chart=rx,
                    ctc_chart=station_chart(view, "ixl_to_ctc"), guarded=guarded, **kw)  # fmt: skip
 

@@ -25,7 +25,7 @@ from hypothesis.stateful import (
 
 from ktcs_bench.atc import WaysideAtc
 from ktcs_bench.atc.wayside import AtcOutput
-from ktcs_bench.charts import names as n
+from ktcs_bench.codes import names as n
 from ktcs_bench.field import Trackside
 from ktcs_bench.field.trackside import FieldOutput
 from ktcs_bench.ixl import Interlocking, Mode

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import re
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
-from ktcs_bench.charts.generate import LINKS, build_specs, station_chart
-from ktcs_bench.charts.model import load_chart
+from ktcs_bench.charts.files import load_chart
 from ktcs_bench.cli.main import main
+from ktcs_bench.codes.stations import LINKS, build_specs, station_chart
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.station import load_line
 
@@ -152,3 +154,59 @@ def test_chart_help_has_an_example(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["chart", "--help"])
     assert "ktcs-bench chart generate" in capsys.readouterr().out
+
+
+def _drop(path: Path, name: str) -> None:
+    """Take code `name` out of a chart file and number the codes after it again."""
+    out, k = [], 0
+    for ln in path.read_text().splitlines(keepends=True):
+        if ln.startswith("  - "):
+            if f"name: {name}," in ln:
+                continue
+            k += 1
+            ln = re.sub(r"sequence: \d+", f"sequence: {k}", ln)
+        out.append(ln)
+    path.write_text("".join(out))
+
+
+def _swap(path: Path, a: str, b: str) -> None:
+    """Swap codes `a` and `b` (their sequence numbers stay where they were)."""
+    text = path.read_text()
+    text = text.replace(f"name: {a},", "name: @@,").replace(f"name: {b},", f"name: {a},")
+    path.write_text(text.replace("name: @@,", f"name: {b},"))
+
+
+@pytest.mark.parametrize(
+    ("file", "edit", "wire"),
+    [
+        (  # renamed: decoders would name code 7 of the ATC's reports after the wrong circuit
+            "st18_atc_to_ixl.yaml",
+            lambda p: _rewrite(p, "name: TC1863,", "name: TC1865,"),
+            "code 7 is 'TC1865' in the file, but the ATC sends and the IXL reads 'TC1863' as code 7",
+        ),
+        (  # dropped: every code after it is one number off
+            "st20_ixl_to_ctc.yaml",
+            lambda p: _drop(p, "SLI2031"),
+            "code 8 is 'SFI2031' in the file, but the IXL sends and the CTC reads 'SLI2031' as "
+            "code 8 (and 102 more codes differ)",
+        ),
+        (  # reordered: two route controls swapped
+            "st22_ctc_to_ixl.yaml",
+            lambda p: _swap(p, "RSC220111", "RCC220111"),
+            "code 17 is 'RCC220111' in the file, but the CTC sends and the IXL reads "
+            "'RSC220111' as code 17 (and 1 more code differs)",
+        ),
+    ],
+)
+def test_check_compares_each_file_with_what_the_emulators_put_on_the_wire(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    file: str,
+    edit: Callable[[Path], None],
+    wire: str,
+) -> None:
+    charts = _copy(tmp_path)
+    edit(charts / file)
+    code, err = _check(charts, capsys)
+    assert code == 1
+    assert f"{charts / file}: {wire}" in err, err

@@ -9,6 +9,7 @@ import re
 
 import pytest
 
+from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.console.diagram import Scale, build, lane_order
 from ktcs_bench.console.trains import EndpointTrains
 from ktcs_bench.ctc.model import CtcModel
@@ -51,7 +52,7 @@ def test_the_scale_runs_left_to_right_through_every_boundary() -> None:
 
 def _picture(rig: StationRig, number: int = 18) -> dict[str, object]:
     model = MODELS[number]
-    chart = rig.ixl.charts["ixl_to_ctc"]  # the numbers the interlocking sends
+    chart, _ = link_charts(rig.view, "ixl_to_ctc")  # the numbers the interlocking's link sends
     table = {chart.number_of(k): v for k, v in rig.ctc.items()}
     return model.picture(table, True, True)
 
@@ -89,14 +90,13 @@ def test_picture_of_a_moving_point_and_of_an_unknown_table() -> None:
 
 def test_actions_map_to_the_control_chart() -> None:
     model = MODELS[18]
-    ixl = StationRig(LINE.view(18)).ixl
-    controls = ixl.charts["ctc_to_ixl"]  # the numbers the interlocking reads
+    indications, controls = link_charts(LINE.view(18), "ixl_to_ctc")  # as the IXL's link numbers
     act = model.set_route("01", "12")
     assert (act.name, act.code, act.value) == ("RSC180112", controls.number_of("RSC180112"), 1)
     assert model.move_point("32", "reverse").name == "SRC1832"
     assert model.mode("center").name == "CMQ18"
     assert model.mode("local").name == "LMQ18"
-    rsi = ixl.charts["ixl_to_ctc"].number_of("RSI180112")
+    rsi = indications.number_of("RSI180112")
     assert model.cancel_route("01", {rsi: 1}).name == "RCC180112"
     with pytest.raises(UsageError, match="no route is set from signal 01"):
         model.cancel_route("01", {rsi: 0})

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import pytest
 
+from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ctc.log import CommandLog, command_words
 from ktcs_bench.ctc.model import UNKNOWN, CtcModel
 from ktcs_bench.ctc.tables import IndicationTable
@@ -20,7 +21,7 @@ LINE = load_line()
 def table_of(rig: StationRig, number: int) -> IndicationTable:
     """The CTC's table for `rig` as a live, synced link would have brought it (code numbers as
     the interlocking numbers them)."""
-    chart = rig.ixl.charts["ixl_to_ctc"]
+    chart, _ = link_charts(rig.view, "ixl_to_ctc")
     state = {chart.number_of(k): v for k, v in rig.ctc.items()}
     return IndicationTable(number, state, connected=True, synced=True)
 
@@ -65,7 +66,7 @@ def test_a_table_the_ctc_cannot_trust_reads_unknown() -> None:
 def test_operator_commands_become_the_codes_the_interlocking_reads() -> None:
     ctc = CtcModel(LINE)
     rig = StationRig(LINE.view(18), mode=Mode.CENTER)
-    controls = rig.ixl.charts["ctc_to_ixl"]
+    _, controls = link_charts(rig.view, "ixl_to_ctc")
 
     def act(**command: object) -> tuple[str, int, int]:
         a = ctc.action(command)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from ktcs_bench.binding import ControlLink
+from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ixl import Interlocking, Mode, Reason, RouteStatus
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station import Line, load_line
@@ -26,7 +28,7 @@ def test_reason_numbers_are_the_wire_values() -> None:
 
 def test_route_set_throws_points_awaits_detection_then_clears(rig: StationRig) -> None:
     result = rig.control("RSC200112")
-    assert result.accepted and result.reason is Reason.NONE and result.number == 21
+    assert result.accepted and result.reason is Reason.NONE and result.name == "RSC200112"
     assert rig.ixl.route_status("0112") is RouteStatus.SETTING
     assert rig.ixl.aspect("01") == "R"
     assert rig.ixl.full_state("io")["PRC2031"] == 1  # point 31 commanded reverse
@@ -90,11 +92,23 @@ def test_rejected_when_point_failed(rig: StationRig) -> None:
 
 
 def test_unknown_code_number(rig: StationRig) -> None:
-    out = rig.ixl.control(9999, 1, rig.now)
-    assert out.results[0].reason is Reason.UNKNOWN_CODE and out.results[0].name is None
-    chart = rig.ixl.charts["ctc_to_ixl"]
-    out = rig.ixl.control(chart.number_of("RSC200111"), 1, rig.now)
-    assert out.results[0].accepted and out.results[0].name == "RSC200111"
+    """Controls come by number (Type II): the IXL's binding refuses a number the chart lacks and
+    hands a known one to the interlocking by name."""
+    given: list[str] = []
+
+    def control(name: str, value: int) -> tuple[bool, int]:
+        given.append(name)
+        result = rig.control(name, value)
+        return result.accepted, int(result.reason)
+
+    link = ControlLink(
+        *link_charts(rig.view, "ixl_to_ctc"), lambda: rig.ctc, control, int(Reason.UNKNOWN_CODE)
+    )
+    assert link.on_control(9999, 1) == (False, Reason.UNKNOWN_CODE) and given == []
+    assert link.control_name(21) == "RSC200112"
+    assert link.on_control(link.rx.number_of("RSC200111"), 1) == (True, Reason.NONE)
+    assert given == ["RSC200111"]
+    assert rig.ixl.control("RSC209999", 1, rig.now).results[0].name is None  # not a control
 
 
 def test_center_local_modes_and_cmr_handshake(line: Line) -> None:

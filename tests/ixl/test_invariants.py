@@ -25,7 +25,9 @@ from hypothesis.stateful import (
     run_state_machine_as_test,
 )
 
-from ktcs_bench.charts import names as n
+from ktcs_bench.codes import names as n
+from ktcs_bench.codes.names import CodeName, Function
+from ktcs_bench.codes.stations import StationCodes
 from ktcs_bench.ixl import Interlocking, Mode, RouteStatus
 from ktcs_bench.ixl.interlocking import IxlOutput
 from ktcs_bench.station import load_line
@@ -54,6 +56,7 @@ class InterlockingMachine(RuleBasedStateMachine):
         self.view = LINE.view(station)
         self.st = station
         self.ixl = Interlocking(self.view, mode=Mode.CENTER)
+        self.codes = StationCodes(self.view)
         self.tcs = [t.name for t in self.view.track_circuits]
         self.points = [p.name for p in self.view.station.points]
         self.routes = [r.name for r in self.view.station.routes]
@@ -74,7 +77,9 @@ class InterlockingMachine(RuleBasedStateMachine):
     def apply(self, out: IxlOutput) -> None:
         """Check invariant 2 on every point demand the IXL changed in this output."""
         for name, value in out.io:
-            kind, obj = name[:3], name[3 + len(str(self.st)) :]
+            code = self.codes.parse_code(name)
+            assert code is not None
+            kind, obj = code.function, code.object
             if kind not in ("PNC", "PRC") or value != 1:
                 continue
             position = "normal" if kind == "PNC" else "reverse"
@@ -100,7 +105,7 @@ class InterlockingMachine(RuleBasedStateMachine):
         codes: dict[str, int] = {}
         for p in points:
             for bit, v in BITS[self.det[p]].items():
-                codes[f"{bit}{self.st}{p}"] = v
+                codes[CodeName(Function(bit), self.st, p).text] = v
         self.apply(self.ixl.receive("io", codes, self.now))
 
     def feed_occupancy(self, tc: str, value: bool) -> None:
@@ -136,7 +141,8 @@ class InterlockingMachine(RuleBasedStateMachine):
     @rule(action=st.sampled_from(["CMQ", "LMQ", "grant", "take"]))
     def mode(self, action: str) -> None:
         if action in ("CMQ", "LMQ"):
-            self.apply(self.ixl.control(f"{action}{self.st}", 1, self.now))
+            code = n.cmq(self.st) if action == "CMQ" else n.lmq(self.st)
+            self.apply(self.ixl.control(code, 1, self.now))
         else:
             self.apply(self.ixl.local(action, self.now))
 

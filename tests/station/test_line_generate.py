@@ -12,7 +12,7 @@ import yaml
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from ktcs_bench.charts.generate import check_charts
+from ktcs_bench.charts.check import check_charts
 from ktcs_bench.cli.main import main
 from ktcs_bench.lab.topology import load_lab
 from ktcs_bench.station import Line, Route, Station, load_line

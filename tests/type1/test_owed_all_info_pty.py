@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import asyncio
 
-from ktcs_bench.charts.generate import station_chart
+from ktcs_bench.binding import LinkBinding
 from ktcs_bench.codec import Frame, StreamDecoder
+from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.station import load_line
 from ktcs_bench.transport import SerialTransport
@@ -25,14 +26,15 @@ CONFIG = LinkConfig(line_rate=RATE, longest_frame_data=64, delta_r=0.15, ack_tim
 
 def test_an_atc_deaf_after_asking_once_gets_the_ixls_current_state_over_a_pty() -> None:
     view = load_line().view(18)
-    tx, rx = station_chart(view, "ixl_to_atc"), station_chart(view, "atc_to_ixl")
+    tx, rx = link_charts(view, "ixl_to_atc")
+    state: dict[str, int] = {}  # the IXL's state of its ATC link: the test plays the interlocking
 
     async def main() -> None:
         loop = asyncio.get_running_loop()
         link_states: asyncio.Queue[bool] = asyncio.Queue()
         port = CodePort(
-            "ixl18-atc", Endpoint("pty", ""), tx, rx, {}, lambda codes: None,
-            link_states.put_nowait, config=CONFIG,
+            "ixl18-atc", Endpoint("pty", ""), LinkBinding(tx, rx, lambda: state),
+            lambda codes: None, link_states.put_nowait, config=CONFIG,
         )  # fmt: skip
         assert port.path is not None and port.transport is not None
         acking = False
@@ -60,7 +62,9 @@ def test_an_atc_deaf_after_asking_once_gets_the_ixls_current_state_over_a_pty() 
                     assert await link_states.get() is True  # our request brought it up
                     assert await link_states.get() is False  # and our deafness took it down
                 # the IXL's state moves on while the ATC is deaf
-                port.update({tx.codes[0].name: 1, tx.codes[5].name: 1})
+                changes = {tx.codes[0].name: 1, tx.codes[5].name: 1}
+                state.update(changes)
+                port.update(changes)
                 current = bytes(port.state[c.name] for c in tx.codes)
                 assert current.count(1) == 2
                 acking = True

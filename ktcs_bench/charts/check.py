@@ -1,0 +1,197 @@
+"""`chart check`: the chart files against the station data, and against what the emulators send.
+
+Against the data: every station link has its file, and each file's header and codes (names,
+types, order) are what `codes.stations` derives. Against the emulators: each station's cores (the
+interlocking, the trackside, the wayside ATC, and the CTC's model) are built and bound to their
+links as the emulator processes bind them (`binding.LinkBinding`), and every code a link carries
+-- the number each end puts on the wire or reads from it -- must be the file's code of that
+number; and every code a core gives or takes must be one its link carries.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+
+from ktcs_bench.atc.wayside import WaysideAtc
+from ktcs_bench.binding import LinkBinding
+from ktcs_bench.charts.files import load_chart
+from ktcs_bench.codes.chart import CodeChart
+from ktcs_bench.codes.stations import ChartSpec, build_specs, link_charts
+from ktcs_bench.ctc.model import StationModel
+from ktcs_bench.errors import ConfigError
+from ktcs_bench.field.trackside import Trackside
+from ktcs_bench.ixl.interlocking import Interlocking
+from ktcs_bench.station.model import Line
+
+
+def check_charts(line: Line, chart_dir: Path, emulators: bool = True) -> list[str]:
+    """Every disagreement between the chart files, the station data and the emulators."""
+    problems: list[str] = []
+    specs = build_specs(line)
+    expected = {f"{s.stem}.yaml" for s in specs}
+    for extra in sorted(p.name for p in chart_dir.glob("*.yaml") if p.name not in expected):
+        problems.append(f"{chart_dir / extra}: unexpected chart (no such station link in the data)")
+    files: dict[str, tuple[Path, CodeChart]] = {}
+    for spec in specs:
+        path = chart_dir / f"{spec.stem}.yaml"
+        if not path.exists():
+            problems.append(f"{path}: missing chart (run `ktcs-bench chart generate`)")
+            continue
+        try:
+            chart = load_chart(path)
+        except ConfigError as exc:
+            problems.append(str(exc))
+            continue
+        files[spec.stem] = (path, chart)
+        problems += _compare(path, chart, spec)
+    if emulators:
+        problems += _check_emulators(line, files)
+    return problems
+
+
+def _compare(path: Path, chart: CodeChart, spec: ChartSpec) -> list[str]:
+    out: list[str] = []
+    for key, have, want in (
+        ("chart", chart.name, spec.name),
+        ("protocol", chart.protocol, spec.protocol),
+        ("direction", chart.direction, spec.direction),
+        ("station", chart.station, spec.station),
+    ):
+        if have != want:
+            out.append(f"{path}: {key}: is {have!r}, station data gives {want!r}")
+    want_names = [nm for nm, _ in spec.codes]
+    want_set = set(want_names)
+    have_names = [c.name for c in chart.codes]
+    for c in chart.codes:
+        if c.name not in want_set:
+            out.append(
+                f"{path}: codes[{c.number - 1}].name: unknown code {c.name!r} "
+                f"(no such object or code in the station data)"
+            )
+    for missing in [nm for nm in want_names if nm not in set(have_names)]:
+        out.append(f"{path}: codes: missing code {missing!r} that the station data gives")
+    if not out:
+        for c, (nm, ty) in zip(chart.codes, spec.codes, strict=True):
+            if c.name != nm:
+                out.append(
+                    f"{path}: codes[{c.number - 1}].name: code {c.number} is {c.name!r}, "
+                    f"station data gives {nm!r} (order differs: regenerate)"
+                )
+                break
+            if c.type != ty:
+                out.append(f"{path}: codes[{c.number - 1}].type: is {c.type!r}, expected {ty!r}")
+    return out
+
+
+@dataclass(frozen=True)
+class _End:
+    """One end of a station link as an emulator runs it: who, whether it sends or reads the link,
+    the chart its binding numbers the codes by, and the codes its core gives or takes."""
+
+    who: str  # "the IXL"
+    verb: str  # "sends" | "reads"
+    chart: CodeChart
+    core: frozenset[str] | None  # None: the end has no core of its own to compare (the CTC)
+
+
+def _ends(line: Line, station: int) -> dict[str, list[_End]]:
+    """Every station link's two ends, bound as the emulator processes bind them."""
+    view = line.view(station)
+    ixl, io, atc = Interlocking(view), Trackside(view), WaysideAtc(line, station)
+    ctc = StationModel(view)
+    ixl_atc = LinkBinding(*link_charts(view, "ixl_to_atc"), partial(ixl.full_state, "atc"))
+    ixl_io = LinkBinding(*link_charts(view, "ixl_to_io"), partial(ixl.full_state, "io"))
+    ixl_ctc = LinkBinding(*link_charts(view, "ixl_to_ctc"), partial(ixl.full_state, "ctc"))
+    atc_ixl = LinkBinding(*link_charts(view, "atc_to_ixl"), atc.full_state)
+    io_ixl = LinkBinding(*link_charts(view, "io_to_ixl"), io.full_state)
+
+    def gives(binding: LinkBinding) -> frozenset[str]:
+        return frozenset(binding.state())
+
+    return {
+        "ixl_to_ctc": [
+            _End("the IXL", "sends", ixl_ctc.tx, gives(ixl_ctc)),
+            _End("the CTC", "reads", ctc.indications, None),
+        ],
+        "ctc_to_ixl": [
+            _End("the CTC", "sends", ctc.controls, None),
+            _End("the IXL", "reads", ixl_ctc.rx, frozenset(ixl.control_names())),
+        ],
+        "ixl_to_atc": [
+            _End("the IXL", "sends", ixl_atc.tx, gives(ixl_atc)),
+            _End("the ATC", "reads", atc_ixl.rx, frozenset(atc.input_names())),
+        ],
+        "atc_to_ixl": [
+            _End("the ATC", "sends", atc_ixl.tx, gives(atc_ixl)),
+            _End("the IXL", "reads", ixl_atc.rx, frozenset(ixl.input_names("atc"))),
+        ],
+        "ixl_to_io": [
+            _End("the IXL", "sends", ixl_io.tx, gives(ixl_io)),
+            _End("the trackside", "reads", io_ixl.rx, frozenset(io.command_names())),
+        ],
+        "io_to_ixl": [
+            _End("the trackside", "sends", io_ixl.tx, gives(io_ixl)),
+            _End("the IXL", "reads", ixl_io.rx, frozenset(ixl.input_names("io"))),
+        ],
+    }
+
+
+def _check_emulators(line: Line, files: dict[str, tuple[Path, CodeChart]]) -> list[str]:
+    out: list[str] = []
+    for st in sorted(line.stations):
+        for link, ends in _ends(line, st).items():
+            stem = f"st{st}_{link}"
+            for end in ends:
+                out += _core_against_link(stem, end)
+            if stem in files:
+                out += _file_against_wire(*files[stem], ends)
+    return out
+
+
+def _core_against_link(stem: str, end: _End) -> list[str]:
+    """The codes a core gives (or takes) are the codes its link carries."""
+    if end.core is None:
+        return []
+    carried = set(end.chart.names)
+    doing = "gives" if end.verb == "sends" else "takes"
+    out = [f"{stem}: {end.who} {doing} code {name!r}, which its link does not carry"
+           for name in sorted(end.core - carried)]  # fmt: skip
+    out += [f"{stem}: its link carries code {name!r}, which {end.who} never {doing}"
+            for name in sorted(carried - end.core)]  # fmt: skip
+    return out
+
+
+def _file_against_wire(path: Path, file: CodeChart, ends: Iterable[_End]) -> list[str]:
+    """Code k of the file is code k as each end puts it on the wire or reads it: the first
+    difference, and how many more."""
+    groups: dict[tuple[str, ...], list[_End]] = {}
+    for end in ends:
+        groups.setdefault(end.chart.names, []).append(end)
+    out: list[str] = []
+    for wire, who in groups.items():
+        doers = " and ".join(f"{e.who} {e.verb}" for e in who)
+        written = file.names
+        differ = [k for k in range(max(len(wire), len(written)))
+                  if k >= len(wire) or k >= len(written) or wire[k] != written[k]]  # fmt: skip
+        if not differ:
+            continue
+        k = differ[0]
+        if k >= len(written):
+            text = f"{path}: code {k + 1} is missing from the file, but {doers} {wire[k]!r} as it"
+        elif k >= len(wire):
+            text = (
+                f"{path}: code {k + 1} is {written[k]!r} in the file, but {doers} no code {k + 1}"
+            )
+        else:
+            text = (
+                f"{path}: code {k + 1} is {written[k]!r} in the file, "
+                f"but {doers} {wire[k]!r} as code {k + 1}"
+            )
+        more = len(differ) - 1
+        if more:
+            text += f" (and {more} more code{'s differ' if more > 1 else ' differs'})"
+        out.append(text)
+    return out

@@ -1,0 +1,42 @@
+"""The station-code layer (SPEC §3.5, §5), under the IXL, the trackside, the ATC and the CTC.
+
+Owns: the code names (`names`: the one place a name is spelled, `CodeName` a name taken apart),
+the code chart (`chart`: numbered codes of one link and direction), and what station data gives
+(`stations`: each station link's chart, `StationCodes.parse_code` for what a name means, the TTC
+totalisers). Pure: no files, no links, no clock.
+Imports only station data (`ktcs_bench.station.model`). Must not import the cores (`ixl`,
+`field`, `atc`), `charts` (the YAML files and `chart check`, built on this), the links (`type1`,
+`type2`, `binding`, `transport`), `emulator`, `ctc` or `console`.
+"""
+
+from ktcs_bench.codes.chart import Code, CodeChart
+from ktcs_bench.codes.names import CodeName, Function
+from ktcs_bench.codes.stations import (
+    LINKS,
+    ChartSpec,
+    StationCodes,
+    Totaliser,
+    build_specs,
+    chart_spec,
+    link_charts,
+    reverse,
+    station_chart,
+    totalisers,
+)
+
+__all__ = [
+    "LINKS",
+    "ChartSpec",
+    "Code",
+    "CodeChart",
+    "CodeName",
+    "Function",
+    "StationCodes",
+    "Totaliser",
+    "build_specs",
+    "chart_spec",
+    "link_charts",
+    "reverse",
+    "station_chart",
+    "totalisers",
+]
