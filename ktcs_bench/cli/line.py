@@ -1,6 +1,6 @@
 """`ktcs-bench line generate --stations N --out DIR`: a synthetic N-station line for scale runs.
 
-Thin front over `ktcs_bench.station.generate`: writes the line, its stations, a lab file, a
+Thin front over `ktcs_bench.lab.generate` (the files' text: `ktcs_bench.station.generate`): writes the line, its stations, a lab file, a
 timetable and the code charts, then loads the lab it wrote (the same checks `lab up` makes).
 Exit 0 written, 2 a bad N or an output folder that is not empty (without --force).
 """
@@ -12,13 +12,13 @@ from pathlib import Path
 
 from ktcs_bench.cli._common import positive
 from ktcs_bench.errors import UsageError
+from ktcs_bench.lab.generate import write_line
 from ktcs_bench.station.generate import (
     CHARTS_DIR,
     LAB_FILE,
     LINE_FILE,
     MAX_STATIONS,
     TIMETABLE_FILE,
-    write_line,
 )
 
 EPILOG = f"""\

@@ -1,7 +1,8 @@
 """Synthetic lines for the scale figures: N stations built on the reference stations' patterns.
 
 `line_files(n)` returns the text of every file of an N-station line, keyed by its path relative
-to the output folder; `write_line(n, out)` writes them and the code charts generated from them:
+to the output folder; `lab.generate.write_line(n, out)` writes them and the code charts generated
+from them (above the charts: station data imports nothing built on it):
 
     line.yaml              the line: plain-line track circuits, intervals, gradients, limits, ATC
     stations/stNN.yaml     one per station
@@ -28,7 +29,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.loader import load_line
@@ -484,37 +484,3 @@ def line_files(n: int, reference: Line | None = None) -> dict[str, str]:
     files[LAB_FILE] = _lab_text(placed, n)
     files[TIMETABLE_FILE] = _timetable_text(placed, n)
     return files
-
-
-def owned_files(out: Path) -> list[Path]:
-    """What a generated line in `out` consists of (and `--force` may replace)."""
-    found = [out / name for name in (LINE_FILE, LAB_FILE, TIMETABLE_FILE)]
-    found += sorted((out / STATIONS_DIR).glob("st*.yaml"))
-    found += sorted((out / CHARTS_DIR).glob("st*_*.yaml"))
-    return [f for f in found if f.is_file()]
-
-
-def write_line(n: int, out: Path, force: bool = False) -> list[Path]:
-    """Write an N-station line into `out` and generate its code charts into `out/code_charts`.
-
-    A folder that already holds anything is refused (UsageError) unless `force`; then the files
-    of an earlier generated line are removed first (nothing else is touched)."""
-    from ktcs_bench.charts.files import generate
-
-    files = line_files(n)
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"{out} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()):
-        if not force:
-            raise UsageError(f"{out} is not empty (--force replaces a generated line there)")
-        for old in owned_files(out):
-            old.unlink()
-    written = []
-    for rel, text in files.items():
-        path = out / rel
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
-        written.append(path)
-    line = load_line(out / LINE_FILE)
-    written += generate(line, out / CHARTS_DIR, LINE_FILE)
-    return written

@@ -89,6 +89,10 @@ def test_the_code_layer_and_the_binding_import_only_what_is_under_them(
     assert reaches(graph, package) <= only | reaches(graph, "station")
 
 
+def test_station_data_reaches_nothing_built_on_it() -> None:
+    assert not reaches(package_imports(), "station") & {"codes", "charts", "lab", "binding"}
+
+
 @pytest.mark.parametrize("core", ["ixl", "field", "atc"])
 def test_the_cores_never_reach_the_chart_files_links_or_processes(core: str) -> None:
     reached = reaches(package_imports(), core)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ktcs_bench.station.generate import write_line
+from ktcs_bench.lab.generate import write_line
 from tests.lab.conftest import start_lab, wait_until
 
 

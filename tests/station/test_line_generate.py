@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from ktcs_bench.charts.check import check_charts
 from ktcs_bench.cli.main import main
+from ktcs_bench.lab.generate import write_line
 from ktcs_bench.lab.topology import load_lab
 from ktcs_bench.station import Line, Route, Station, load_line
 from ktcs_bench.station.generate import (
@@ -21,7 +22,6 @@ from ktcs_bench.station.generate import (
     PATTERNS,
     line_files,
     station_numbers,
-    write_line,
 )
 
 SIZES = (1, 3, 10, 20)
