@@ -35,6 +35,7 @@ bench: setup
 	$(BIN)/python benchmarks/links_type2.py
 	$(BIN)/python benchmarks/lab.py
 	$(BIN)/python benchmarks/atp.py
+	$(BIN)/python benchmarks/scale.py
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info .pytest_cache .mypy_cache .ruff_cache .hypothesis

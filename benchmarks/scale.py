@@ -1,0 +1,253 @@
+"""Issue 15 §4 scale figures: generated lines of N = 3, 10, 20 stations (`line generate`).
+
+Live: `ktcs-bench lab up` on the generated lab file (every device its own process, Type I paced at
+9600 bit/s through taps, Type II through taps), timed from the launch of `lab up` until every
+station is synced at the CTC in center mode with its Type II link up and its IXL's Type I links
+(ATC, trackside) up. Then the memory of the lab: the resident set (VmRSS) of `lab up` (which also
+runs the taps, one thread each) and of every process under it, summed; the proportional set size
+(Pss, shared pages split between the processes that share them) beside it, since a sum of RSS
+counts the interpreter's shared pages once per process. Goals: 20 stations live in <= 20 s and
+<= 1.5 GB.
+
+Where the time goes: `lab up` starts the devices one after another, each waiting for the previous
+one's ready line, so the start-up is about (number of devices) x (one device's start-up). The
+figure printed under the table splits it: the time until `lab up` has started every device and
+answers, the time from then until the stations are synced, and a device's start-up (from its
+spawn to the next device's spawn) by kind, from the processes' start times in /proc.
+
+Virtual time: `lab simulate` (the whole lab in one process on a virtual clock, issue 15 §2) does
+not exist yet; `virtual_speed_up` is where its figure (goal: >= 50x real time at 20 stations) goes.
+
+Run: python benchmarks/scale.py [--stations 3 10 20] [--timeout 300]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from ktcs_bench.lab.generate import write_line
+from ktcs_bench.runtime import process_alive, read_token
+from ktcs_bench.station.generate import LAB_FILE
+from ktcs_bench.transport import jsonlines
+
+GOAL_STATIONS, GOAL_S, GOAL_BYTES = 20, 20.0, 1.5e9
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+IDLE_SAMPLE_S = 5.0  # how long the ready lab's CPU use is sampled
+
+
+def _request(address: str, obj: dict[str, Any], token: str) -> dict[str, Any]:
+    host, _, port = address.rpartition(":")
+    return asyncio.run(jsonlines.request(host, int(port), obj, timeout=10, token=token))
+
+
+def _descendants(root: int) -> list[int]:
+    """`root` and every live process under it (by parent pid, from /proc)."""
+    parent: dict[int, int] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rpartition(")")[2].split()
+            except OSError:
+                continue
+            parent[int(entry.name)] = int(fields[1])
+    out, todo = [root], [root]
+    while todo:
+        p = todo.pop()
+        kids = [c for c, pp in parent.items() if pp == p]
+        out += kids
+        todo += kids
+    return out
+
+
+def _memory_kb(pid: int) -> tuple[int, int]:
+    """(VmRSS, Pss) of `pid` in kB; (0, 0) if it has gone."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+        rollup = Path(f"/proc/{pid}/smaps_rollup").read_text()
+    except OSError:
+        return 0, 0
+
+    def field(text: str, key: str) -> int:
+        line = next((ln for ln in text.splitlines() if ln.startswith(key + ":")), f"{key}: 0 kB")
+        return int(line.split()[1])
+
+    return field(status, "VmRSS"), field(rollup, "Pss")
+
+
+def _ready(state: dict[str, Any], stations: list[int], token: str) -> bool:
+    """Every station synced at the CTC in center mode, its IXL's links all up."""
+    devices = state["devices"]
+    seen = _request(devices["ctc"]["control"], {"cmd": "status"}, token)["status"]["stations"]
+    if sorted(int(s) for s in seen) != stations or not all(
+        s["link"] == "up" and s["synced"] and s["mode"] == "center" for s in seen.values()
+    ):
+        return False
+    for st in stations:
+        ixl = _request(devices[f"ixl{st}"]["control"], {"cmd": "status"}, token)["status"]
+        if ixl["mode"] != "center" or not ixl["links"] or not all(ixl["links"].values()):
+            return False
+    return True
+
+
+def live(n: int, timeout: float) -> dict[str, Any]:
+    """One live run of the generated N-station lab: its timings and memory."""
+    tmp = Path(tempfile.mkdtemp(prefix=f"ktcs-scale-{n}-"))
+    write_line(n, tmp / "line")
+    run_dir = tmp / "run"
+    env = {**os.environ, "KTCS_BENCH_RUN_DIR": str(run_dir)}
+    argv = [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(tmp / "line" / LAB_FILE),
+            "--json", "--interval", "3600"]  # fmt: skip
+    t0 = time.monotonic()
+    boot = _boot_time()
+    err = open(tmp / "lab.stderr", "w")  # noqa: SIM115 -- closed below
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=err, text=True, env=env,
+                            start_new_session=True)  # fmt: skip
+    state: dict[str, Any] = {"devices": {}}
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        if not first:
+            raise SystemExit(f"lab up failed: {(tmp / 'lab.stderr').read_text()[-2000:]}")
+        t_up = time.monotonic() - t0
+        state = json.loads((run_dir / "labs" / f"line{n}" / "lab.json").read_text())
+        token = read_token(Path(state["token_file"]))
+        stations = sorted(
+            int(name.removeprefix("ixl")) for name in state["devices"] if name.startswith("ixl")
+        )
+        while not _ready(state, stations, token):
+            if time.monotonic() - t0 > timeout:
+                raise SystemExit(f"{n} stations: not ready within {timeout:g} s")
+            time.sleep(0.1)
+        t_ready = time.monotonic() - t0
+        pids = _descendants(proc.pid)
+        memory = {pid: _memory_kb(pid) for pid in pids}
+        cpu0, w0 = sum(_cpu_ticks(p) for p in pids), time.monotonic()
+        time.sleep(IDLE_SAMPLE_S)
+        idle_cpu = (sum(_cpu_ticks(p) for p in pids) - cpu0) / CLOCK_TICKS / (time.monotonic() - w0)
+        kinds = {int(d["pid"]): name.rstrip("0123456789") for name, d in state["devices"].items()}
+        by_kind: dict[str, list[int]] = {}
+        for pid, (rss, _) in memory.items():
+            kind = "lab up + taps" if pid == proc.pid else kinds.get(pid, "other")
+            by_kind.setdefault(kind, []).append(rss)
+        spawned = sorted(
+            (boot + d["started"] / CLOCK_TICKS, name.rstrip("0123456789"))
+            for name, d in state["devices"].items()
+        )
+        starts: dict[str, list[float]] = {}
+        for (t, kind), (t_next, _) in zip(spawned, spawned[1:], strict=False):
+            starts.setdefault(kind, []).append(t_next - t)
+        return {
+            "stations": n,
+            "devices": len(state["devices"]),
+            "processes": len(pids),
+            "up_s": t_up,
+            "ready_s": t_ready,
+            "rss_bytes": sum(r for r, _ in memory.values()) * 1024,
+            "pss_bytes": sum(p for _, p in memory.values()) * 1024,
+            "rss_by_kind_mb": {k: (len(v), statistics.mean(v) / 1024) for k, v in by_kind.items()},
+            "device_start_s": {k: statistics.mean(v) for k, v in starts.items()},
+            "idle_cpu": idle_cpu,
+            "data_load_s": _data_load_s(tmp / "line" / LAB_FILE),
+        }
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(120)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        err.close()
+        for d in state["devices"].values():  # they stop with their lab; none may outlive it
+            if d.get("pid") and process_alive(d["pid"], d.get("started")):
+                os.killpg(d["pid"], signal.SIGKILL)
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _cpu_ticks(pid: int) -> int:
+    """utime + stime of `pid` in clock ticks; 0 if it has gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
+    except OSError:
+        return 0
+    return int(fields[11]) + int(fields[12])
+
+
+def _data_load_s(lab_file: Path) -> float:
+    """What every device process does first: load the lab file (which loads and checks the line)
+    and then the line (`ktcs-bench emulator`). Best of three, in this process."""
+    from ktcs_bench.lab.topology import load_lab
+
+    best = float("inf")
+    for _ in range(3):
+        t = time.perf_counter()
+        load_lab(lab_file).load_line()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def _boot_time() -> float:
+    """The monotonic clock's reading at boot, so /proc start times (ticks since boot) compare."""
+    uptime = float(Path("/proc/uptime").read_text().split()[0])
+    return time.monotonic() - uptime
+
+
+def virtual_speed_up(n: int) -> float | None:
+    """Virtual seconds per wall second of the generated N-station lab under `lab simulate` (issue
+    15 §2, goal >= 50x at 20 stations). The in-process lab does not exist yet: no figure."""
+    return None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--stations", type=int, nargs="+", default=[3, 10, 20])
+    ap.add_argument("--timeout", type=float, default=300.0, help="give up on a lab after (s)")
+    args = ap.parse_args()
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start")
+    head = (f"{'stations':>8} {'devices':>7} {'procs':>5} {'all started':>11} {'ready':>7} "
+            f"{'RSS sum':>9} {'Pss sum':>9} {'virtual':>9}")  # fmt: skip
+    print(head, flush=True)
+    rows = []
+    for n in args.stations:
+        r = live(n, args.timeout)
+        rows.append(r)
+        v = virtual_speed_up(n)
+        print(f"{n:>8} {r['devices']:>7} {r['processes']:>5} {r['up_s']:>10.1f}s "
+              f"{r['ready_s']:>6.1f}s {r['rss_bytes'] / 1e6:>7.0f}MB {r['pss_bytes'] / 1e6:>7.0f}MB "
+              f"{'n/a' if v is None else f'{v:.0f}x':>9}", flush=True)  # fmt: skip
+    print("virtual: `lab simulate` (issue 15 §2) is not built yet -- no figure")
+    for r in rows:
+        kinds = ", ".join(
+            f"{k} {c}x{mb:.0f}MB" for k, (c, mb) in sorted(r["rss_by_kind_mb"].items())
+        )
+        starts = ", ".join(f"{k} {s:.2f}s" for k, s in sorted(r["device_start_s"].items()))
+        print(f"{r['stations']} stations: RSS by process kind (count x mean): {kinds}")
+        print(
+            f"{r['stations']} stations: one device's start-up by kind (spawn to next spawn): {starts}"
+        )
+        print(f"{r['stations']} stations: a device's data load (lab file + line, YAML): "
+              f"{r['data_load_s']:.2f} s; the ready lab idling uses {r['idle_cpu']:.2f} CPU")  # fmt: skip
+    big = next((r for r in rows if r["stations"] == GOAL_STATIONS), None)
+    if big is not None:
+        t_ok, m_ok = big["ready_s"] <= GOAL_S, big["rss_bytes"] <= GOAL_BYTES
+        print(f"goal {GOAL_STATIONS} stations live in <= {GOAL_S:g} s: "
+              f"{'met' if t_ok else 'NOT met'} ({big['ready_s']:.1f} s); "
+              f"<= {GOAL_BYTES / 1e9:g} GB: {'met' if m_ok else 'NOT met'} "
+              f"(RSS sum {big['rss_bytes'] / 1e9:.2f} GB, Pss sum {big['pss_bytes'] / 1e9:.2f} GB)")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
