@@ -24,6 +24,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -57,6 +58,8 @@ def run_lab(routes: int, unpaced: bool) -> list[float]:
     try:
         assert proc.stdout is not None
         json.loads(proc.stdout.readline())
+        # drain the status stream: a full pipe would block `lab up` (and its Ctrl-C handling)
+        threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()  # type: ignore[union-attr]
         state = json.loads((tmp / "run" / "labs" / "bench" / "lab.json").read_text())
         ctc = state["devices"]["ctc"]["control"]
         token = read_token(Path(state["token_file"]))  # the lab's: its control ports need it

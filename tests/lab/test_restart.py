@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from .conftest import RunningLab, request, start_lab
+from .conftest import RunningLab, request, start_lab, wait_until
 
 TRAIN = "  train1: {kind: train, train: T1, start_m: 420, length_m: 100, max_speed_kmh: 80}\n"
 STATIONS = (18, 20, 22)
@@ -105,6 +105,11 @@ def test_a_running_device_restarted_keeps_its_addresses(lab: RunningLab) -> None
         assert lab.lab({"cmd": "restart", "device": device})["ok"]
     assert addresses(lab.state()) == addresses(before)
     wait_whole(lab, "a restart of the running CTC and track circuits")
+    # the rails came back, so station 20 reads its (empty) line again: until the new track-circuit
+    # emulator has reported, losing the rails keeps every track circuit occupied (fail-safe)
+    wait_until(
+        "ixl20 reads its line clear from the new rails", lambda: not lab.status("ixl20")["occupied"]
+    )
     ctc = lab.device("ctc")
     answer = request(
         ctc, {"cmd": "route", "action": "set", "station": 20, "entry": "01", "exit": "11"}
