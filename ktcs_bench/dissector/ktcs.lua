@@ -471,7 +471,7 @@ end
 local ARQ_WINDOW = 16  -- frames of one direction within which a repeated SEQ is a resend
 
 local function new_arq_dir()
-    return { count = 0, last_seq = nil, data_by_seq = {}, any_by_seq = {} }
+    return { count = 0, last_seq = nil, data_by_seq = {}, any_by_seq = {}, nak_waiting = {} }
 end
 
 local function is_control(c, op)
@@ -482,9 +482,29 @@ end
 local function arq_observe(c, d, rev, r)
     if r.kind ~= "frame" or r.seq == nil then return end
     local a = d.arq
+    local function recent(x, of) return x and of.count - x.arq_index <= ARQ_WINDOW end
+    -- a NAK decoded before the frame it refuses (a bad frame whose header ends in a later
+    -- packet): it refuses this frame, not an older one with the SEQ
+    local function nak_waiting()
+        local w = a.nak_waiting[r.seq]
+        a.nak_waiting[r.seq] = nil
+        if w and r.pnum <= w.pnum and (w.nak_target == nil or w.nak_target.pnum < r.pnum) then
+            local old = w.nak_target
+            if old and old.naked_in == w.pnum then old.naked_in = nil end
+            w.nak_to, w.nak_target = r.pnum, r
+            r.naked_in = r.naked_in or w.pnum
+        end
+    end
     if r.err then
         a.count = a.count + 1
         r.arq_index = a.count
+        nak_waiting()
+        -- a bad frame resending one the peer NAKed: a later good copy is a retransmission of
+        -- the first transmission, and counts this one too
+        local p = a.any_by_seq[r.seq]
+        if recent(p, a) and p.naked_in and not (p.op and is_control(c, p.op)) then
+            r.first_tx, r.transmission = p.first_tx or p, (p.transmission or 1) + 1
+        end
         a.any_by_seq[r.seq] = r
         return
     end
@@ -507,27 +527,29 @@ local function arq_observe(c, d, rev, r)
         end
         r.nak_seq = seq
         local target = rev and rev.arq.any_by_seq[seq]
-        if target then
+        if recent(target, rev and rev.arq) then  -- not a frame long gone that had the SEQ
             r.nak_to = target.pnum
+            r.nak_target = target
             target.naked_in = target.naked_in or r.pnum
         end
+        if rev then rev.arq.nak_waiting[seq] = r end
         return
     end
     a.count = a.count + 1
     r.arq_index = a.count
-    local function recent(x) return x and a.count - x.arq_index <= ARQ_WINDOW end
+    nak_waiting()
     local good, bad = a.data_by_seq[r.seq], a.any_by_seq[r.seq]
     local prev
-    if recent(good) and good.raw == r.raw then
+    if recent(good, a) and good.raw == r.raw then
         prev = good  -- sent again intact (its ACK was lost, or Type II went back past it)
-    elseif recent(bad) and bad.err and bad.naked_in and not (bad.op and is_control(c, bad.op)) then
-        prev = bad   -- the peer NAKed its bad CRC
+    elseif recent(bad, a) and bad.err and bad.naked_in and not (bad.op and is_control(c, bad.op)) then
+        prev = bad   -- the peer NAKed it bad (CRC, LEN or ETX)
     end
     if prev then
         local first = prev.first_tx or prev
         r.first_tx = first
         r.retrans_of, r.transmission = first.pnum, (prev.transmission or 1) + 1
-    elseif recent(good) and a.last_seq == r.seq then
+    elseif recent(good, a) and a.last_seq == r.seq then
         r.repeat_diff = true
     elseif a.last_seq and r.seq ~= (a.last_seq + 1) % c.p.seq_modulo then
         r.gap_expected = (a.last_seq + 1) % c.p.seq_modulo
@@ -589,6 +611,38 @@ local function summary(c, r, opc, parsed, perr)
     end
     if r.ack_to then parts[#parts + 1] = "(of #" .. r.ack_to .. ")" end
     return table.concat(parts, " ")
+end
+
+-- What ties a frame to others: its ARQ links and the packet its first byte came in. A frame
+-- with a bad LEN shows them too (the peer NAKs it, the sender resends it).
+local function show_links(P, c, r, opc, t)
+    local F, E = P.f, P.e
+    if r.ack_to then t:add(F.ack_to, r.ack_to):set_generated() end
+    if r.ack_orphan then
+        t:add_proto_expert_info(E.ack_orphan, sfmt("ACK of SEQ %s: no frame with that SEQ seen from the peer", hexw(r.seq, c.field.seq.size)))
+    end
+    if r.nak_seq ~= nil then
+        local reason = c.field.sub and r.sub or (r.data_end > r.data_start and byte_at(r.raw, r.data_start)) or nil
+        local rn = reason and (c.p.nak_reasons[reason] or (opc and opc.subs and opc.subs[reason]))
+        local what = reason and sfmt("reason %d (%s) ", reason, rn or "unknown") or ""
+        t:add_proto_expert_info(E.nak, sfmt("NAK %sfor SEQ %s: expect a retransmission", what, hexw(r.nak_seq, c.field.seq.size)))
+        if r.nak_to then t:add(F.nak_to, r.nak_to):set_generated() end
+    end
+    if r.acked_in then t:add(F.acked_in, r.acked_in):set_generated() end
+    if r.naked_in then t:add(F.naked_in, r.naked_in):set_generated() end
+    if r.retrans_of then
+        t:add(F.retrans_of, r.retrans_of):set_generated()
+        t:add(F.transmission, r.transmission):set_generated()
+        t:add_proto_expert_info(E.retransmission, sfmt("Retransmission of SEQ %s (transmission %d, first in frame %d)",
+            hexw(r.seq, c.field.seq.size), r.transmission, r.retrans_of))
+    end
+    if r.repeat_diff then
+        t:add_proto_expert_info(E.repeat_diff, sfmt("SEQ %s repeated with different content", hexw(r.seq, c.field.seq.size)))
+    end
+    if r.gap_expected then
+        t:add_proto_expert_info(E.gap, sfmt("SEQ gap: expected %s, got %s", hexw(r.gap_expected, c.field.seq.size), hexw(r.seq, c.field.seq.size)))
+    end
+    if r.first_in then t:add(F.first_in, r.first_in):set_generated() end
 end
 
 -- Add one record to the tree. `ft` is a Tvb holding exactly r.raw at offset 0.
@@ -654,6 +708,7 @@ local function show_record(P, c, r, ft, pinfo, tree, infos)
         t:add(F.error, "length"):set_generated()
         t:add_proto_expert_info(E.length, what)
         t:add(F.crc_ok, false):set_generated()
+        show_links(P, c, r, opc, t)
         return
     end
     if r.data_end > r.data_start then t:add(F.data, ft(r.data_start, r.data_end - r.data_start)) end
@@ -731,33 +786,7 @@ local function show_record(P, c, r, ft, pinfo, tree, infos)
             end
         end
     end
-    -- ARQ
-    if r.ack_to then t:add(F.ack_to, r.ack_to):set_generated() end
-    if r.ack_orphan then
-        t:add_proto_expert_info(E.ack_orphan, sfmt("ACK of SEQ %s: no frame with that SEQ seen from the peer", hexw(r.seq, c.field.seq.size)))
-    end
-    if r.nak_seq ~= nil then
-        local reason = c.field.sub and r.sub or (r.data_end > r.data_start and byte_at(r.raw, r.data_start)) or nil
-        local rn = reason and (c.p.nak_reasons[reason] or (opc and opc.subs and opc.subs[reason]))
-        local what = reason and sfmt("reason %d (%s) ", reason, rn or "unknown") or ""
-        t:add_proto_expert_info(E.nak, sfmt("NAK %sfor SEQ %s: expect a retransmission", what, hexw(r.nak_seq, c.field.seq.size)))
-        if r.nak_to then t:add(F.nak_to, r.nak_to):set_generated() end
-    end
-    if r.acked_in then t:add(F.acked_in, r.acked_in):set_generated() end
-    if r.naked_in then t:add(F.naked_in, r.naked_in):set_generated() end
-    if r.retrans_of then
-        t:add(F.retrans_of, r.retrans_of):set_generated()
-        t:add(F.transmission, r.transmission):set_generated()
-        t:add_proto_expert_info(E.retransmission, sfmt("Retransmission of SEQ %s (transmission %d, first in frame %d)",
-            hexw(r.seq, c.field.seq.size), r.transmission, r.retrans_of))
-    end
-    if r.repeat_diff then
-        t:add_proto_expert_info(E.repeat_diff, sfmt("SEQ %s repeated with different content", hexw(r.seq, c.field.seq.size)))
-    end
-    if r.gap_expected then
-        t:add_proto_expert_info(E.gap, sfmt("SEQ gap: expected %s, got %s", hexw(r.gap_expected, c.field.seq.size), hexw(r.seq, c.field.seq.size)))
-    end
-    if r.first_in then t:add(F.first_in, r.first_in):set_generated() end
+    show_links(P, c, r, opc, t)
 end
 
 -- A Tvb holding exactly the record's bytes: a slice of this packet when they all lie in it,

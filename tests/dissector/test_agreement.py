@@ -18,7 +18,7 @@ from ktcs_bench.codec.frame import FrameCodec
 from ktcs_bench.codec.profile import get_profile
 from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.datafiles import data_dir
-from ktcs_bench.faults import BitErrors, InsertGarbage
+from ktcs_bench.faults import BitErrors, CorruptFrame, InsertGarbage
 from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.transport.aio import LinkRunner
@@ -128,6 +128,22 @@ def check_arq(packets: list[Any], short: str) -> dict[str, int]:
     return counts
 
 
+def resent_after_nak(packets: list[Any], short: str) -> set[tuple[str, str]]:
+    """(direction, error) of the bad frames the peer NAKed whose retransmission is linked to them."""
+    x = short + "."
+    trees = layers_of(packets, short)
+    naked = {
+        (num, d): t[x + "error"]
+        for num, d, t in trees
+        if x + "error" in t and x + "arq.naked_in" in t
+    }
+    return {
+        (d, naked[key])
+        for _, d, t in trees
+        if (key := (int(t.get(x + "arq.retransmission_of", 0)), d)) in naked
+    }
+
+
 def errors_in(view: dict[str, list[Rec]]) -> set[str]:
     kinds = {r["error"] for recs in view.values() for r in recs if r.get("error")}
     if any("garbage" in r for recs in view.values() for r in recs):
@@ -177,6 +193,17 @@ def type1_session(path: Path) -> None:
             tap.inject(BitErrors(4e-3))  # CRC errors: NAK, retransmission
             await exchange(25)
             tap.clear()
+            # the same in every run, whatever the bit errors hit: the next frame each way has a
+            # LEN over the maximum (the ixl's) or a bad CRC (the atc's); the peer NAKs it, the
+            # sender resends it
+            for end, fault in (
+                ("ixl", CorruptFrame(2, 0x08, direction="ixl>atc")),  # LEN's high byte: +2048
+                ("atc", CorruptFrame(5, 0x01, direction="atc>ixl")),  # a DATA byte
+            ):
+                tap.inject(fault)
+                runners[end].send(links[end].message("CHANGE", items=[[99, 1]]))
+                while links[end].queued:
+                    await asyncio.sleep(0.005)
             tap.inject(
                 InsertGarbage(bytes([0x02, 0x40, 0x00]) + b"\x99\x02\x13", direction="ixl>atc")
             )
@@ -218,6 +245,7 @@ def test_type1_link_on_real_ptys_through_a_tap(lua: Path, tmp_path: Path) -> Non
     assert_agree(dissected(packets, "ktcs1"), python)
     arq = check_arq(packets, "ktcs1")
     assert arq["ack"] > 30 and arq["nak"] >= 1 and arq["retransmission"] >= 1, arq
+    assert {("ixl>atc", "length"), ("atc>ixl", "crc")} <= resent_after_nak(packets, "ktcs1")
     # the same bytes in other packets: several frames in one, one frame over several
     again = write_pcapng(tmp_path / "rechunked.pcapng", rechunked(records, 1), "type1")
     packets = tshark_json(lua, again)
