@@ -412,10 +412,11 @@ class Interlocking:
                 self._detect_entry(rs, now)
             if rs.status in (RouteStatus.ENTERED, RouteStatus.CANCELLING) and rs.seen:
                 self._sequential_release(rs, now)
-            if rs.overlap_ceded and rs.holds_anything:
-                self._retake_overlap(rs, now)
             if rs.status in (RouteStatus.SETTING, RouteStatus.SET):
                 self._drive_points(rs, now)
+        for rs in self.routes.values():  # after every release of this input: no gap between
+            if rs.overlap_ceded and rs.holds_anything:
+                self._retake_overlap(rs, now)
         self._update_signals(now)
 
     def _retake_overlap(self, rs: RouteState, now: float) -> None:

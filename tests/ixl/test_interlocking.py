@@ -302,3 +302,26 @@ def test_link_flap_during_a_train_movement_releases_nothing_ahead(rig: StationRi
     assert rs.seen == [True, False, False]
     rig.occupy("TC2053A", False)  # the train has not reached section 2: nothing may release
     assert {"TC2053A", "TC2053B", "TC2055"} <= rs.held_tcs
+
+
+def test_an_overlap_handed_on_is_locked_again_in_the_input_that_frees_it(line: Line) -> None:
+    """The onward route that held our overlap is released: our overlap is locked again before
+    anything else can use the gap (a point control in the very next input is refused)."""
+    rig = StationRig(line.view(18))
+    rig.control("RSC180112")
+    rig.advance(5)
+    for tc, occupied in [("TC1851", True), ("TC1853A", True), ("TC1851", False)]:
+        rig.occupy(tc, occupied)
+    rig.occupy("TC1856")
+    rig.occupy("TC1853A", False)  # the train stands in the berth of track 2
+    assert rig.control("RSC181291").accepted  # its departure takes over the overlap (point 32)
+    rig.advance(5)
+    assert "32" in rig.ixl.routes["1291"].held_points
+    assert rig.control("RCC181291").accepted  # the train at signal 12: approach-locked
+    due = rig.ixl.next_deadline()
+    assert due is not None
+    rig.now = due
+    rig.take(rig.ixl.tick(due))  # the one input in which 1291's timed release falls due
+    assert rig.ixl.route_status("1291") is RouteStatus.IDLE
+    assert "32" in rig.ixl.routes["0112"].held_points
+    assert rig.control("SNC1832").reason is Reason.POINT_LOCKED
