@@ -9,7 +9,8 @@ puts a signal to stop in the same call that reported it (invariant 4: within one
 
 Fail-safe defaults: links start down; a track circuit is occupied until its source reports it
 clear and whenever a link that reports it is down; a point has no detection until the trackside
-reports it and whenever the trackside link is down.
+reports it and whenever the trackside link is down. A link that went down is believed again only
+for what it reports after it came back: nothing it said before the outage is reused.
 """
 
 from __future__ import annotations
@@ -90,6 +91,9 @@ class Interlocking:
         self.ttc: dict[str, int] = {}
         self._points_in = {p.name: p.track_circuits for p in st.points}
         self._proceed_before: dict[str, bool] = dict.fromkeys(self.signals, False)
+        # occupancy as the last evaluation with live reports saw it (a train's sequence is read
+        # by comparing each live picture with this one)
+        self._occupied_before: dict[str, bool] = dict.fromkeys(self.tc_names, True)
         self._noticed: set[str] = set()
         self.codes = StationCodes(view)
         self._controls = set(self.codes.names("ctc_to_ixl"))
@@ -133,7 +137,14 @@ class Interlocking:
         return self._finish(now)
 
     def receive(self, link: str, codes: Mapping[str, int], now: float) -> IxlOutput:
-        """Code changes or a full state from a Type I peer: link "atc" or "io"."""
+        """Code changes or a full state from a Type I peer: link "atc" or "io".
+
+        Codes that come while the link is in communication error are ignored: the IXL has gone
+        fail-safe for that link and rebuilds its view from what comes after `link_state(up)`.
+        """
+        if not self.link_up[link]:
+            self._event(now, "fault", f"{link}: codes on a link in communication error ignored")
+            return self._finish(now)
         known = self._inputs[link]
         for name, state in codes.items():
             if name not in known:
@@ -150,9 +161,18 @@ class Interlocking:
             self.link_up[link] = up
             what = "up" if up else "in communication error"
             self._event(now, "link", f"{link} link {what}")
-            if not up and link == "io":
-                for sig in self.signals.values():
-                    sig.lamp_reported = False
+            if not up:
+                # What the link reported is stale from now on: after recovery each report is
+                # believed again only once the peer sends it (its ALL_INFO), not before.
+                self.tc_reports[link].clear()
+                if link == "atc":
+                    self.izc.clear()
+                else:
+                    for ps in self.points.values():
+                        ps.bits.clear()
+                    for sig in self.signals.values():
+                        sig.lamp_bits.clear()
+                        sig.lamp_reported = False
         return self._finish(now)
 
     def tick(self, now: float) -> IxlOutput:
@@ -403,21 +423,25 @@ class Interlocking:
     def _evaluate(self, now: float) -> None:
         if self.modes.tick(now):
             self._event(now, "mode", "center mode granted automatically")
+        live = self._reports_live()
         for rs in self.routes.values():
             if rs.release_at is not None:
                 if now >= rs.release_at:
                     self._event(now, "route", f"route {rs.route.name} released (timed release)")
                     rs.release_all()
-            if rs.status is RouteStatus.SET:
+            if rs.status is RouteStatus.SET and live:
                 self._detect_entry(rs, now)
-            if rs.status in (RouteStatus.ENTERED, RouteStatus.CANCELLING) and rs.seen:
+            if rs.status is RouteStatus.ENTERED and live:
                 self._sequential_release(rs, now)
+                self._overlap_release(rs, now)
             if rs.status in (RouteStatus.SETTING, RouteStatus.SET):
                 self._drive_points(rs, now)
         for rs in self.routes.values():  # after every release of this input: no gap between
             if rs.overlap_ceded and rs.holds_anything:
                 self._retake_overlap(rs, now)
         self._update_signals(now)
+        if live:
+            self._occupied_before = {tc: self.occupied(tc) for tc in self.tc_names}
 
     def _retake_overlap(self, rs: RouteState, now: float) -> None:
         """The onward route let our overlap go (cancelled or released): lock it again if free."""
@@ -439,54 +463,92 @@ class Interlocking:
         return True
 
     def _reports_live(self) -> bool:
-        """Occupancy comes from live reports, not from the fail-safe assumption of a dead link."""
-        return all(self.link_up[src] for src in self.tc_sources)
+        """Occupancy comes from live reports, not from the fail-safe assumption of a dead link or
+        of a link back up whose peer has not yet reported every track circuit again."""
+        return all(
+            self.link_up[src] and len(self.tc_reports[src]) == len(self.tc_names)
+            for src in self.tc_sources
+        )
+
+    def _was_occupied(self, tcs: tuple[str, ...]) -> bool:
+        """Any of `tcs` occupied at the last evaluation with live reports."""
+        return any(self._occupied_before.get(tc, True) for tc in tcs)
 
     def _detect_entry(self, rs: RouteState, now: float) -> None:
+        """Called with live reports only: a dead link is never read as a train entering."""
         r = rs.route
-        if not self._reports_live():
-            return
         first = r.release_sections[0]
         if not any(self.occupied(tc) for tc in first):
             self._noticed.discard(r.name)
             return
         if self._proceed_before.get(r.entry, False):
             rs.status = RouteStatus.ENTERED
-            rs.seen[0] = True
             self._event(now, "train", f"train entered route {r.name}: signal {r.entry} to stop")
+            rs.passed[0] = not r.approach or self._was_occupied(r.approach)
+            if not rs.passed[0]:
+                self._event(
+                    now,
+                    "fault",
+                    f"route {r.name}: {'+'.join(first)} occupied with the approach "
+                    f"{'+'.join(r.approach)} clear: not a train's sequence, the route stays "
+                    "locked until it is cancelled (timed release)",
+                )
         elif r.name not in self._noticed:
             self._noticed.add(r.name)
             self._event(now, "fault", f"route {r.name}: {first[0]} occupied, signal at stop")
 
     def _sequential_release(self, rs: RouteState, now: float) -> None:
-        if not self._reports_live():
-            return  # a dead link shows everything occupied: no train movement can be read
-        sections = rs.route.release_sections
+        """Release by train passage, read from live reports only (SPEC §6.2).
+
+        A section counts as passed when it went occupied while the track before it (the section
+        before, itself passed, or the approach for the first) was already occupied at the
+        previous live evaluation: the train's head running in. It is released once the track
+        before it has cleared (the tail has followed: for the first section the approach, seen
+        clear while the section was occupied or clear now; for the others the section before,
+        released already) and it clears while the next section, itself passed, is occupied (the
+        last section: when it clears). A train standing in the approach while the sections go
+        occupied and clear around it has passed nothing.
+        Track circuits that go occupied in one report and clear in one report (a rails outage, a
+        detection failure, a failed-occupied track circuit that recovers) never make this
+        sequence: such a route keeps everything locked until it is cancelled, which time-releases
+        it with its approach-locking time.
+        """
+        r = rs.route
+        sections = r.release_sections
         last = len(sections) - 1
-        for i in range(rs.next_section, len(sections)):
-            if any(self.occupied(tc) for tc in sections[i]):
-                rs.seen[i] = True
+        occupied = [any(self.occupied(tc) for tc in sec) for sec in sections]
+        for k in range(rs.next_section, len(sections)):
+            before = sections[k - 1] if k else r.approach
+            ran_in = not before or self._was_occupied(before)  # no approach: the signal alone
+            in_order = k == 0 or rs.passed[k - 1]  # the head runs in section after section
+            if occupied[k] and not self._was_occupied(sections[k]) and ran_in and in_order:
+                rs.passed[k] = True
+        if rs.passed[0] and occupied[0] and not any(self.occupied(tc) for tc in r.approach):
+            rs.approach_left = True
         while rs.next_section <= last:
             k = rs.next_section
-            clear = not any(self.occupied(tc) for tc in sections[k])
-            if rs.seen[k] and clear and (k == last or rs.seen[k + 1]):
-                rs.release_section(k, self._points_in)
-                rs.next_section += 1
-                self._event(
-                    now, "route", f"route {rs.route.name}: {'+'.join(sections[k])} released"
-                )
-            else:
+            # the tail has followed: the approach seen clear behind the train in section 0, or
+            # clear now (two joints crossed between reports); section k-1 released: it cleared
+            tail_in = k > 0 or rs.approach_left or not any(self.occupied(tc) for tc in r.approach)
+            onward = k == last or (rs.passed[k + 1] and occupied[k + 1])
+            if not (rs.passed[k] and tail_in and not occupied[k] and onward):
                 break
+            rs.release_section(k, self._points_in)
+            rs.next_section += 1
+            self._event(now, "route", f"route {r.name}: {'+'.join(sections[k])} released")
+        if rs.overlap_held and rs.overlap_at is None and rs.next_section <= last:
+            if rs.passed[last]:  # the train reached the berth: it stops within the overlap
+                rs.overlap_at = now + r.overlap_release_s
+
+    def _overlap_release(self, rs: RouteState, now: float) -> None:
+        """The overlap goes with the last section, or on its timer; then the route is free."""
         if rs.overlap_held:
-            if rs.next_section > last:
+            if rs.next_section >= len(rs.route.release_sections):
                 rs.release_overlap()
-            elif rs.seen[last]:
-                if rs.overlap_at is None:
-                    rs.overlap_at = now + rs.route.overlap_release_s
-                elif now >= rs.overlap_at:
-                    rs.release_overlap()
-                    self._event(now, "route", f"route {rs.route.name}: overlap released")
-        if rs.next_section > last and not rs.overlap_held and rs.status is RouteStatus.ENTERED:
+            elif rs.overlap_at is not None and now >= rs.overlap_at:
+                rs.release_overlap()
+                self._event(now, "route", f"route {rs.route.name}: overlap released")
+        if rs.next_section >= len(rs.route.release_sections) and not rs.overlap_held:
             rs.release_all()
             self._event(now, "route", f"route {rs.route.name} fully released")
 

@@ -1,9 +1,11 @@
 """Route state: what a route holds locked, and its life from setting to sequential release.
 
 IDLE -> SETTING (locked, points being thrown) -> SET (every point detected; the signal may clear)
--> ENTERED (the train passed the cleared entry signal; sections release one by one behind it)
--> IDLE. A cancel goes SETTING/SET -> IDLE at once when nothing approaches a signal that has
-shown proceed, else -> CANCELLING (approach locked) -> IDLE when the timed release expires.
+-> ENTERED (the entry section was occupied after the signal had cleared; sections release one by
+one behind a train that runs through them in sequence, see `passed`) -> IDLE. A cancel goes
+SETTING/SET -> IDLE at once when nothing approaches a signal that has shown proceed, else ->
+CANCELLING (approach locked) -> IDLE when the timed release expires; a cancel of an ENTERED route
+whose track circuits are all clear time-releases what it still holds.
 
 Each route keeps its own set of held track circuits and points: the interlocking's locking is the
 union of these sets, so "no element held twice" (SPEC §6.2 invariant 1) is checkable directly.
@@ -35,8 +37,11 @@ class RouteState:
     held_tcs: set[str] = field(default_factory=set)
     held_points: set[str] = field(default_factory=set)
     cleared_once: bool = False  # the entry signal has shown proceed since the route was set
-    next_section: int = 0
-    seen: list[bool] = field(default_factory=list)  # section occupied since entry
+    next_section: int = 0  # the first section not yet released
+    # section k was occupied in a train's sequence: it went occupied while the track before it
+    # (section k-1, or the approach for k = 0) was already occupied, not in the same report
+    passed: list[bool] = field(default_factory=list)
+    approach_left: bool = False  # the approach cleared while section 0 was occupied (passed)
     release_at: float | None = None  # approach-locking timed release
     overlap_at: float | None = None  # overlap timed release
     overlap_held: bool = False
@@ -58,7 +63,8 @@ class RouteState:
         self.held_points = {s.point for s in r.all_points}
         self.cleared_once = False
         self.next_section = 0
-        self.seen = [False] * len(r.release_sections)
+        self.passed = [False] * len(r.release_sections)
+        self.approach_left = False
         self.release_at = None
         self.overlap_at = None
         self.overlap_held = bool(r.overlap_track_circuits or r.overlap_points)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.binding import ControlLink
 from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ixl import Interlocking, Mode, Reason, RouteStatus
@@ -299,9 +300,138 @@ def test_link_flap_during_a_train_movement_releases_nothing_ahead(rig: StationRi
     rig.set_link("atc", False)  # everything looks occupied while the link is in error
     rig.set_link("atc", True)
     rs = rig.ixl.routes["0111"]
-    assert rs.seen == [True, False, False]
+    assert rs.passed == [True, False, False]
     rig.occupy("TC2053A", False)  # the train has not reached section 2: nothing may release
     assert {"TC2053A", "TC2053B", "TC2055"} <= rs.held_tcs
+
+
+@pytest.mark.parametrize("link", ["atc", "io"])
+def test_a_link_back_up_is_believed_only_for_what_it_reports_again(
+    rig: StationRig, link: str
+) -> None:
+    rig.control("RSC200112")
+    rig.advance(5)
+    assert rig.ixl.aspect("01") == "Y"
+    rig.take(rig.ixl.link_state(link, False, rig.now))
+    if link == "io":
+        rig.from_field(rig.io.link_state(False, rig.now).changes)
+    assert rig.ixl.aspect("01") == "R"
+    # the link is up again, but the peer's ALL_INFO has not arrived: what it said before the
+    # outage may be out of date (a train may have come in), so nothing is read from it
+    rig.take(rig.ixl.link_state(link, True, rig.now))
+    assert rig.ixl.aspect("01") == "R"
+    if link == "atc":
+        assert rig.ctc["TC2053A"] == 1 and rig.ixl.occupied("TC2056")
+    else:
+        assert rig.ixl.detection("31") == "none" and rig.ctc["SFI2031"] == 1
+    # the peer's full state arrives: the signal clears again
+    if link == "atc":
+        rig.occupy("TC2047", False)  # the ATC reports every track circuit
+    else:
+        rig.from_field(rig.io.link_state(True, rig.now).changes)
+        rig.take(rig.ixl.receive("io", rig.io.full_state(), rig.now))
+    assert rig.ixl.aspect("01") == "Y"
+
+
+class AtcOnRails:
+    """The station's wayside ATC as the IXL's source of occupancy, fed by the rails."""
+
+    def __init__(self, rig: StationRig, line: Line) -> None:
+        self.rig = rig
+        self.atc = WaysideAtc(line, rig.view.number)
+        self.tcs = [t.name for t in line.all_track_circuits()]
+        self.atc.link_state(True, rig.now)
+        self.atc.receive(rig.ixl.full_state("atc"), rig.now)
+        self.report(self.atc.set_occupancy(dict.fromkeys(self.tcs, False), rig.now))
+
+    def report(self, out: AtcOutput) -> None:
+        """One ATC output is one CHANGE frame to the IXL: one input, all at once."""
+        if out.ixl:
+            self.rig.take(self.rig.ixl.receive("atc", dict(out.ixl), self.rig.now))
+
+    def occupy(self, tc: str, occupied: bool = True) -> None:
+        self.report(self.atc.set_occupancy({tc: occupied}, self.rig.now))
+
+    def rails_lost(self) -> None:
+        self.report(self.atc.rails_state(False, self.rig.now))
+
+    def rails_back(self, occupied: tuple[str, ...] = ()) -> None:
+        """The rails reconnect and report every track circuit (their full occupancy)."""
+        self.report(self.atc.rails_state(True, self.rig.now))
+        full = {tc: tc in occupied for tc in self.tcs}
+        self.report(self.atc.set_occupancy(full, self.rig.now))
+
+
+def _locked(rig: StationRig, route: str) -> bool:
+    rs = rig.ixl.routes[route]
+    r = rs.route
+    return (
+        set(r.all_track_circuits) <= rs.held_tcs
+        and {s.point for s in r.all_points} <= rs.held_points
+    )
+
+
+def test_a_rails_outage_is_no_train_passage_the_route_stays_locked(
+    rig: StationRig, line: Line
+) -> None:
+    atc = AtcOnRails(rig, line)
+    rig.control("RSC200111")
+    rig.advance(5)
+    assert rig.ixl.aspect("01") == "Y"
+    atc.rails_lost()  # every track circuit occupied in one report
+    assert rig.ixl.aspect("01") == "R"
+    assert rig.ixl.route_status("0111") is RouteStatus.ENTERED  # as if a train had entered
+    rig.advance(60)  # longer than the overlap timer: no train reached the berth
+    atc.rails_back()  # every track circuit clear in one report
+    rig.advance(200)
+    assert rig.ixl.route_status("0111") is RouteStatus.ENTERED and _locked(rig, "0111")
+    assert all(rig.ctc[f"SLI20{p}"] == 1 for p in ("31", "33", "34"))  # points still locked
+    assert rig.control("SNC2031").reason is Reason.POINT_LOCKED
+    assert rig.ixl.aspect("01") == "R"
+    # released properly: the operator cancels and the approach-locking time runs
+    assert rig.control("RCC200111").accepted
+    assert rig.ctc["ALI200111"] == 1
+    rig.advance(89)
+    assert _locked(rig, "0111")
+    rig.advance(1.5)
+    assert rig.ixl.route_status("0111") is RouteStatus.IDLE
+    assert rig.ctc["SLI2031"] == 0 and rig.ctc["ALI200111"] == 0
+
+
+def test_a_rails_outage_with_a_train_waiting_in_the_approach_releases_nothing(
+    rig: StationRig, line: Line
+) -> None:
+    """A one-section departure route: its section and approach both occupied by the outage,
+    then the section clear with the train still standing in the approach."""
+    atc = AtcOnRails(rig, line)
+    rig.control("RSC200112")
+    rig.advance(5)
+    atc.occupy("TC2047")
+    atc.occupy("TC2053A")
+    atc.occupy("TC2047", False)
+    atc.occupy("TC2056")
+    atc.occupy("TC2053A", False)  # a train in the berth of track 2
+    assert rig.control("RSC201291").accepted  # its departure (takes over the overlap)
+    rig.advance(5)
+    assert rig.ixl.aspect("12") != "R"
+    atc.rails_lost()
+    atc.rails_back(occupied=("TC2056",))  # the train never moved
+    rig.advance(120)
+    assert rig.ixl.route_status("1291") is RouteStatus.ENTERED and _locked(rig, "1291")
+    assert rig.ctc["SLI2032"] == 1
+
+
+def test_a_failed_occupied_entry_section_that_recovers_releases_nothing(rig: StationRig) -> None:
+    rig.control("RSC200111")
+    rig.advance(5)
+    rig.occupy("TC2053A")  # the first section fails occupied, no train in the approach
+    assert rig.ixl.route_status("0111") is RouteStatus.ENTERED
+    assert any("not a train's sequence" in e.text for e in rig.events)
+    rig.occupy("TC2053B")
+    rig.occupy("TC2053A", False)  # recovers; a later section flickers
+    rig.occupy("TC2053B", False)
+    rig.advance(100)
+    assert _locked(rig, "0111")
 
 
 def test_an_overlap_handed_on_is_locked_again_in_the_input_that_frees_it(line: Line) -> None:

@@ -10,7 +10,18 @@ the invariants are checked against what the test itself fed in, not the IXL's ow
    towards that route's position) and its track circuits are clear;
 3. a signal shows proceed only with its route set, every point detected as required, every track
    circuit of route and overlap clear, the overlap locked, both links up, and no stop hold;
-4. is 3 checked after every single input: a failing condition puts the signal to stop at once.
+4. is 3 checked after every single input: a failing condition puts the signal to stop at once;
+5. once a route is entered, a section (and its points) is released only after a train's passage
+   sequence in the occupancy fed -- the section went occupied in a later report than the track
+   before it (a section, or the approach), the track before it was seen clear while it was
+   occupied (or is clear now), the next section went occupied in a later report than it, and it
+   is clear while the next is occupied (the last: clear) -- or by a timed cancel (the approach-locking time after an
+   accepted cancel); its overlap only with the last section, or the overlap time after the train
+   ran into the berth in sequence, or by a timed cancel. The field includes rails outages:
+   every track circuit occupied in one report, then every one clear in one report.
+
+The test keeps its own picture of the occupancy the IXL may believe: a track circuit counts as
+occupied while the ATC link is down and, after it came back, until the test has reported it again.
 """
 
 from __future__ import annotations
@@ -35,6 +46,7 @@ from ktcs_bench.station.model import Route
 
 LINE = load_line()
 STEPS = {"count": 0}
+RELEASED = {"passage": 0, "timed": 0}  # sections released while entered, by how
 DETECTIONS = ("normal", "reverse", "to_normal", "to_reverse", "none")
 BITS = {
     "normal": {"SNI": 1, "SRN": 0, "SRI": 0, "SNR": 0},
@@ -50,6 +62,12 @@ class InterlockingMachine(RuleBasedStateMachine):
         super().__init__()
         self.now = 0.0
         self.trains: list[tuple[tuple[str, ...], int]] = []
+        self.reported: set[str] = set()  # track circuits reported since the ATC link came up
+        # the occupancy the IXL could read, after every input it took with live reports
+        self.history: list[tuple[float, frozenset[str]]] = []
+        self.since: dict[str, int] = {}  # route -> last history index before it was locked
+        self.cancels: dict[str, list[float]] = {}  # route -> accepted cancels while entered
+        self.before: dict[str, tuple[RouteStatus, set[str], set[str]]] = {}
 
     @initialize(station=st.sampled_from(sorted(LINE.stations)))
     def start(self, station: int) -> None:
@@ -66,16 +84,24 @@ class InterlockingMachine(RuleBasedStateMachine):
         self.links = {"atc": True, "io": True}
         self.held_stop: set[str] = set()
         self.demand = {p: "normal" for p in self.points}
+        self.before = {r: (RouteStatus.IDLE, set(), set()) for r in self.routes}
         self.apply(self.ixl.link_state("atc", True, self.now))
         self.apply(self.ixl.link_state("io", True, self.now))
-        atc = {tc: 0 for tc in self.tcs} | {n.izc(iv.name): 0 for iv in self.view.intervals}
-        self.apply(self.ixl.receive("atc", atc, self.now))
+        self.feed(dict.fromkeys(self.tcs, False))
         self.feed_detection(self.points)
 
     # ---------------------------------------------------------------- helpers
 
     def apply(self, out: IxlOutput) -> None:
-        """Check invariant 2 on every point demand the IXL changed in this output."""
+        """Check invariant 2 on every point demand the IXL changed in this output, and
+        invariant 5 on every element a route released in it."""
+        self.check_points(out)
+        if self.live():
+            occupied = frozenset(tc for tc in self.tcs if self.occupied(tc))
+            self.history.append((self.now, occupied))
+        self.check_releases()
+
+    def check_points(self, out: IxlOutput) -> None:
         for name, value in out.io:
             code = self.codes.parse_code(name)
             assert code is not None
@@ -99,7 +125,11 @@ class InterlockingMachine(RuleBasedStateMachine):
                     )
 
     def occupied(self, tc: str) -> bool:
-        return self.occ[tc] or not self.links["atc"]
+        """What the IXL may believe: occupied unless reported clear over a live link."""
+        return self.occ[tc] or not self.links["atc"] or tc not in self.reported
+
+    def live(self) -> bool:
+        return self.links["atc"] and len(self.reported) == len(self.tcs)
 
     def feed_detection(self, points: list[str]) -> None:
         codes: dict[str, int] = {}
@@ -109,12 +139,100 @@ class InterlockingMachine(RuleBasedStateMachine):
         self.apply(self.ixl.receive("io", codes, self.now))
 
     def feed_occupancy(self, tc: str, value: bool) -> None:
-        self.occ[tc] = value
-        codes = {tc: int(value)}
+        self.feed({tc: value})
+
+    def feed(self, occupancy: dict[str, bool]) -> None:
+        """One report of the ATC (one CHANGE frame): any number of track circuits at once."""
+        self.occ.update(occupancy)
+        codes = {tc: int(v) for tc, v in occupancy.items()}
         for iv in self.view.intervals:
-            if tc in iv.track_circuits:
+            if set(occupancy) & set(iv.track_circuits):
                 codes[n.izc(iv.name)] = int(any(self.occ[t] for t in self.view.owned_half(iv)))
+        if self.links["atc"]:
+            self.reported |= set(occupancy)
         self.apply(self.ixl.receive("atc", codes, self.now))
+
+    # ---------------------------------------------------------------- invariant 5: the oracle
+
+    def check_releases(self) -> None:
+        """Every element an entered route let go in the last input was released by the rules."""
+        held_by = {
+            e: name for name, rs in self.ixl.routes.items() for e in rs.held_tcs | rs.held_points
+        }
+        for name, rs in self.ixl.routes.items():
+            status, tcs, points = self.before[name]
+            if status is RouteStatus.IDLE and rs.status is not RouteStatus.IDLE:
+                self.since[name] = len(self.history) - 1 - int(self.live())
+                self.cancels[name] = []
+            if status is RouteStatus.ENTERED:
+                let_go = {
+                    e for e in (tcs | points) - rs.held_tcs - rs.held_points if e not in held_by
+                }
+                if let_go:
+                    self.check_route_release(rs.route, let_go, rs.held_tcs)
+            self.before[name] = (rs.status, set(rs.held_tcs), set(rs.held_points))
+
+    def check_route_release(self, r: Route, let_go: set[str], still: set[str]) -> None:
+        sections = r.release_sections
+        if any(t + r.approach_release_s <= self.now for t in self.cancels[r.name]):
+            RELEASED["timed"] += sum(bool(set(sec) & let_go) for sec in sections)
+            return  # a timed cancel
+        for k, sec in enumerate(sections):
+            if set(sec) & let_go:
+                RELEASED["passage"] += 1
+                assert self.passage(r, k), (
+                    f"route {r.name}: {'+'.join(sec)} released without a train's passage "
+                    f"(occupancy fed: {self.history[self.since[r.name] :]})"
+                )
+        for s in r.points:
+            if s.point in let_go:
+                within = self.view.station.point(s.point).track_circuits
+                assert not set(within) & set(r.track_circuits) & still, (
+                    f"route {r.name}: point {s.point} released before its track circuits"
+                )
+        overlap = set(r.overlap_track_circuits) | {s.point for s in r.overlap_points}
+        if overlap & let_go:
+            last = len(sections) - 1
+            berth = [
+                a
+                for a in self.ran_in(r, last)
+                if self.history[a][0] + r.overlap_release_s <= self.now
+            ]
+            assert not set(r.track_circuits) & still or berth, (
+                f"route {r.name}: overlap released with no train in the berth for "
+                f"{r.overlap_release_s:g} s"
+            )
+
+    def ran_in(self, r: Route, k: int) -> list[int]:
+        """History indices at which section k went occupied while the track before it was."""
+        h, sections = self.history, r.release_sections
+        sec, before = set(sections[k]), set(sections[k - 1] if k else r.approach)
+        return [
+            a
+            for a in range(self.since[r.name] + 1, len(h))
+            if sec & h[a][1] and not sec & h[a - 1][1] and (not before or before & h[a - 1][1])
+        ]
+
+    def passage(self, r: Route, k: int) -> bool:
+        """Section k of route r was passed by a train, by the occupancy fed (invariant 5)."""
+        h, sections = self.history, r.release_sections
+        t = len(h) - 1
+        sec, before = set(sections[k]), set(sections[k - 1] if k else r.approach)
+        after = set(sections[k + 1]) if k + 1 < len(sections) else set()
+        if sec & h[t][1] or (after and not after & h[t][1]):
+            return False  # not clear now, or the next section not occupied now
+        for a in self.ran_in(r, k):
+            tail = any(not before & h[c][1] and (sec & h[c][1] or c == t) for c in range(a, t + 1))
+            if not tail:
+                continue
+            if not after:
+                return True
+            if any(
+                after & h[b][1] and not after & h[b - 1][1] and sec & h[b - 1][1]
+                for b in range(a + 1, t + 1)
+            ):
+                return True
+        return False
 
     # ---------------------------------------------------------------- rules: commands
 
@@ -122,7 +240,11 @@ class InterlockingMachine(RuleBasedStateMachine):
     def route_control(self, data: st.DataObject, cancel: bool) -> None:
         route = data.draw(st.sampled_from(self.routes))
         code = n.rcc(self.st, route) if cancel else n.rsc(self.st, route)
-        self.apply(self.ixl.control(code, 1, self.now))
+        entered = self.ixl.route_status(route) is RouteStatus.ENTERED
+        out = self.ixl.control(code, 1, self.now)
+        if cancel and entered and out.results[0].accepted:
+            self.cancels[route].append(self.now)
+        self.apply(out)
 
     @rule(data=st.data(), reverse=st.booleans())
     def point_control(self, data: st.DataObject, reverse: bool) -> None:
@@ -193,9 +315,29 @@ class InterlockingMachine(RuleBasedStateMachine):
     def track_circuit(self, data: st.DataObject, value: bool) -> None:
         self.feed_occupancy(data.draw(st.sampled_from(self.tcs)), value)
 
+    @rule(keep_trains=st.booleans())
+    def rails_outage(self, keep_trains: bool) -> None:
+        """The ATC loses the rails (every track circuit occupied in one report); the rails come
+        back (every one clear in one report, or all but those under the trains)."""
+        self.feed(dict.fromkeys(self.tcs, True))
+        self.rails_back(keep_trains)
+
+    @rule()
+    def rails_lost(self) -> None:
+        self.feed(dict.fromkeys(self.tcs, True))
+
+    @rule(keep_trains=st.booleans())
+    def rails_back(self, keep_trains: bool) -> None:
+        under = {path[head] for path, head in self.trains} if keep_trains else set()
+        if not keep_trains:
+            self.trains.clear()
+        self.feed({tc: tc in under for tc in self.tcs})
+
     @rule(link=st.sampled_from(["atc", "io"]), up=st.booleans())
     def link(self, link: str, up: bool) -> None:
         self.links[link] = up
+        if link == "atc" and not up:
+            self.reported.clear()
         self.apply(self.ixl.link_state(link, up, self.now))
         if up and link == "atc":
             for tc in self.tcs:
@@ -210,18 +352,53 @@ class InterlockingMachine(RuleBasedStateMachine):
 
     @rule(data=st.data())
     def train_enters(self, data: st.DataObject) -> None:
-        """A train runs onto a route whose signal shows proceed."""
+        """A train in the approach runs onto a route whose signal shows proceed."""
         route = self.draw_cleared_route(data)
         if route is None:
             return
-        self.trains.append((route.track_circuits, 0))
-        self.feed_occupancy(route.track_circuits[0], True)
+        path = route.approach + route.track_circuits
+        self.feed_occupancy(path[0], True)
+        self.trains.append((path, 0))
+        self.move_train(len(self.trains) - 1)
+
+    @rule(data=st.data())
+    def a_train_runs_a_route(self, data: st.DataObject) -> None:
+        """The common case end to end: a route set, its points arriving, a train through it."""
+        self.set_route_and_let_points_arrive(data)
+        if self.draw_cleared_route(data) is not None:
+            self.train_enters(data)
+            self.train_runs_through(data)
+
+    @rule(data=st.data())
+    def train_runs_through(self, data: st.DataObject) -> None:
+        """A train runs all the way: into the berth and off the route's end."""
+        if self.trains:
+            i = data.draw(st.integers(0, len(self.trains) - 1))
+            path, head = self.trains[i]
+            for _ in range(len(path) - head):
+                self.move_train(i)
+
+    @rule(data=st.data(), wait=st.booleans())
+    def cancel_an_entered_route(self, data: st.DataObject, wait: bool) -> None:
+        """The operator cancels a route a train (or a fault) has entered, and may wait out the
+        approach-locking time."""
+        entered = [r for r in self.routes if self.ixl.route_status(r) is RouteStatus.ENTERED]
+        if entered:
+            route = data.draw(st.sampled_from(entered))
+            out = self.ixl.control(n.rcc(self.st, route), 1, self.now)
+            if out.results[0].accepted:
+                self.cancels[route].append(self.now)
+            self.apply(out)
+            if wait:
+                self.time_passes(self.view.station.route(route).approach_release_s)
 
     @rule(data=st.data())
     def train_moves(self, data: st.DataObject) -> None:
-        if not self.trains:
-            return
-        i = data.draw(st.integers(0, len(self.trains) - 1))
+        if self.trains:
+            self.move_train(data.draw(st.integers(0, len(self.trains) - 1)))
+
+    def move_train(self, i: int) -> None:
+        """The train's head runs into the next track circuit, then its tail leaves the last."""
         path, head = self.trains[i]
         if head + 1 < len(path):
             self.feed_occupancy(path[head + 1], True)
@@ -283,13 +460,16 @@ class InterlockingMachine(RuleBasedStateMachine):
                     f"{sig.name} proceed with point {s.point} {self.det[s.point]}"
                 )
             for tc in r.all_track_circuits:
-                assert not self.occ[tc], f"{sig.name} proceed with {tc} occupied"
+                assert not self.occupied(tc), f"{sig.name} proceed with {tc} occupied"
 
 
 def test_interlocking_invariants_hold_over_random_sequences() -> None:
     STEPS["count"] = 0
+    RELEASED.update(passage=0, timed=0)
     run_state_machine_as_test(
         InterlockingMachine,
         settings=settings(max_examples=300, stateful_step_count=50, deadline=None),
     )
     assert STEPS["count"] >= 10_000, STEPS["count"]
+    # the release rules were exercised both ways, not only checked on nothing
+    assert RELEASED["passage"] >= 50 and RELEASED["timed"] >= 10, RELEASED

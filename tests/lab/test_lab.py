@@ -151,3 +151,7 @@ def test_cutting_a_type1_link_gives_most_restrictive_codes_and_signals_to_stop(
             with TapClient((host, int(port)), timeout=10, token=token_for(tap)) as client:
                 client.command("restore")
         wait_until("links up again", lambda: lab.status("ixl22")["links"]["atc"], timeout=30)
+        # until the ATC has reported every track circuit again the IXL takes them occupied (a
+        # cancel then would be approach-locked); once it has, the signal clears again
+        wait_until("the ATC's reports back: signal 01 clears again",
+                   lambda: lab.status("ixl22")["signals"]["01"] != "R")  # fmt: skip
