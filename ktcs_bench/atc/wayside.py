@@ -19,6 +19,10 @@ from the signal it approaches, if that signal shows proceed; the route that last
 train keeps its path after the entry signal went back to stop); on the plain line, the traffic
 direction. Beyond this station's own signals nothing is known, so a path leaving the station ends
 at the far end of the interval (the next station's home signal) as a stop point.
+
+The ATC has no timers: every output follows from an input at once (occupancy, IXL codes, link and
+rails state), so it is not `Timed` (`ktcs_bench.timed`) and no driver calls it on a clock; its
+time-driven partners are the Type I link beside it and the IXL.
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 
 `RigIxl` serves `ixl.rig.StationRig` -- the real `Interlocking` wired to the real `Trackside` --
 over Type II, run on the asyncio loop's clock: its binding (`binding.ControlLink`, the IXL
-emulator's own) is the Type II application, controls go to the interlocking by name, a ticker
-walks the rig through its deadlines (point throws, timed releases) and every change the
+emulator's own) is the Type II application, controls go to the interlocking by name, the one
+wall-clock driver (`timed.LoopTimer`) walks the rig through its deadlines (point throws, timed releases) and every change the
 interlocking gives the CTC is pushed as INDICATION changes. It is an adapter for people without
 the full multi-process lab, not the lab's IXL emulator.
 """
@@ -11,7 +11,6 @@ the full multi-process lab, not the lab's IXL emulator.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from dataclasses import replace
 
 from ktcs_bench.binding import ControlLink
@@ -20,9 +19,8 @@ from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station.model import Line, Station
+from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.type2.ixl_client import IxlClient
-
-TICK_S = 0.05  # how often the rig's timers are honoured
 
 
 def with_throw_time(line: Line, seconds: float) -> Line:
@@ -55,8 +53,7 @@ class RigIxl:
         self.rig.on_ctc = self._indicate
         self.station = station
         self.client: IxlClient | None = None
-        self._t0 = 0.0
-        self._ticker: asyncio.Task[None] | None = None
+        self.timer: LoopTimer[None] | None = None  # the rig on the wall clock, from its zero
 
     # -- the application the Type II client serves ---------------------------------------------
     def full_state(self) -> list[tuple[int, int]]:
@@ -64,7 +61,9 @@ class RigIxl:
 
     def on_control(self, code: int, value: int) -> tuple[bool, int]:
         self._catch_up()
-        return self.link.on_control(code, value)
+        answer = self.link.on_control(code, value)
+        self._poke()
+        return answer
 
     def _control(self, name: str, value: int) -> tuple[bool, int]:
         result = self.rig.control(name, value)
@@ -77,18 +76,16 @@ class RigIxl:
 
     # -- driving it ----------------------------------------------------------------------------
     def start(self, host: str, port: int) -> IxlClient:
-        loop = asyncio.get_running_loop()
-        self._t0 = loop.time() - self.rig.now
+        origin = asyncio.get_running_loop().time() - self.rig.now
+        self.timer = LoopTimer(self.rig, lambda now, out: None, origin=origin)
+        self.timer.poke()
         self.client = IxlClient(self.station, host, port, self, backoff_initial=0.05)
         self.client.start()
-        self._ticker = loop.create_task(self._tick())
         return self.client
 
     async def close(self) -> None:
-        if self._ticker is not None:
-            self._ticker.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._ticker
+        if self.timer is not None:
+            self.timer.cancel()
         if self.client is not None:
             await self.client.close()
 
@@ -96,18 +93,20 @@ class RigIxl:
         """A train on (or off) a track circuit, as the ATC would report it."""
         self._catch_up()
         self.rig.occupy(tc, occupied)
+        self._poke()
 
     def local(self, action: str) -> None:
         """The local operator's panel: "grant" / "refuse" a center-mode request, "take" control."""
         self._catch_up()
         self.rig.take(self.rig.ixl.local(action, self.rig.now))
+        self._poke()
 
     def _catch_up(self) -> None:
-        now = asyncio.get_running_loop().time() - self._t0
-        if now > self.rig.now:
-            self.rig.advance(now - self.rig.now)
+        """Bring the rig to the wall clock before an input (its timer keeps it there after)."""
+        if self.timer is not None:
+            self.rig.handle_timer(self.timer.now())
 
-    async def _tick(self) -> None:
-        while True:
-            await asyncio.sleep(TICK_S)
-            self._catch_up()
+    def _poke(self) -> None:
+        """An input may have moved the rig's deadline (a point now throwing): re-arm its timer."""
+        if self.timer is not None:
+            self.timer.poke()

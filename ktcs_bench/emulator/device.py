@@ -27,6 +27,8 @@ from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.runtime import server_token
 from ktcs_bench.station.model import Line
+from ktcs_bench.timed import Out, Sink, Timed
+from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport import jsonlines
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
@@ -41,7 +43,7 @@ class Device:
         self.name = name
         self.control_address = control
         self.events: deque[dict[str, Any]] = deque(maxlen=2000)
-        self._timer: asyncio.TimerHandle | None = None
+        self.timer: LoopTimer[Any] | None = None  # the device's core on the wall clock
         self._stop: asyncio.Event | None = None
         self._server: asyncio.Server | None = None
         self.ready_info: dict[str, Any] = {}
@@ -57,22 +59,14 @@ class Device:
     def now(self) -> float:
         return asyncio.get_running_loop().time()
 
-    def arm(self, deadline: float | None) -> None:
-        """Call `tick()` at the sans-I/O object's next deadline (one timer, re-armed each time)."""
-        if self._timer is not None:
-            if deadline is not None and self._timer.when() == deadline:
-                return
-            self._timer.cancel()
-            self._timer = None
-        if deadline is not None:
-            self._timer = self.loop.call_at(deadline, self._on_timer)
+    def drive(self, core: Timed[Out], sink: Sink[Out]) -> None:
+        """Put the device's sans-I/O core on the one wall-clock driver (`timed.LoopTimer`): its
+        timer outputs go to `sink`; `poke()` after every input moves the timer to its deadline."""
+        self.timer = LoopTimer(core, sink)
 
-    def _on_timer(self) -> None:
-        self._timer = None
-        self.tick()
-
-    def tick(self) -> None:
-        """Override: the object's timers are due."""
+    def poke(self) -> None:
+        if self.timer is not None:
+            self.timer.poke()
 
     def note(self, kind: str, text: str) -> None:
         self.events.append({"time": time.time(), "kind": kind, "text": text})
@@ -115,8 +109,8 @@ class Device:
         return []
 
     async def close(self) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
+        if self.timer is not None:
+            self.timer.cancel()
         if self._server is not None:
             self._server.close()
 

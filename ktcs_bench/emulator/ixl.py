@@ -45,6 +45,7 @@ class IxlDevice(Device):
         self.station = station
         view = line.view(station)
         self.ixl = Interlocking(view, mode=mode, tc_sources=("atc",))
+        self.drive(self.ixl, lambda now, out: self.apply(out))
         self.ports: dict[str, CodePort] = {}
         for role in ("atc", "io"):
             if role in links:
@@ -98,10 +99,7 @@ class IxlDevice(Device):
                 self.client.indicate(items)
         for e in out.events:
             self.note(e.kind, e.text)
-        self.arm(self.ixl.next_deadline())
-
-    def tick(self) -> None:
-        self.apply(self.ixl.tick(self.now()))
+        self.poke()
 
     # -- life cycle ------------------------------------------------------------------------------
     async def start(self) -> None:

@@ -21,6 +21,7 @@ class TracksideDevice(IxlPeerDevice):
     ) -> None:
         self.io = Trackside(line.view(station))
         super().__init__(name, line, station, links, self.io.full_state, **kwargs)
+        self.drive(self.io, lambda now, out: self.apply(out))
 
     def from_ixl(self, codes: dict[str, int]) -> None:
         self.apply(self.io.receive(codes, self.now()))
@@ -45,10 +46,7 @@ class TracksideDevice(IxlPeerDevice):
             self.port.update(out.changes)
         for e in out.events:
             self.note(e.kind, e.text)
-        self.arm(self.io.next_deadline())
-
-    def tick(self) -> None:
-        self.apply(self.io.tick(self.now()))
+        self.poke()
 
     def status(self) -> dict[str, Any]:
         return {

@@ -42,7 +42,7 @@ class PointMachine:
         self.arrive_at = now + run
         return True
 
-    def tick(self, now: float) -> bool:
+    def handle_timer(self, now: float) -> bool:
         """Finish a throw that is due; True when the blades arrived."""
         if self.arrive_at is None or now < self.arrive_at or self.fault == "jammed":
             return False
@@ -51,7 +51,7 @@ class PointMachine:
         self.started_at = None
         return True
 
-    def deadline(self) -> float | None:
+    def next_deadline(self) -> float | None:
         return None if self.fault == "jammed" else self.arrive_at
 
     def bits(self) -> dict[str, int]:

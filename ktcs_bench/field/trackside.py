@@ -120,7 +120,7 @@ class Trackside:
                     sig.commanded = "R"
         return self._finish(now)
 
-    def tick(self, now: float) -> FieldOutput:
+    def handle_timer(self, now: float) -> FieldOutput:
         return self._finish(now)
 
     # ------------------------------------------------------------------ faults
@@ -165,7 +165,7 @@ class Trackside:
         return self._command_names
 
     def next_deadline(self) -> float | None:
-        due = [p.deadline() for p in self.points.values()]
+        due = [p.next_deadline() for p in self.points.values()]
         return min((d for d in due if d is not None), default=None)
 
     def full_state(self) -> dict[str, int]:
@@ -200,7 +200,7 @@ class Trackside:
 
     def _finish(self, now: float) -> FieldOutput:
         for name, pm in self.points.items():
-            if pm.tick(now):
+            if pm.handle_timer(now):
                 self._event(now, "point", f"point {name} detected {pm.position}")
         state = self.full_state()
         out = FieldOutput(

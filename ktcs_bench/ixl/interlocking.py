@@ -2,7 +2,7 @@
 
 Inputs: CTC controls (`control`, by code name), local-panel actions (`local`), Type I
 code changes from the ATC and the trackside (`receive`), link up/down (`link_state`) and timers
-(`tick`). Every call takes `now` (seconds) and returns an `IxlOutput`: indication changes for the
+(`handle_timer`, the timer shape of every core: `ktcs_bench.timed`). Every call takes `now` (seconds) and returns an `IxlOutput`: indication changes for the
 CTC chart, code changes for the IXL->ATC and IXL->IO charts, control results, events and the next
 deadline. After every input the whole station is re-evaluated at once, so a failing condition
 puts a signal to stop in the same call that reported it (invariant 4: within one cycle).
@@ -175,14 +175,14 @@ class Interlocking:
                         sig.lamp_reported = False
         return self._finish(now)
 
-    def tick(self, now: float) -> IxlOutput:
+    def handle_timer(self, now: float) -> IxlOutput:
         """Timers: call at (or after) `next_deadline()`."""
         return self._finish(now)
 
     # ------------------------------------------------------------------ public queries
 
     def next_deadline(self) -> float | None:
-        due = [self.modes.deadline()]
+        due = [self.modes.next_deadline()]
         for rs in self.routes.values():
             due += [rs.release_at, rs.overlap_at]
         return min((d for d in due if d is not None), default=None)
@@ -421,7 +421,7 @@ class Interlocking:
         return out
 
     def _evaluate(self, now: float) -> None:
-        if self.modes.tick(now):
+        if self.modes.handle_timer(now):
             self._event(now, "mode", "center mode granted automatically")
         live = self._reports_live()
         for rs in self.routes.values():

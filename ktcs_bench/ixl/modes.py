@@ -54,14 +54,14 @@ class ModeControl:
         self.requested_at = None
         return changed
 
-    def deadline(self) -> float | None:
+    def next_deadline(self) -> float | None:
         if self.requested_at is None or self.auto_grant_s is None:
             return None
         return self.requested_at + self.auto_grant_s
 
-    def tick(self, now: float) -> bool:
+    def handle_timer(self, now: float) -> bool:
         """Apply the automatic grant when due; True when the mode changed."""
-        due = self.deadline()
+        due = self.next_deadline()
         if due is not None and now >= due:
             return self.grant()
         return False

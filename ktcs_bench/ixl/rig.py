@@ -57,20 +57,25 @@ class StationRig:
             else:
                 self._report_occupancy(full=True)
 
-    def advance(self, seconds: float) -> None:
-        """Move virtual time on, honouring every deadline of the IXL and the trackside."""
-        end = self.now + seconds
-        while True:
-            due = [d for d in (self.ixl.next_deadline(), self.io.next_deadline()) if d is not None]
-            nxt = min(due, default=None)
-            if nxt is None or nxt > end:
-                break
+    def next_deadline(self) -> float | None:
+        """The earlier of the IXL's and the trackside's deadlines (the timer shape, `timed`)."""
+        due = [d for d in (self.ixl.next_deadline(), self.io.next_deadline()) if d is not None]
+        return min(due, default=None)
+
+    def handle_timer(self, now: float) -> None:
+        """Move the station's time on to `now`, honouring every deadline on the way."""
+        end = max(self.now, now)
+        while (nxt := self.next_deadline()) is not None and nxt <= end:
             self.now = max(self.now, nxt)
-            self.from_field(self.io.tick(self.now).changes)
-            self.take(self.ixl.tick(self.now))
+            self.from_field(self.io.handle_timer(self.now).changes)
+            self.take(self.ixl.handle_timer(self.now))
         self.now = end
-        self.from_field(self.io.tick(self.now).changes)
-        self.take(self.ixl.tick(self.now))
+        self.from_field(self.io.handle_timer(self.now).changes)
+        self.take(self.ixl.handle_timer(self.now))
+
+    def advance(self, seconds: float) -> None:
+        """Move virtual time on by `seconds` (tests and scenarios that step a station by hand)."""
+        self.handle_timer(self.now + seconds)
 
     def _report_occupancy(self, full: bool = False) -> None:
         codes = {tc: int(v) for tc, v in self.occupancy.items()}

@@ -106,11 +106,11 @@ class RailsLostMachine(RuleBasedStateMachine):
             if nxt is None or nxt > end:
                 break
             self.now = max(self.now, nxt)
-            self.from_io(self.io.tick(self.now))
-            self.from_ixl(self.ixl.tick(self.now))
+            self.from_io(self.io.handle_timer(self.now))
+            self.from_ixl(self.ixl.handle_timer(self.now))
         self.now = end
-        self.from_io(self.io.tick(self.now))
-        self.from_ixl(self.ixl.tick(self.now))
+        self.from_io(self.io.handle_timer(self.now))
+        self.from_ixl(self.ixl.handle_timer(self.now))
 
     # ---------------------------------------------------------------- rules: commands
 

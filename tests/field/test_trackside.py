@@ -32,8 +32,8 @@ def test_point_throw_takes_throw_time_and_shows_moving(io: Trackside) -> None:
     out = io.receive({"PNC1831": 0, "PRC1831": 1}, 10.0)
     assert dict(out.changes) == {"SNI1831": 0, "SNR1831": 1}
     assert out.deadline == 14.0
-    assert io.tick(13.9).changes == []
-    out = io.tick(14.0)
+    assert io.handle_timer(13.9).changes == []
+    out = io.handle_timer(14.0)
     assert dict(out.changes) == {"SNR1831": 0, "SRI1831": 1}
     assert out.deadline is None
     out = io.receive({"PRC1831": 0, "PNC1831": 1}, 20.0)
@@ -42,10 +42,10 @@ def test_point_throw_takes_throw_time_and_shows_moving(io: Trackside) -> None:
 
 def test_throw_reversed_half_way_comes_back_in_the_time_it_ran(io: Trackside) -> None:
     io.receive({"PNC1832": 0, "PRC1832": 1}, 0.0)
-    io.tick(1.0)
+    io.handle_timer(1.0)
     out = io.receive({"PNC1832": 1, "PRC1832": 0}, 1.0)
     assert out.deadline == pytest.approx(2.0)
-    assert dict(io.tick(2.0).changes) == {"SRN1832": 0, "SNI1832": 1}
+    assert dict(io.handle_timer(2.0).changes) == {"SRN1832": 0, "SNI1832": 1}
 
 
 def test_no_demand_or_both_demands_leave_the_point_alone(io: Trackside) -> None:
@@ -61,7 +61,7 @@ def test_detection_fault_and_jam(io: Trackside) -> None:
     io.fail_point("32", "jammed", 0.0)
     io.receive({"PNC1832": 0, "PRC1832": 1}, 0.0)
     assert io.next_deadline() is None
-    io.tick(100.0)
+    io.handle_timer(100.0)
     s = io.full_state()
     assert s["SNR1832"] == 1 and s["SRI1832"] == 0  # never arrives
     with pytest.raises(ValueError):

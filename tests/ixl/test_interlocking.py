@@ -135,7 +135,7 @@ def test_automatic_grant_keeps_cmr_visible(line: Line) -> None:
     ixl = Interlocking(line.view(22), auto_grant_s=1.0)
     out = ixl.control("CMQ22", 1, 10.0)
     assert ("CMR22", 1) in out.ctc and out.deadline == 11.0
-    out = ixl.tick(11.0)
+    out = ixl.handle_timer(11.0)
     assert set(out.ctc) >= {("CMR22", 0), ("CTC22", 1), ("LOC22", 0)}
 
 
@@ -451,7 +451,7 @@ def test_an_overlap_handed_on_is_locked_again_in_the_input_that_frees_it(line: L
     due = rig.ixl.next_deadline()
     assert due is not None
     rig.now = due
-    rig.take(rig.ixl.tick(due))  # the one input in which 1291's timed release falls due
+    rig.take(rig.ixl.handle_timer(due))  # the one input in which 1291's timed release falls due
     assert rig.ixl.route_status("1291") is RouteStatus.IDLE
     assert "32" in rig.ixl.routes["0112"].held_points
     assert rig.control("SNC1832").reason is Reason.POINT_LOCKED

@@ -348,7 +348,7 @@ class InterlockingMachine(RuleBasedStateMachine):
     @rule(seconds=st.sampled_from([0.5, 5.0, 31.0, 61.0, 100.0]))
     def time_passes(self, seconds: float) -> None:
         self.now += seconds
-        self.apply(self.ixl.tick(self.now))
+        self.apply(self.ixl.handle_timer(self.now))
 
     @rule(data=st.data())
     def train_enters(self, data: st.DataObject) -> None:
