@@ -20,7 +20,7 @@ import time
 
 from ktcs_bench.codec import get_profile
 from ktcs_bench.transport import LinkRunner, PtyTransport, SerialTransport, VirtualBench
-from ktcs_bench.type1 import AckReceived, Event, LinkConfig, MessageReceived, Type1Link
+from ktcs_bench.type1 import AckReceived, LinkConfig, LinkEvent, MessageReceived, Type1Link
 
 CODES = 132
 PROFILE = get_profile("ktcs-type1")
@@ -37,11 +37,11 @@ async def exchanges(line_rate: float, repeats: int) -> list[float]:
     acked = asyncio.Event()
     delivered = 0
 
-    def on_a(now: float, event: Event) -> None:
+    def on_a(now: float, event: LinkEvent) -> None:
         if isinstance(event, AckReceived):
             acked.set()
 
-    def on_b(now: float, event: Event) -> None:
+    def on_b(now: float, event: LinkEvent) -> None:
         nonlocal delivered
         if isinstance(event, MessageReceived) and event.message.data == STATUSES:
             delivered += 1

@@ -149,7 +149,7 @@ async def bench(
 ) -> list[str]:
     applied = 0
 
-    def on_event(station: int | None, e: ev.Event) -> None:
+    def on_event(station: int | None, e: ev.SessionEvent) -> None:
         nonlocal applied
         if isinstance(e, ev.IndicationsChanged):
             applied += len(e.items)

@@ -6,8 +6,8 @@ summary). Must not use the bench's link code (`type1/`,
 `type2/` sessions) to judge a device -- only the codec.
 """
 
-from ktcs_bench.conformance.model import Case, CaseResult, Verdict
+from ktcs_bench.conformance.model import Case, CaseResult, CaseVerdict
 from ktcs_bench.conformance.runner import CASES, SuiteResult, run_suite
 from ktcs_bench.conformance.timing import SuiteTiming
 
-__all__ = ["CASES", "Case", "CaseResult", "SuiteResult", "SuiteTiming", "Verdict", "run_suite"]
+__all__ = ["CASES", "Case", "CaseResult", "SuiteResult", "SuiteTiming", "CaseVerdict", "run_suite"]

@@ -18,7 +18,7 @@ from ktcs_bench.conformance.timing import MeasuredTiming, SuiteTiming
 from ktcs_bench.conformance.wire import Evidence, Type1Wire, Type2Wire
 
 
-class Verdict(enum.Enum):
+class CaseVerdict(enum.Enum):
     PASS = "pass"
     FAIL = "fail"
     ERROR = "error"
@@ -95,7 +95,7 @@ class Case:
 @dataclass
 class CaseResult:
     case: Case
-    verdict: Verdict
+    verdict: CaseVerdict
     message: str
     duration: float
     evidence: Evidence

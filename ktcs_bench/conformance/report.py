@@ -7,11 +7,11 @@ import json
 import xml.etree.ElementTree as ET
 from typing import Any
 
-from ktcs_bench.conformance.model import CaseResult, Verdict
+from ktcs_bench.conformance.model import CaseResult, CaseVerdict
 from ktcs_bench.conformance.runner import SuiteResult
 
-_COLOUR = {Verdict.PASS: "\x1b[32m", Verdict.FAIL: "\x1b[31m", Verdict.ERROR: "\x1b[35m",
-           Verdict.SKIP: "\x1b[33m"}  # fmt: skip
+_COLOUR = {CaseVerdict.PASS: "\x1b[32m", CaseVerdict.FAIL: "\x1b[31m", CaseVerdict.ERROR: "\x1b[35m",
+           CaseVerdict.SKIP: "\x1b[33m"}  # fmt: skip
 _RESET = "\x1b[0m"
 _BOLD = "\x1b[1m"
 
@@ -28,8 +28,8 @@ def junit_xml(suite: SuiteResult) -> bytes:
     root = ET.Element("testsuites", name="ktcs-bench conformance")
     ts = ET.SubElement(
         root, "testsuite", name=name, tests=str(len(suite.results)),
-        failures=str(suite.count(Verdict.FAIL)), errors=str(suite.count(Verdict.ERROR)),
-        skipped=str(suite.count(Verdict.SKIP)), time=f"{suite.duration:.3f}",
+        failures=str(suite.count(CaseVerdict.FAIL)), errors=str(suite.count(CaseVerdict.ERROR)),
+        skipped=str(suite.count(CaseVerdict.SKIP)), time=f"{suite.duration:.3f}",
     )  # fmt: skip
     props = ET.SubElement(ts, "properties")
     for key, value in {"role": suite.role, "target": suite.target, "profile": suite.profile,
@@ -42,13 +42,13 @@ def junit_xml(suite: SuiteResult) -> bytes:
         tc = ET.SubElement(ts, "testcase", name=r.case.name,
                            classname=f"conformance.{suite.protocol}.{suite.role}",
                            time=f"{r.duration:.3f}")  # fmt: skip
-        if r.verdict is Verdict.FAIL:
+        if r.verdict is CaseVerdict.FAIL:
             ET.SubElement(
                 tc, "failure", message=r.message, type="ConformanceFailure"
             ).text = f"{r.case.title} ({r.case.rule})\n{r.message}"
-        elif r.verdict is Verdict.ERROR:
+        elif r.verdict is CaseVerdict.ERROR:
             ET.SubElement(tc, "error", message=r.message, type="SuiteError").text = r.message
-        elif r.verdict is Verdict.SKIP:
+        elif r.verdict is CaseVerdict.SKIP:
             ET.SubElement(tc, "skipped", message=r.message)
         ET.SubElement(tc, "system-out").text = _frames_text(r)
     ET.indent(root)
@@ -67,7 +67,7 @@ def as_json(suite: SuiteResult, evidence: bool = True) -> dict[str, Any]:
         "measured": suite.measured.describe(),
         "stopped": suite.stopped,
         "duration": round(suite.duration, 3),
-        "summary": {v.value: suite.count(v) for v in Verdict},
+        "summary": {v.value: suite.count(v) for v in CaseVerdict},
         "cases": [r.as_dict(evidence) for r in suite.results],
     }
 
@@ -82,7 +82,7 @@ def case_line(result: CaseResult, colour: bool) -> str:
     if colour:
         mark = f"{_COLOUR[v]}{_BOLD}{mark}{_RESET}"
     text = f"{mark} {result.case.name:28s} {result.duration:6.2f} s  {result.case.title}"
-    if result.message and v is not Verdict.PASS:
+    if result.message and v is not CaseVerdict.PASS:
         text += f"\n      -> {result.message}"
     return text
 
@@ -116,19 +116,17 @@ def measured_line(suite: SuiteResult) -> str:
 def case_block(result: CaseResult, colour: bool, verbose: bool = False) -> str:
     """The case's line, and its checks when it did not pass (all of them with `verbose`)."""
     lines = [case_line(result, colour)]
-    if verbose or result.verdict in (Verdict.FAIL, Verdict.ERROR):
+    if verbose or result.verdict in (CaseVerdict.FAIL, CaseVerdict.ERROR):
         checks = result.evidence.checks if verbose else result.evidence.checks[-6:]
         lines.extend("      " + c for c in checks)
     return "\n".join(lines)
 
 
 def footer(suite: SuiteResult, colour: bool) -> str:
-    counts = ", ".join(f"{suite.count(v)} {v.value}" for v in Verdict if suite.count(v))
+    counts = ", ".join(f"{suite.count(v)} {v.value}" for v in CaseVerdict if suite.count(v))
     verdict = "FAILED" if suite.failed else "PASSED"
     if colour:
-        verdict = (
-            f"{_COLOUR[Verdict.FAIL if suite.failed else Verdict.PASS]}{_BOLD}{verdict}{_RESET}"
-        )
+        verdict = f"{_COLOUR[CaseVerdict.FAIL if suite.failed else CaseVerdict.PASS]}{_BOLD}{verdict}{_RESET}"
     lines = [f"{verdict}: {counts} in {suite.duration:.1f} s"]
     if measured_line(suite):
         lines.insert(0, measured_line(suite))

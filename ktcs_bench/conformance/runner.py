@@ -29,8 +29,8 @@ from ktcs_bench.conformance.model import (
     CaseContext,
     CaseFailed,
     CaseResult,
+    CaseVerdict,
     NotApplicable,
-    Verdict,
 )
 from ktcs_bench.conformance.timing import MeasuredTiming, SuiteTiming
 from ktcs_bench.conformance.type1_cases import TYPE1_CASES
@@ -114,9 +114,9 @@ class SuiteResult:
 
     @property
     def failed(self) -> list[CaseResult]:
-        return [r for r in self.results if r.verdict in (Verdict.FAIL, Verdict.ERROR)]
+        return [r for r in self.results if r.verdict in (CaseVerdict.FAIL, CaseVerdict.ERROR)]
 
-    def count(self, verdict: Verdict) -> int:
+    def count(self, verdict: CaseVerdict) -> int:
         return sum(r.verdict is verdict for r in self.results)
 
 
@@ -201,7 +201,7 @@ def run_suite(
         steps = [MEASURE[protocol], *chosen] if auto else chosen
         for case in steps:
             result = _run_case(case, role, suite, station, codes, wire1, opener)
-            if result.heard == 0 and result.verdict in (Verdict.FAIL, Verdict.ERROR):
+            if result.heard == 0 and result.verdict in (CaseVerdict.FAIL, CaseVerdict.ERROR):
                 result = _silent_device(suite, result)
             suite.results.append(result)
             if case is MEASURE[protocol]:
@@ -227,8 +227,8 @@ def _silent_device(suite: SuiteResult, result: CaseResult) -> CaseResult:
     said = "the device stopped answering" if ever else "no device answered"
     suite.stopped = (f"{said}: not one byte from {suite.target} in {result.case.name} "
                      f"({result.duration:.1f} s); the run stops here")  # fmt: skip
-    why = ("failed check: " if result.verdict is Verdict.FAIL else "") + result.message
-    return dataclasses.replace(result, verdict=Verdict.ERROR, message=f"{said} ({why})")
+    why = ("failed check: " if result.verdict is CaseVerdict.FAIL else "") + result.message
+    return dataclasses.replace(result, verdict=CaseVerdict.ERROR, message=f"{said} ({why})")
 
 
 def _run_case(case: Case, role: str, suite: SuiteResult, station: int | None,
@@ -244,17 +244,17 @@ def _run_case(case: Case, role: str, suite: SuiteResult, station: int | None,
     t0 = time.monotonic()
     try:
         case.run(ctx)
-        verdict, message = Verdict.PASS, ""
+        verdict, message = CaseVerdict.PASS, ""
     except CaseFailed as exc:
-        verdict, message = Verdict.FAIL, str(exc)
+        verdict, message = CaseVerdict.FAIL, str(exc)
     except NotApplicable as exc:
-        verdict, message = Verdict.SKIP, str(exc)
+        verdict, message = CaseVerdict.SKIP, str(exc)
     except Inconclusive as exc:
-        verdict, message = Verdict.ERROR, f"inconclusive: {exc}"
+        verdict, message = CaseVerdict.ERROR, f"inconclusive: {exc}"
     except (PeerError, OSError, ssl.SSLError) as exc:
-        verdict, message = Verdict.ERROR, f"{type(exc).__name__}: {exc}"
+        verdict, message = CaseVerdict.ERROR, f"{type(exc).__name__}: {exc}"
     except Exception as exc:  # a bug in a case must not stop the suite
-        verdict, message = Verdict.ERROR, f"{type(exc).__name__}: {exc}"
+        verdict, message = CaseVerdict.ERROR, f"{type(exc).__name__}: {exc}"
         evidence.note(traceback.format_exc())
     finally:
         for w in ctx.opened:

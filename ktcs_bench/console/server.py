@@ -153,7 +153,7 @@ class ConsoleServer:
         await self._site.start()
         self._chained = self.ctc.on_event
 
-        def hook(station: int | None, event: ev.Event) -> None:
+        def hook(station: int | None, event: ev.SessionEvent) -> None:
             if self._chained is not None:
                 self._chained(station, event)
             self._changed()

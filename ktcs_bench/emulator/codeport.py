@@ -23,9 +23,9 @@ from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.transport.serialport import open_transport
 from ktcs_bench.type1 import (
     CommunicationError,
-    Event,
     LinkConfig,
     LinkDown,
+    LinkEvent,
     LinkUp,
     MessageReceived,
     Type1Link,
@@ -46,7 +46,7 @@ class CodePort:
         on_link: Callable[[bool], None],
         profile: str = "ktcs-type1",
         config: LinkConfig | None = None,
-        on_event: Callable[[str, Event], None] | None = None,
+        on_event: Callable[[str, LinkEvent], None] | None = None,
         faults: frozenset[str] = frozenset(),
     ) -> None:
         self.name = name
@@ -127,7 +127,7 @@ class CodePort:
     def _statuses(self, start: int, count: int) -> bytes:
         return bytes(self.binding.statuses()[start : start + count])
 
-    def _event(self, now: float, event: Event) -> None:
+    def _event(self, now: float, event: LinkEvent) -> None:
         if self.on_event is not None:
             self.on_event(self.name, event)
         if isinstance(event, MessageReceived):

@@ -20,7 +20,7 @@ from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.errors import UsageError
 from ktcs_bench.type1 import LinkConfig, StateProvider, Type1Link
 from ktcs_bench.type1.arq import Acceptance, Receiver
-from ktcs_bench.type1.events import Event
+from ktcs_bench.type1.events import LinkEvent
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.admission import ADMIT, AdmissionPolicy, Decision
 from ktcs_bench.type2.ctc_server import CtcApplication, CtcServer
@@ -98,14 +98,14 @@ class _VariantLink(Type1Link):
         if "duplicate-delivery" in faults:
             self._receiver = _ForgetfulReceiver(self._codec.seq_modulo)
 
-    def _nak(self, seq: int, reason: int, detail: str, raw: bytes, events: list[Event]) -> None:
+    def _nak(self, seq: int, reason: int, detail: str, raw: bytes, events: list[LinkEvent]) -> None:
         if "no-nak" in self.faults:
             return
         if "wrong-nak-reason" in self.faults:
             reason = 3
         super()._nak(seq, reason, detail, raw, events)
 
-    def handle_timer(self, now: float) -> list[Event]:
+    def handle_timer(self, now: float) -> list[LinkEvent]:
         if "no-delta-r" in self.faults:
             self._rx_pending_since = None
         return super().handle_timer(now)
@@ -160,7 +160,7 @@ class _VariantIxlSession(IxlSession):
             return
         super()._on_nak(frame, now)
 
-    def handle_timer(self, now: float) -> list[ev.Event]:
+    def handle_timer(self, now: float) -> list[ev.SessionEvent]:
         if "no-heartbeat" in self.faults:
             self._last_tx = now
         return super().handle_timer(now)

@@ -6,14 +6,14 @@ Modules: `modes` (center/local, CMR), `routes` (locking and release), `points`, 
 `reasons` (CONTROL_RESULT reason numbers), `interlocking` (the station as a whole).
 """
 
-from ktcs_bench.ixl.interlocking import ControlResult, Event, Interlocking, IxlOutput
+from ktcs_bench.ixl.interlocking import ControlResult, Interlocking, IxlEvent, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.routes import RouteStatus
 
 __all__ = [
     "ControlResult",
-    "Event",
+    "IxlEvent",
     "Interlocking",
     "IxlOutput",
     "Mode",

@@ -34,7 +34,7 @@ OUTPUTS = ("ctc", "atc", "io")  # the IXL->CTC, IXL->ATC and IXL->IO charts
 
 
 @dataclass(frozen=True, slots=True)
-class Event:
+class IxlEvent:
     time: float
     kind: str  # control, mode, route, point, signal, train, link, fault
     text: str
@@ -53,7 +53,7 @@ class IxlOutput:
     atc: list[tuple[str, int]] = field(default_factory=list)  # IXL->ATC code changes
     io: list[tuple[str, int]] = field(default_factory=list)  # IXL->trackside command changes
     results: list[ControlResult] = field(default_factory=list)
-    events: list[Event] = field(default_factory=list)
+    events: list[IxlEvent] = field(default_factory=list)
     deadline: float | None = None
 
 
@@ -101,9 +101,9 @@ class Interlocking:
             "atc": set(self.codes.names("atc_to_ixl")),
             "io": set(self.codes.names("io_to_ixl")),
         }
-        self.log: list[Event] = []
+        self.log: list[IxlEvent] = []
         self._log_limit = log_limit
-        self._events: list[Event] = []
+        self._events: list[IxlEvent] = []
         self._results: list[ControlResult] = []
         self._evaluate(0.0)
         self._sent = {k: self.full_state(k) for k in OUTPUTS}
@@ -685,7 +685,7 @@ class Interlocking:
         return out
 
     def _event(self, now: float, kind: str, text: str) -> None:
-        ev = Event(now, kind, text)
+        ev = IxlEvent(now, kind, text)
         self._events.append(ev)
         self.log.append(ev)
         if len(self.log) > self._log_limit:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 from ktcs_bench.codes import names as n
 from ktcs_bench.field.trackside import Trackside
-from ktcs_bench.ixl.interlocking import ControlResult, Event, Interlocking, IxlOutput
+from ktcs_bench.ixl.interlocking import ControlResult, Interlocking, IxlEvent, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.model import StationView
 
@@ -27,7 +27,7 @@ class StationRig:
         self.occupancy = {t.name: False for t in view.track_circuits}
         self.ctc = self.ixl.full_state("ctc")  # the CTC's picture, kept by indication changes
         self.atc = self.ixl.full_state("atc")  # what the ATC is told
-        self.events: list[Event] = []
+        self.events: list[IxlEvent] = []
         self.on_ctc: Callable[[list[tuple[str, int]]], None] | None = None
         self.io.link_state(True, now)
         self.take(self.ixl.link_state("io", True, now))

@@ -16,7 +16,13 @@ from dataclasses import dataclass, field
 
 from ktcs_bench.scenario.model import Scenario
 from ktcs_bench.timed.virtual import VirtualClock
-from ktcs_bench.train.endpoint import CycleInputs, CycleOutputs, Event, TrackCode, TrainEndpoint
+from ktcs_bench.train.endpoint import (
+    CycleInputs,
+    CycleOutputs,
+    TrackCode,
+    TrainEndpoint,
+    TrainEvent,
+)
 from ktcs_bench.train.resources import ResourceManager
 from ktcs_bench.train.supervision import Status
 from ktcs_bench.train.t2t import T2TMessage
@@ -49,7 +55,7 @@ class Trace:
 class RunResult:
     scenario: Scenario
     traces: dict[str, Trace]
-    events: list[Event]
+    events: list[TrainEvent]
     end_time: float
 
 
@@ -125,7 +131,7 @@ def run(scn: Scenario, progress: Callable[[float], None] | None = None) -> RunRe
     rm = ResourceManager(list(scn.resources)) if scn.resources is not None else None
     trains = [TrainEndpoint(cfg, scn.line, cycle=dt) for cfg in scn.trains]
     traces = {t.cfg.train_id: Trace() for t in trains}
-    events: list[Event] = []
+    events: list[TrainEvent] = []
     messages: dict[str, T2TMessage] = {}
     for t in trains:
         pos = t.position
@@ -148,7 +154,7 @@ def _record(
     t: TrainEndpoint,
     tr: Trace,
     messages: dict[str, T2TMessage],
-    events: list[Event],
+    events: list[TrainEvent],
     now: float,
     out: CycleOutputs | None,
 ) -> None:
@@ -184,7 +190,7 @@ class _AfterCycle:
         scn: Scenario,
         trains: list[TrainEndpoint],
         rm: ResourceManager | None,
-        events: list[Event],
+        events: list[TrainEvent],
         progress: Callable[[float], None] | None,
     ) -> None:
         self.scn, self.trains, self.rm, self.events, self.progress = (
@@ -208,7 +214,7 @@ class _AfterCycle:
         rm, scn = self.rm, self.scn
         if rm is not None and len(rm.events) > self.rm_seen:
             for when, text in rm.events[self.rm_seen :]:
-                self.events.append(Event(when, "RM", "resource", text))
+                self.events.append(TrainEvent(when, "RM", "resource", text))
             self.rm_seen = len(rm.events)
         if self.progress is not None and k % 50 == 0:
             self.progress(now / scn.duration)

@@ -59,8 +59,8 @@ from ktcs_bench.train.supervision import (
     WARNING,
     Status,
     SupervisionLimits,
+    SupervisionVerdict,
     Supervisor,
-    Verdict,
 )
 from ktcs_bench.train.t2t import T2TMessage, leader_of, target_from_leader
 from ktcs_bench.train.units import kmh
@@ -178,7 +178,7 @@ class CycleInputs:
 
 
 @dataclass(frozen=True)
-class Event:
+class TrainEvent:
     time: float
     train: str
     kind: str
@@ -189,10 +189,10 @@ class Event:
 class CycleOutputs:
     message: T2TMessage
     request_up_to: float
-    verdict: Verdict
+    verdict: SupervisionVerdict
     position: Position
     target_point: float
-    events: tuple[Event, ...]
+    events: tuple[TrainEvent, ...]
 
 
 def _no_inputs(now: float) -> CycleInputs:
@@ -282,7 +282,7 @@ class TrainEndpoint:
     def step(self, now: float, inputs: CycleInputs, dt: float = CYCLE) -> CycleOutputs:
         cfg, p = self.cfg, self.cfg.params
         s = self.dynamics.state
-        events: list[Event] = []
+        events: list[TrainEvent] = []
         pos = self.position
         # 1. target points and curves
         stop = self._target_point(pos, inputs)
@@ -296,9 +296,9 @@ class TrainEndpoint:
         if verdict.emergency_brake and not self._eb_seen:
             self._eb_seen = True
             self.eb_count += 1
-            events.append(Event(now, cfg.train_id, "emergency_brake", verdict.reason or "EB"))
+            events.append(TrainEvent(now, cfg.train_id, "emergency_brake", verdict.reason or "EB"))
         if verdict.service_brake and self._sb_prev is False:
-            events.append(Event(now, cfg.train_id, "service_brake", "SBI exceeded"))
+            events.append(TrainEvent(now, cfg.train_id, "service_brake", "SBI exceeded"))
         self._sb_prev = verdict.service_brake
         # 3. driver or ATO
         traction, brake = self._drive(now, dt, verdict, inputs, events)
@@ -319,7 +319,7 @@ class TrainEndpoint:
         if release and self.supervisor.eb_latched and s.speed <= 0.0:
             self.supervisor.release()
             self._eb_seen = False
-            events.append(Event(now, cfg.train_id, "eb_release", "driver released the EB"))
+            events.append(TrainEvent(now, cfg.train_id, "eb_release", "driver released the EB"))
         if verdict.traction_cut:
             traction = 0.0
         if verdict.service_brake:
@@ -336,7 +336,7 @@ class TrainEndpoint:
         self.position, missed = self.estimator.advance(x0, s.position)
         for tag in missed:
             self.supervisor.trip(f"missed tag {tag}")
-            events.append(Event(now, cfg.train_id, "missed_tag", f"tag {tag} not read"))
+            events.append(TrainEvent(now, cfg.train_id, "missed_tag", f"tag {tag} not read"))
         pos = self.position
         msg = T2TMessage(cfg.train_id, pos.head, pos.min_safe_rear, s.speed, now)
         up_to = min(pos.head + MAX_MA, self.line.length)
@@ -446,7 +446,12 @@ class TrainEndpoint:
         return grid
 
     def _drive(
-        self, now: float, dt: float, verdict: Verdict, inputs: CycleInputs, events: list[Event]
+        self,
+        now: float,
+        dt: float,
+        verdict: SupervisionVerdict,
+        inputs: CycleInputs,
+        events: list[TrainEvent],
     ) -> tuple[float, float]:
         cfg, p = self.cfg, self.cfg.params
         s = self.dynamics.state
@@ -474,7 +479,12 @@ class TrainEndpoint:
         return 0.0, 0.0
 
     def _ato(
-        self, now: float, dt: float, verdict: Verdict, inputs: CycleInputs, events: list[Event]
+        self,
+        now: float,
+        dt: float,
+        verdict: SupervisionVerdict,
+        inputs: CycleInputs,
+        events: list[TrainEvent],
     ) -> tuple[float, float]:
         cfg, p = self.cfg, self.cfg.params
         s = self.dynamics.state
@@ -488,7 +498,9 @@ class TrainEndpoint:
         ai = AtoInputs(speed=s.speed, speed_command=code_speed, at_station=at_station)
         for letter in self.ato_sm.step(ai, now):
             events.append(
-                Event(now, cfg.train_id, "ato", f"transition {letter} → {self.ato_sm.state.value}")
+                TrainEvent(
+                    now, cfg.train_id, "ato", f"transition {letter} → {self.ato_sm.state.value}"
+                )
             )
         if self.ato_sm.state is not AtoState.ACTIVE_OPERATING:
             return 0.0, p.service_decel
@@ -496,7 +508,9 @@ class TrainEndpoint:
             return 0.0, p.service_decel  # service over: held at the last station
         if self.ato_sm.berthed and station is not None:
             events.append(
-                Event(now, cfg.train_id, "berthed", f"{station.name} at {self.position.head:.2f} m")
+                TrainEvent(
+                    now, cfg.train_id, "berthed", f"{station.name} at {self.position.head:.2f} m"
+                )
             )
             self._dwell_until = now + station.dwell
             self._next_station += 1

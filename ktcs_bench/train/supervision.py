@@ -38,7 +38,7 @@ class Status(Enum):
 
 
 @dataclass(frozen=True)
-class Verdict:
+class SupervisionVerdict:
     status: Status
     traction_cut: bool
     service_brake: bool
@@ -196,7 +196,7 @@ class Supervisor:
         self.eb_latched = False
         self.sb_applied = False
         self._release_requested = False
-        self.last: Verdict | None = None
+        self.last: SupervisionVerdict | None = None
         self._ceil_for = math.nan
         self._ceilings = (0.0, 0.0, 0.0)
 
@@ -227,7 +227,7 @@ class Supervisor:
         """Command the emergency brake for a reason outside the curves (e.g. a missed tag)."""
         self.eb_latched = True
         self._release_requested = False
-        self.last = Verdict(Status.INTERVENTION, True, False, True, 0.0, reason)
+        self.last = SupervisionVerdict(Status.INTERVENTION, True, False, True, 0.0, reason)
 
     def curve_lead(self, curve: int) -> float:
         """The curve's time offset after the EBI (§3.13.9.3)."""
@@ -243,7 +243,9 @@ class Supervisor:
         v_bec, d_bec = self.times.bec(v, 0.0, a)
         return v_bec > lim.seen(j, x + d_bec + v * lead, curve)
 
-    def check(self, lim: SupervisionLimits, x: float, v: float, a: float = 0.0) -> Verdict:
+    def check(
+        self, lim: SupervisionLimits, x: float, v: float, a: float = 0.0
+    ) -> SupervisionVerdict:
         """Supervise the train at max-safe front x with speed v and acceleration a."""
         f = self.times.fixed
         if self.eb_latched and v <= 0.0 and self._release_requested:
@@ -315,7 +317,7 @@ class Supervisor:
             and last.reason == reason
         ):
             return last
-        verdict = Verdict(
+        verdict = SupervisionVerdict(
             status=status,
             traction_cut=traction_cut,
             service_brake=self.sb_applied,

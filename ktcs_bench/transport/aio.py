@@ -16,9 +16,9 @@ from collections.abc import Callable
 
 from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport.base import Transport, TransportClosed
-from ktcs_bench.type1 import Event, Message, Type1Link
+from ktcs_bench.type1 import LinkEvent, Message, Type1Link
 
-EventSink = Callable[[float, Event], None]
+EventSink = Callable[[float, LinkEvent], None]
 POLL = 0.05  # s, reader-thread poll period for transports without an fd
 
 
@@ -31,7 +31,7 @@ class LinkRunner:
         self.link = link
         self.transport = transport
         self.on_event = on_event
-        self.events: asyncio.Queue[tuple[float, Event]] = asyncio.Queue()
+        self.events: asyncio.Queue[tuple[float, LinkEvent]] = asyncio.Queue()
         self.error: BaseException | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.timer = LoopTimer(link, lambda now, events: self._after(events, now))
@@ -51,7 +51,7 @@ class LinkRunner:
         if self._done is not None and not self._done.done():
             self._done.set_result(None)
 
-    async def next_event(self, *kinds: type, timeout: float | None = None) -> Event:
+    async def next_event(self, *kinds: type, timeout: float | None = None) -> LinkEvent:
         """The next event from the queue (of the given classes, skipping others)."""
         async with asyncio.timeout(timeout):
             while True:
@@ -113,7 +113,7 @@ class LinkRunner:
             if data:
                 loop.call_soon_threadsafe(self._data, data)
 
-    def _after(self, events: list[Event], now: float) -> None:
+    def _after(self, events: list[LinkEvent], now: float) -> None:
         out = self.link.data_to_send(now)
         if out:
             try:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.faults import Fault, FaultInjector
 from ktcs_bench.timed.virtual import VirtualClock
-from ktcs_bench.type1 import Event, Message, Type1Link
+from ktcs_bench.type1 import LinkEvent, Message, Type1Link
 
 
 @dataclass
@@ -128,7 +128,7 @@ class VirtualBench:
         self.ab = VirtualWire(a.timers.byte_time, a.profile, piece, faults_ab, seed=1)
         self.ba = VirtualWire(b.timers.byte_time, b.profile, piece, faults_ba, seed=2)
         self.clock = clock if clock is not None else VirtualClock(start)
-        self.events: list[tuple[float, str, Event]] = []
+        self.events: list[tuple[float, str, LinkEvent]] = []
         self._out = {id(a): self.ab, id(b): self.ba}
         # the wires first: an instant's arrivals reach the links before their timers run
         self.clock.add(self.ab, lambda now, data: self._deliver(b, data, now))
@@ -163,21 +163,21 @@ class VirtualBench:
         self.clock.run_for(dt, stop)
 
     # -- looking -------------------------------------------------------------------------------
-    def of(self, link: Type1Link, *kinds: type) -> list[Event]:
+    def of(self, link: Type1Link, *kinds: type) -> list[LinkEvent]:
         """Events of one link, optionally only of the given classes."""
         return [
             e for _, n, e in self.events if n == link.name and (not kinds or isinstance(e, kinds))
         ]
 
     # -- internals -----------------------------------------------------------------------------
-    def _sink(self, link: Type1Link) -> Callable[[float, list[Event]], None]:
+    def _sink(self, link: Type1Link) -> Callable[[float, list[LinkEvent]], None]:
         return lambda now, events: self._after(link, events, now)
 
     def _deliver(self, link: Type1Link, data: bytes, now: float) -> None:
         if data:
             self._after(link, link.receive_data(data, now), now)
 
-    def _after(self, link: Type1Link, events: list[Event], now: float) -> None:
+    def _after(self, link: Type1Link, events: list[LinkEvent], now: float) -> None:
         self.events.extend((now, link.name, e) for e in events)
         data = link.data_to_send(now)
         if data:

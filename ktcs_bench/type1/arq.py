@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from ktcs_bench.type1.events import Message
 
 
-class Verdict(enum.Enum):
+class ReceiveVerdict(enum.Enum):
     RETRANSMIT = "retransmit"
     GIVE_UP = "give up"
     IGNORE = "ignore"
@@ -110,25 +110,25 @@ class Sender:
         self.outstanding = None
         return out
 
-    def nak(self) -> Verdict:
+    def nak(self) -> ReceiveVerdict:
         """A NAK: retransmit the outstanding frame (unless a send of it is already pending)."""
         out = self.outstanding
         if out is None or out.due or out.transmissions == 0:
-            return Verdict.IGNORE
+            return ReceiveVerdict.IGNORE
         return self._failed(out)
 
-    def timeout(self, now: float) -> Verdict:
+    def timeout(self, now: float) -> ReceiveVerdict:
         out = self.outstanding
         if out is None or out.due or out.ack_deadline is None or now < out.ack_deadline:
-            return Verdict.IGNORE
+            return ReceiveVerdict.IGNORE
         return self._failed(out)
 
-    def _failed(self, out: Outstanding) -> Verdict:
+    def _failed(self, out: Outstanding) -> ReceiveVerdict:
         if out.transmissions >= self.max_transmissions:
-            return Verdict.GIVE_UP
+            return ReceiveVerdict.GIVE_UP
         out.due = True
         out.ack_deadline = None
-        return Verdict.RETRANSMIT
+        return ReceiveVerdict.RETRANSMIT
 
     def give_up(self) -> tuple[Outstanding, tuple[Queued, ...]]:
         """Drop the outstanding frame and everything queued behind it."""

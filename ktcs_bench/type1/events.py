@@ -1,7 +1,7 @@
 """What goes into a Type I link (`Message`) and what comes out of it (events).
 
 Owns the link's vocabulary only: plain frozen dataclasses, no logic. Every event a `Type1Link`
-returns is one of the classes listed in `Event`. An application acts on `MessageReceived`,
+returns is one of the classes listed in `LinkEvent`. An application acts on `MessageReceived`,
 `CommunicationError`, `LinkDown` and `LinkUp`; the rest are for monitors, logs and tests.
 """
 
@@ -120,7 +120,7 @@ class GarbageReceived:
     raw: bytes
 
 
-Event = (
+LinkEvent = (
     MessageReceived
     | AckReceived
     | AckSent

@@ -43,16 +43,16 @@ from collections.abc import Callable, Sequence
 from ktcs_bench.codec import Frame, FrameCodec, FrameProfile, Garbage, StreamDecoder, get_profile
 from ktcs_bench.codec.opcodes import Opcode, PayloadError
 from ktcs_bench.errors import UsageError
-from ktcs_bench.type1.arq import Owed, Queued, Receiver, Sender, Verdict
+from ktcs_bench.type1.arq import Owed, Queued, Receiver, ReceiveVerdict, Sender
 from ktcs_bench.type1.config import LinkConfig, LinkTimers
 from ktcs_bench.type1.events import (
     AckReceived,
     AckSent,
     CommunicationError,
     DuplicateReceived,
-    Event,
     GarbageReceived,
     LinkDown,
+    LinkEvent,
     LinkUp,
     Message,
     MessageReceived,
@@ -132,9 +132,9 @@ class Type1Link:
         return len(s.queue) + (s.outstanding is not None)
 
     # -- wire side -----------------------------------------------------------------------------
-    def receive_data(self, data: bytes, now: float) -> list[Event]:
+    def receive_data(self, data: bytes, now: float) -> list[LinkEvent]:
         self._start(now)
-        events: list[Event] = []
+        events: list[LinkEvent] = []
         records = self._decoder.feed(data)
         self._records(records, now, events)
         if not self._decoder.pending:
@@ -160,15 +160,15 @@ class Type1Link:
         self._tx_free_at = end
         return b"".join(parts)
 
-    def handle_timer(self, now: float) -> list[Event]:
+    def handle_timer(self, now: float) -> list[LinkEvent]:
         self._start(now)
-        events: list[Event] = []
+        events: list[LinkEvent] = []
         t = self.timers
         if self._rx_pending_since is not None and now >= self._rx_pending_since + t.delta_r:
             self._records(self._decoder.abandon(), now, events)
             self._rx_pending_since = now if self._decoder.pending else None
         verdict = self._sender.timeout(now)
-        if verdict is not Verdict.IGNORE:
+        if verdict is not ReceiveVerdict.IGNORE:
             self._failed(verdict, "timeout", events)
         if self.up and now >= self._last_rx + t.link_down_after:
             self.up = False
@@ -229,7 +229,7 @@ class Type1Link:
                 self._held.append(item)
         return tuple(m for m in dropped if isinstance(m, Message))
 
-    def _records(self, records: list[Frame | Garbage], now: float, events: list[Event]) -> None:
+    def _records(self, records: list[Frame | Garbage], now: float, events: list[LinkEvent]) -> None:
         for rec in records:
             if isinstance(rec, Garbage):
                 events.append(GarbageReceived(rec.offset, rec.raw))
@@ -242,7 +242,7 @@ class Type1Link:
                 continue
             self._frame(rec, now, events)
 
-    def _frame(self, rec: Frame, now: float, events: list[Event]) -> None:
+    def _frame(self, rec: Frame, now: float, events: list[LinkEvent]) -> None:
         assert rec.seq is not None and rec.op is not None
         seq, op, data = rec.seq, rec.op, rec.data
         self._last_rx = now
@@ -265,7 +265,7 @@ class Type1Link:
             reason = data[0] if data else 0
             events.append(NakReceived(seq, reason, self.profile.nak_reason_name(reason)))
             verdict = self._sender.nak()
-            if verdict is not Verdict.IGNORE:
+            if verdict is not ReceiveVerdict.IGNORE:
                 self._failed(verdict, "nak", events)
             return
         opcode = self.profile.opcodes.get(op)
@@ -310,13 +310,13 @@ class Type1Link:
         self._sender.push(Message(opcode.op, opcode.build(values), opcode.name), front=front)
         self._last_request_all = now
 
-    def _nak(self, seq: int, reason: int, detail: str, raw: bytes, events: list[Event]) -> None:
+    def _nak(self, seq: int, reason: int, detail: str, raw: bytes, events: list[LinkEvent]) -> None:
         seq %= self._codec.seq_modulo
         self._control.append(self._codec.encode(seq, self._nak_op, bytes([reason])))
         events.append(NakSent(seq, reason, self.profile.nak_reason_name(reason), detail, raw))
 
-    def _failed(self, verdict: Verdict, cause: str, events: list[Event]) -> None:
-        if verdict is Verdict.RETRANSMIT:
+    def _failed(self, verdict: ReceiveVerdict, cause: str, events: list[LinkEvent]) -> None:
+        if verdict is ReceiveVerdict.RETRANSMIT:
             out = self._sender.outstanding
             assert out is not None
             events.append(Retransmission(out.seq, out.message, out.transmissions + 1, cause))

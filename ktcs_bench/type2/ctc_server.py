@@ -230,7 +230,7 @@ class CtcServer(Waitable):
             meter = self.admission.bad_frame_meter()
             holder: list[_CtcLink] = []
 
-            def on_events(events: list[ev.Event]) -> None:
+            def on_events(events: list[ev.SessionEvent]) -> None:
                 self._on_events(holder[0], meter, events)
 
             cl = _CtcLink(SessionPump(conn, reader, writer, on_events), conn, host, peer)
@@ -282,7 +282,7 @@ class CtcServer(Waitable):
                         fut.set_exception(PeerError(f"station {st} disconnected"))
             self._notify()
 
-    def _on_events(self, cl: _CtcLink, meter: BadFrameMeter, events: list[ev.Event]) -> None:
+    def _on_events(self, cl: _CtcLink, meter: BadFrameMeter, events: list[ev.SessionEvent]) -> None:
         conn = cl.conn
         now = cl.pump.now()
         for e in events:

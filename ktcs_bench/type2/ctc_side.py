@@ -59,7 +59,7 @@ class CtcConnection(Type2Session):
         self.state = SessionState.OPEN
         self.resync_pending = True
 
-    def refuse(self, now: float, reason: str) -> list[ev.Event]:
+    def refuse(self, now: float, reason: str) -> list[ev.SessionEvent]:
         """Refuse the station (IDENT sub 2) and close; `reason` is for the log, not the wire."""
         self._check_ident_pending()
         assert self.station is not None

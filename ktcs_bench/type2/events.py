@@ -118,7 +118,7 @@ class Closed:
     reason: str
 
 
-Event = (
+SessionEvent = (
     IdentRequested
     | IdentAccepted
     | IdentRefused

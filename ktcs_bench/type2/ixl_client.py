@@ -214,7 +214,7 @@ class IxlClient(Waitable):
             await asyncio.sleep(backoff)
             backoff = min(backoff * 2, self.backoff_max)
 
-    def _on_events(self, events: list[ev.Event]) -> None:
+    def _on_events(self, events: list[ev.SessionEvent]) -> None:
         try:
             self._handle_events(events)
         except Exception:  # the application failed: log it, drop this connection, reconnect
@@ -223,7 +223,7 @@ class IxlClient(Waitable):
                 self._session.close("application error")
         self._notify()
 
-    def _handle_events(self, events: list[ev.Event]) -> None:
+    def _handle_events(self, events: list[ev.SessionEvent]) -> None:
         session, pump = self._session, self._pump
         assert session is not None and pump is not None
         for e in events:

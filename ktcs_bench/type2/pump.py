@@ -23,7 +23,7 @@ log = logging.getLogger("ktcs_bench.type2")
 
 READ_SIZE = 1 << 16
 
-EventCallback = Callable[[int | None, ev.Event], None]
+EventCallback = Callable[[int | None, ev.SessionEvent], None]
 """(station or None before IDENT, event) -- every session event, after the adapter acted on it."""
 
 
@@ -35,7 +35,7 @@ class SessionPump:
         session: Type2Session,
         reader: asyncio.StreamReader,
         writer: asyncio.StreamWriter,
-        on_events: Callable[[list[ev.Event]], None],
+        on_events: Callable[[list[ev.SessionEvent]], None],
     ) -> None:
         self.session = session
         self.reader = reader
@@ -47,7 +47,7 @@ class SessionPump:
     def now(self) -> float:
         return self.loop.time()
 
-    def feed(self, events: list[ev.Event]) -> None:
+    def feed(self, events: list[ev.SessionEvent]) -> None:
         if events:
             self.on_events(events)
         self.flush()

@@ -97,7 +97,7 @@ class Type2Session:
         self.state = SessionState.IDENTIFYING
         self.close_reason: str | None = None
         self._out = bytearray()
-        self._events: list[ev.Event] = []
+        self._events: list[ev.SessionEvent] = []
         self._tx_seq = 0
         self._history: OrderedDict[int, _Sent] = OrderedDict()
         self._rx_expected: int | None = None
@@ -130,7 +130,7 @@ class Type2Session:
         self._out.clear()
         return out
 
-    def receive_data(self, data: bytes, now: float) -> list[ev.Event]:
+    def receive_data(self, data: bytes, now: float) -> list[ev.SessionEvent]:
         """Feed bytes from the transport; returns the events they caused."""
         if self.closed or not data:
             return self._take_events()
@@ -147,12 +147,12 @@ class Type2Session:
                 self._good(rec, now)
         return self._take_events()
 
-    def connection_lost(self, now: float) -> list[ev.Event]:
+    def connection_lost(self, now: float) -> list[ev.SessionEvent]:
         """The transport closed under us."""
         self._close("connection lost")
         return self._take_events()
 
-    def close(self, reason: str = "closed locally") -> list[ev.Event]:
+    def close(self, reason: str = "closed locally") -> list[ev.SessionEvent]:
         self._close(reason)
         return self._take_events()
 
@@ -170,7 +170,7 @@ class Type2Session:
             due = min(due, self._nak_at + cfg.nak_repeat)
         return due
 
-    def handle_timer(self, now: float) -> list[ev.Event]:
+    def handle_timer(self, now: float) -> list[ev.SessionEvent]:
         if self.closed:
             return self._take_events()
         cfg = self.config
@@ -347,7 +347,7 @@ class Type2Session:
         self.close_reason = reason
         self._events.append(ev.Closed(reason))
 
-    def _take_events(self) -> list[ev.Event]:
+    def _take_events(self) -> list[ev.SessionEvent]:
         out = self._events
         self._events = []
         return out

@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from ktcs_bench.codec.profile import get_profile
-from ktcs_bench.conformance import SuiteTiming, Verdict, run_suite
+from ktcs_bench.conformance import CaseVerdict, SuiteTiming, run_suite
 from ktcs_bench.conformance.model import Case, CaseContext
 from ktcs_bench.conformance.runner import CASES
 from ktcs_bench.lab.topology import resolve_lab_path
@@ -105,9 +105,9 @@ def test_a_case_that_breaks_its_own_silence_is_inconclusive(
                       cases=["talks-while-timing", "unknown-opcode"], station=18)  # fmt: skip
     by_name = {r.case.name: r for r in suite.results}
     broken, after = by_name["talks-while-timing"], by_name["unknown-opcode"]
-    assert broken.verdict is Verdict.ERROR, broken.message
+    assert broken.verdict is CaseVerdict.ERROR, broken.message
     assert broken.message.startswith("inconclusive: the suite sent LINK_TEST"), broken.message
-    assert suite.stopped is None and after.verdict is Verdict.PASS
+    assert suite.stopped is None and after.verdict is CaseVerdict.PASS
 
 
 def test_timings_auto_measures_the_peer(spawn: Callable[..., Proc], tmp_path: Path) -> None:
@@ -143,10 +143,10 @@ def test_timings_auto_measures_a_ctc(spawn: Callable[..., Proc]) -> None:
     suite = run_suite("ctc", f"tcp://{ctc.ready['listen']}", t2, SuiteTiming.resolve(t2),
                       cases=["t2-heartbeat"], station=20, auto=True)  # fmt: skip
     measure, heartbeat = suite.results
-    assert measure.case.name == "measure-timings" and measure.verdict is Verdict.PASS, (
+    assert measure.case.name == "measure-timings" and measure.verdict is CaseVerdict.PASS, (
         measure.evidence.checks
     )
-    assert heartbeat.verdict is Verdict.PASS
+    assert heartbeat.verdict is CaseVerdict.PASS
     m = suite.measured
     assert m.heartbeat_period is not None and 0.95 <= m.heartbeat_period <= 1.0 + 0.75
     assert m.t2_t_max is not None and 0.95 * 3.0 <= m.t2_t_max <= 3.0 + 0.75

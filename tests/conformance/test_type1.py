@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from ktcs_bench.codec.profile import get_profile
-from ktcs_bench.conformance import SuiteTiming, Verdict, run_suite
+from ktcs_bench.conformance import CaseVerdict, SuiteTiming, run_suite
 from ktcs_bench.conformance.type1_cases import TYPE1_CASES
 from ktcs_bench.emulator.variants import FAULTS
 
@@ -82,7 +82,7 @@ def test_variant_caught(variant_atcs: dict[str, Proc], variant: str) -> None:
                       SuiteTiming.resolve(profile, line_rate=None), cases=[case], station=18,
                       codes=12)  # fmt: skip
     (result,) = suite.results
-    assert result.verdict is Verdict.FAIL, (result.message, result.evidence.checks)
+    assert result.verdict is CaseVerdict.FAIL, (result.message, result.evidence.checks)
     assert result.evidence.records, "the failing case keeps its frames as evidence"
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from ktcs_bench.codec.profile import get_profile
-from ktcs_bench.conformance import SuiteTiming, Verdict, run_suite
+from ktcs_bench.conformance import CaseVerdict, SuiteTiming, run_suite
 from ktcs_bench.conformance.type2_cases import TYPE2_CASES
 from ktcs_bench.emulator.variants import FAULTS
 
@@ -60,7 +60,7 @@ def test_ixl_variant_caught(spawn: Callable[..., Proc], variant: str) -> None:
     suite = run_suite("ixl", f"listen://127.0.0.1:{port}", PROFILE, TIMING, cases=[case],
                       station=18, codes=75)  # fmt: skip
     (result,) = suite.results
-    assert result.verdict is Verdict.FAIL, (result.message, result.evidence.checks)
+    assert result.verdict is CaseVerdict.FAIL, (result.message, result.evidence.checks)
 
 
 def test_ctc_variant_caught(spawn: Callable[..., Proc]) -> None:
@@ -68,7 +68,7 @@ def test_ctc_variant_caught(spawn: Callable[..., Proc]) -> None:
     suite = run_suite("ctc", f"tcp://{ctc.ready['listen']}", PROFILE, TIMING,
                       cases=["t2-refused-station"], station=18)  # fmt: skip
     (result,) = suite.results
-    assert result.verdict is Verdict.FAIL
+    assert result.verdict is CaseVerdict.FAIL
     assert "IDENT sub 2" in result.message
 
 

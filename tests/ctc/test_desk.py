@@ -30,7 +30,7 @@ def test_commands_from_the_port_and_the_console_go_one_way_into_one_log() -> Non
         model = CtcModel(LINE)
         answers: list[ev.ControlAnswered] = []
 
-        def seen(station: int | None, e: ev.Event) -> None:
+        def seen(station: int | None, e: ev.SessionEvent) -> None:
             if isinstance(e, ev.ControlAnswered):
                 answers.append(e)
 

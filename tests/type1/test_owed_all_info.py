@@ -13,7 +13,7 @@ from collections.abc import Callable
 import pytest
 
 from ktcs_bench.codec import Frame, StreamDecoder
-from ktcs_bench.type1 import CommunicationError, Event, LinkConfig, LinkDown, LinkUp, Type1Link
+from ktcs_bench.type1 import CommunicationError, LinkConfig, LinkDown, LinkEvent, LinkUp, Type1Link
 
 from .helpers import CODEC, CONFIG, OPS, PROFILE, provider
 
@@ -55,11 +55,11 @@ def drive(
     start: float,
     until: float,
     at: dict[float, Callable[[float], bytes | None]] | None = None,
-) -> list[tuple[float, Event]]:
+) -> list[tuple[float, LinkEvent]]:
     """Run the link and the peer from `start` to `until` in steps of `STEP`; `at` holds actions
     (time -> f(now) returning bytes the peer sends, or None) run once when their time comes."""
     actions = sorted((at or {}).items())
-    events: list[tuple[float, Event]] = []
+    events: list[tuple[float, LinkEvent]] = []
     now = start
     while now < until:
         while actions and actions[0][0] <= now:
@@ -76,7 +76,7 @@ def drive(
     return events
 
 
-def of(events: list[tuple[float, Event]], kind: type) -> list[tuple[float, Event]]:
+def of(events: list[tuple[float, LinkEvent]], kind: type) -> list[tuple[float, LinkEvent]]:
     return [(t, e) for t, e in events if isinstance(e, kind)]
 
 

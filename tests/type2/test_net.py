@@ -29,9 +29,9 @@ def table(n: int = 1000, seed: int = 1) -> StateTable:
 
 class Recorder:
     def __init__(self) -> None:
-        self.events: list[tuple[int | None, ev.Event]] = []
+        self.events: list[tuple[int | None, ev.SessionEvent]] = []
 
-    def __call__(self, station: int | None, event: ev.Event) -> None:
+    def __call__(self, station: int | None, event: ev.SessionEvent) -> None:
         self.events.append((station, event))
 
     def of(self, kind: type) -> list:

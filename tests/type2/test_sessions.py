@@ -32,8 +32,8 @@ class Wire:
         self.now = 0.0
         self.ixl = IxlSession(station, self.now, config)
         self.ctc = CtcConnection(self.now, config)
-        self.ixl_events: list[ev.Event] = []
-        self.ctc_events: list[ev.Event] = []
+        self.ixl_events: list[ev.SessionEvent] = []
+        self.ctc_events: list[ev.SessionEvent] = []
         self.damage: Callable[[bytes], bytes] | None = None  # applied to each IXL -> CTC frame
 
     def pump(self) -> None:
