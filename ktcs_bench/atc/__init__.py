@@ -4,6 +4,9 @@
 each train's antenna. `WaysideAtc(line, station)`: occupancy + IXL route state -> TC/TTC/IZC codes
 for the IXL and an `AtcCode` (speed code, target speed, gradient, target distance) per track
 circuit; the most restrictive code everywhere while its IXL link is in communication error.
+
+Must not import the station-code files (`charts`), the links (`type1`, `binding`, `transport`),
+`emulator`, `ctc` or `console`; no socket, pty or clock: the ATC device binds it to its links.
 """
 
 from ktcs_bench.atc.codes import AtcCode, most_restrictive

@@ -3,6 +3,9 @@
 `Trackside(view)` reads the IXL->IO chart codes (point demands, lamp commands), follows train
 occupancy from the track-circuit model, runs point throws against `now`, takes injected faults,
 and reports the IO->IXL chart codes (SNI/SRN/SRI/SNR, LPS/LFI, TC relays) as changes.
+
+Must not import the station-code files (`charts`), the links (`type1`, `binding`, `transport`),
+`emulator` or the IXL; no socket, pty or clock: the trackside device binds it to its links.
 """
 
 from ktcs_bench.field.points import PointMachine
