@@ -14,15 +14,17 @@ in what it reports to the IXL and in its own codes (all the most restrictive), r
 come are ignored, and after `rails_state(True)` each track circuit stays occupied until the rails
 report it again (SPEC §6.2 invariant 3, §6.4).
 
+The ATC has no timer, so it has no `next_deadline`/`handle_timer` (the timer shape of
+`ktcs_bench.timed`): every code follows at once from its inputs -- occupancy, the IXL's codes, the
+link and the rails -- and nothing in it changes while they stand still. What is time-driven around
+it lives in its links and reaches it as an input: the Type I link's communication error
+(`link_state`), the loss of the rails connection (`rails_state`).
+
 How the path ahead of a track circuit is found, in order: a set route through it; a set route
 from the signal it approaches, if that signal shows proceed; the route that last held it (so a
 train keeps its path after the entry signal went back to stop); on the plain line, the traffic
 direction. Beyond this station's own signals nothing is known, so a path leaving the station ends
 at the far end of the interval (the next station's home signal) as a stop point.
-
-The ATC has no timers: every output follows from an input at once (occupancy, IXL codes, link and
-rails state), so it is not `Timed` (`ktcs_bench.timed`) and no driver calls it on a clock; its
-time-driven partners are the Type I link beside it and the IXL.
 """
 
 from __future__ import annotations

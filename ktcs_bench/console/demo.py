@@ -2,9 +2,10 @@
 
 `RigIxl` serves `ixl.rig.StationRig` -- the real `Interlocking` wired to the real `Trackside` --
 over Type II, run on the asyncio loop's clock: its binding (`binding.ControlLink`, the IXL
-emulator's own) is the Type II application, controls go to the interlocking by name, the one
-wall-clock driver (`timed.LoopTimer`) walks the rig through its deadlines (point throws, timed releases) and every change the
-interlocking gives the CTC is pushed as INDICATION changes. It is an adapter for people without
+emulator's own) is the Type II application, controls go to the interlocking by name, the
+wall-clock driver (`timed.aio.LoopTimer`) wakes the rig at its deadlines (point throws, timed
+releases) and no more often, and every change the interlocking gives the CTC is pushed as
+INDICATION changes. It is an adapter for people without
 the full multi-process lab, not the lab's IXL emulator.
 """
 
@@ -15,6 +16,7 @@ from dataclasses import replace
 
 from ktcs_bench.binding import ControlLink
 from ktcs_bench.codes.stations import link_charts
+from ktcs_bench.ixl.interlocking import IxlEvent
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.rig import StationRig
@@ -53,7 +55,7 @@ class RigIxl:
         self.rig.on_ctc = self._indicate
         self.station = station
         self.client: IxlClient | None = None
-        self.timer: LoopTimer[None] | None = None  # the rig on the wall clock, from its zero
+        self.timer: LoopTimer[list[IxlEvent]] | None = None
 
     # -- the application the Type II client serves ---------------------------------------------
     def full_state(self) -> list[tuple[int, int]]:
@@ -77,7 +79,7 @@ class RigIxl:
     # -- driving it ----------------------------------------------------------------------------
     def start(self, host: str, port: int) -> IxlClient:
         origin = asyncio.get_running_loop().time() - self.rig.now
-        self.timer = LoopTimer(self.rig, lambda now, out: None, origin=origin)
+        self.timer = LoopTimer(self.rig, lambda now, events: None, origin=origin)
         self.timer.poke()
         self.client = IxlClient(self.station, host, port, self, backoff_initial=0.05)
         self.client.start()

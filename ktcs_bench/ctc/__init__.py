@@ -5,11 +5,11 @@ the Type II server through its `CtcApplication` protocol), what that means to th
 which control each operator command is (`model`: one reading of a station's indications, code
 charts derived from station data), the command log (`log`), and the desk (`desk`) that sends a
 command through the CTC server and logs what came of it. `tables`, `model` and `log` are pure (no
-sockets, no clock); `desk` is the one part that awaits the server.
+sockets, no clock); `desk` is the one part that awaits the server, so this file does not import
+it (`from ktcs_bench.ctc.desk import Desk`): importing the model loads no loop or clock.
 Must not import `emulator` or `console` (they are built on this package), nor the interlocking.
 """
 
-from ktcs_bench.ctc.desk import Desk, Outcome
 from ktcs_bench.ctc.log import CommandLog, command_words
 from ktcs_bench.ctc.model import Action, CtcModel, StationModel, signal_name
 from ktcs_bench.ctc.tables import IndicationTable, IndicationTables
@@ -18,10 +18,8 @@ __all__ = [
     "Action",
     "CommandLog",
     "CtcModel",
-    "Desk",
     "IndicationTable",
     "IndicationTables",
-    "Outcome",
     "StationModel",
     "command_words",
     "signal_name",

@@ -1,5 +1,6 @@
-"""What every emulator process shares: the loop clock, one timer for the sans-I/O object's
-deadline, an event log, a JSON-lines control port, and the "ready" line a launcher reads.
+"""What every emulator process shares: the loop clock, the wall-clock driver of its sans-I/O
+core's deadlines (`drive`: `ktcs_bench.timed.aio.LoopTimer`), an event log, a JSON-lines control
+port, and the "ready" line a launcher reads.
 
 A device prints exactly one JSON line on stdout when it is up: {"ready": NAME, "kind": KIND,
 "control": "HOST:PORT", "ptys": {PEER: PATH}, ...}, or {"error": TEXT} when it cannot start (a
@@ -59,10 +60,11 @@ class Device:
     def now(self) -> float:
         return asyncio.get_running_loop().time()
 
-    def drive(self, core: Timed[Out], sink: Sink[Out]) -> None:
+    def drive(self, core: Timed[Out], sink: Sink[Out], origin: float = 0.0) -> None:
         """Put the device's sans-I/O core on the one wall-clock driver (`timed.LoopTimer`): its
-        timer outputs go to `sink`; `poke()` after every input moves the timer to its deadline."""
-        self.timer = LoopTimer(core, sink)
+        timer outputs go to `sink`; `poke()` after every input moves the timer to its deadline.
+        `origin`: the core's zero on the loop's clock (a train counts from its start)."""
+        self.timer = LoopTimer(core, sink, origin=origin)
 
     def poke(self) -> None:
         if self.timer is not None:

@@ -23,7 +23,6 @@ from ktcs_bench.emulator.device import Device
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
-from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.train.deceleration import GradientProfile
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import (
@@ -83,7 +82,6 @@ class TrainDevice(Device):
         self.config = config
         # the first cycle one period after the start, on the train's own time (0 at the start)
         self.endpoint = TrainEndpoint(config, train_line(line), sense=self._sense, first=CYCLE)
-        self.timer: LoopTimer[CycleOutputs | None] | None = None
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None
@@ -157,14 +155,9 @@ class TrainDevice(Device):
 
     async def tasks(self) -> list[asyncio.Task[None]]:
         self.rails.send({"position": self._position()})
-        self.timer = LoopTimer(self.endpoint, self._cycled, origin=self.loop.time())
-        self.timer.poke()
+        self.drive(self.endpoint, self._cycled, origin=self.loop.time())
+        self.poke()
         return [asyncio.ensure_future(self.rails.run())]
-
-    async def close(self) -> None:
-        if self.timer is not None:
-            self.timer.cancel()
-        await super().close()
 
     def status(self) -> dict[str, Any]:
         s = self.endpoint.dynamics.state

@@ -5,7 +5,8 @@ Inputs by IXL->IO code name (`receive`), train occupancy from the track-circuit 
 IXL is in communication error the rack puts every signal to stop (the vital outputs drop) and
 leaves the points where they are. When the rails (the source of train occupancy) are lost
 (`rails_state(False)`) every track relay reports occupied, whatever it last knew or its faults,
-until the rails are back and report it again.
+until the rails are back and report it again. Its one timer is the point machines' throw:
+`handle_timer(now)` at `next_deadline()` (the timer shape of every core, `ktcs_bench.timed`).
 """
 
 from __future__ import annotations
@@ -35,7 +36,6 @@ class FieldEvent:
 class FieldOutput:
     changes: list[tuple[str, int]] = field(default_factory=list)  # IO->IXL code changes
     events: list[FieldEvent] = field(default_factory=list)
-    deadline: float | None = None
 
 
 class Trackside:
@@ -121,6 +121,7 @@ class Trackside:
         return self._finish(now)
 
     def handle_timer(self, now: float) -> FieldOutput:
+        """A point throw due by `now` ends (call at or after `next_deadline()`)."""
         return self._finish(now)
 
     # ------------------------------------------------------------------ faults
@@ -206,7 +207,6 @@ class Trackside:
         out = FieldOutput(
             changes=[(k, v) for k, v in state.items() if self._sent.get(k) != v],
             events=self._events,
-            deadline=self.next_deadline(),
         )
         self._sent = state
         self._events = []

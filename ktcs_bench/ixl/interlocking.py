@@ -2,10 +2,12 @@
 
 Inputs: CTC controls (`control`, by code name), local-panel actions (`local`), Type I
 code changes from the ATC and the trackside (`receive`), link up/down (`link_state`) and timers
-(`handle_timer`, the timer shape of every core: `ktcs_bench.timed`). Every call takes `now` (seconds) and returns an `IxlOutput`: indication changes for the
-CTC chart, code changes for the IXL->ATC and IXL->IO charts, control results, events and the next
-deadline. After every input the whole station is re-evaluated at once, so a failing condition
-puts a signal to stop in the same call that reported it (invariant 4: within one cycle).
+(`handle_timer` at `next_deadline()`: the automatic center-mode grant, timed route and overlap
+releases -- the timer shape of every core, `ktcs_bench.timed`). Every call takes `now` (seconds)
+and returns an `IxlOutput`: indication changes for the CTC chart, code changes for the IXL->ATC
+and IXL->IO charts, control results and events. After every input the whole station is
+re-evaluated at once, so a failing condition puts a signal to stop in the same call that reported
+it (invariant 4: within one cycle).
 
 Fail-safe defaults: links start down; a track circuit is occupied until its source reports it
 clear and whenever a link that reports it is down; a point has no detection until the trackside
@@ -54,7 +56,6 @@ class IxlOutput:
     io: list[tuple[str, int]] = field(default_factory=list)  # IXL->trackside command changes
     results: list[ControlResult] = field(default_factory=list)
     events: list[IxlEvent] = field(default_factory=list)
-    deadline: float | None = None
 
 
 class Interlocking:
@@ -182,9 +183,13 @@ class Interlocking:
     # ------------------------------------------------------------------ public queries
 
     def next_deadline(self) -> float | None:
+        """The next automatic grant, timed route release or overlap release. An overlap timer
+        waits while no train movement can be read (a dead occupancy link): it is no deadline
+        then, and the report that brings the link back runs it."""
         due = [self.modes.next_deadline()]
+        live = self._reports_live()
         for rs in self.routes.values():
-            due += [rs.release_at, rs.overlap_at]
+            due += [rs.release_at, rs.overlap_at if live else None]
         return min((d for d in due if d is not None), default=None)
 
     def control_names(self) -> tuple[str, ...]:
@@ -417,7 +422,6 @@ class Interlocking:
             setattr(out, kind, changes)
             self._sent[kind] = state
         self._results, self._events = [], []
-        out.deadline = self.next_deadline()
         return out
 
     def _evaluate(self, now: float) -> None:

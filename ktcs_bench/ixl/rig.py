@@ -1,10 +1,12 @@
 """A station on the bench without links: one Interlocking wired straight to its Trackside.
 
 For deterministic virtual-time runs and tests: code changes pass between the two objects at once
-(as over a perfect Type I link), track occupancy is fed as the ATC would report it, and `advance`
-walks virtual time through every deadline. `ctc` is the CTC's picture, kept by the IXL->CTC
-changes, which are also handed to `on_ctc` as they come (a Type II link to a real CTC). No I/O,
-no clock.
+(as over a perfect Type I link) and track occupancy is fed as the ATC would report it. The rig is
+one `Timed` core (`ktcs_bench.timed`): `next_deadline()` is the earlier of the two cores',
+`handle_timer(now)` runs both and returns the interlocking's new events; `advance` walks it
+through virtual time on the virtual clock, and a wall-clock driver can run it as well (the
+console's demo stations). `ctc` is the CTC's picture, kept by the IXL->CTC changes, which are
+also handed to `on_ctc` as they come (a Type II link to a real CTC). No I/O, no clock.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from ktcs_bench.field.trackside import Trackside
 from ktcs_bench.ixl.interlocking import ControlResult, Interlocking, IxlEvent, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.model import StationView
+from ktcs_bench.timed.virtual import VirtualClock
 
 
 class StationRig:
@@ -58,24 +61,26 @@ class StationRig:
                 self._report_occupancy(full=True)
 
     def next_deadline(self) -> float | None:
-        """The earlier of the IXL's and the trackside's deadlines (the timer shape, `timed`)."""
+        """The earlier of the IXL's and the trackside's deadlines."""
         due = [d for d in (self.ixl.next_deadline(), self.io.next_deadline()) if d is not None]
         return min(due, default=None)
 
-    def handle_timer(self, now: float) -> None:
-        """Move the station's time on to `now`, honouring every deadline on the way."""
-        end = max(self.now, now)
-        while (nxt := self.next_deadline()) is not None and nxt <= end:
-            self.now = max(self.now, nxt)
-            self.from_field(self.io.handle_timer(self.now).changes)
-            self.take(self.ixl.handle_timer(self.now))
-        self.now = end
+    def handle_timer(self, now: float) -> list[IxlEvent]:
+        """Both cores' timers by `now` (the trackside first: a point that arrived is reported
+        to the interlocking in the same instant); the interlocking's events of this call."""
+        self.now = max(self.now, now)
+        first = len(self.events)
         self.from_field(self.io.handle_timer(self.now).changes)
         self.take(self.ixl.handle_timer(self.now))
+        return self.events[first:]
 
     def advance(self, seconds: float) -> None:
-        """Move virtual time on by `seconds` (tests and scenarios that step a station by hand)."""
-        self.handle_timer(self.now + seconds)
+        """Move virtual time on, honouring every deadline of the IXL and the trackside."""
+        end = self.now + seconds
+        clock = VirtualClock(self.now)
+        clock.add(self)
+        clock.run_until(end)
+        self.now = end
 
     def _report_occupancy(self, full: bool = False) -> None:
         codes = {tc: int(v) for tc, v in self.occupancy.items()}

@@ -13,8 +13,10 @@ trackside, the train's ATP cycle, a fault injector, a tap's recorder, a virtual 
 Outputs are collected one way: every call of a core -- `handle_timer` and each input (`receive`,
 `control`, `receive_data`, ...) -- returns that core's output object (`IxlOutput`, `FieldOutput`,
 `CycleOutputs`, a list of link events, the bytes a wire delivers), so one sink per core takes
-what it produced, whichever call produced it. A link's bytes for its wire are the one thing not
-returned: its driver collects them with `data_to_send` after every call, as h11 and aioquic do.
+what it produced, whichever call produced it. Two things are collected otherwise: a link's bytes
+for its wire, which its driver takes with `data_to_send` after every call (as h11 and aioquic
+do), and a fault injector's bytes -- its `feed` only queues, what it lets through comes out of
+`handle_timer(now)`, called after each `feed`.
 
 Exactly one driver per clock:
 

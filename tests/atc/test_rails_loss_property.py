@@ -99,8 +99,7 @@ class RailsLostMachine(RuleBasedStateMachine):
     def advance(self, seconds: float) -> None:
         end = self.now + seconds
         while True:
-            # a deadline not after `now` was seen by the last tick (the IXL's overlap timer stays
-            # past while the ATC link is down): only later ones move time on
+            # a deadline not after `now` was seen by the last call: only later ones move time on
             due = [self.ixl.next_deadline(), self.io.next_deadline()]
             nxt = min((d for d in due if d is not None and d > self.now), default=None)
             if nxt is None or nxt > end:

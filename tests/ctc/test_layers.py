@@ -74,9 +74,10 @@ IO_AND_CLOCKS = {"asyncio", "time", "socket", "serial", "threading", "select", "
                  "subprocess", "signal"}  # fmt: skip
 """What a sans-I/O core must never import, even through another module: I/O and clocks."""
 
-CORES = ("codec", "type1", "type2.session", "type2.ctc_side", "type2.ixl_side", "faults",
-         "station", "ixl", "field", "atc", "train", "scenario", "timed", "tap.core", "tap.control",
-         "tap.recorder")  # fmt: skip
+CORES = ("codec", "codes", "binding", "type1", "type2.session", "type2.ctc_side",
+         "type2.ixl_side", "faults", "station", "ixl", "field", "atc", "train", "scenario",
+         "timed", "tap.core", "tap.control", "tap.recorder", "ctc.model", "ctc.tables",
+         "ctc.log")  # fmt: skip
 """The cores fed bytes/events and an explicit `now` (a package: every module in it)."""
 
 ADAPTERS = {"ktcs_bench.timed.aio"}

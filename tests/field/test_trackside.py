@@ -31,11 +31,11 @@ def test_initial_state_points_normal_signals_red_track_clear(io: Trackside) -> N
 def test_point_throw_takes_throw_time_and_shows_moving(io: Trackside) -> None:
     out = io.receive({"PNC1831": 0, "PRC1831": 1}, 10.0)
     assert dict(out.changes) == {"SNI1831": 0, "SNR1831": 1}
-    assert out.deadline == 14.0
+    assert io.next_deadline() == 14.0
     assert io.handle_timer(13.9).changes == []
     out = io.handle_timer(14.0)
     assert dict(out.changes) == {"SNR1831": 0, "SRI1831": 1}
-    assert out.deadline is None
+    assert io.next_deadline() is None
     out = io.receive({"PRC1831": 0, "PNC1831": 1}, 20.0)
     assert dict(out.changes) == {"SRI1831": 0, "SRN1831": 1}  # moving reverse -> normal
 
@@ -43,8 +43,8 @@ def test_point_throw_takes_throw_time_and_shows_moving(io: Trackside) -> None:
 def test_throw_reversed_half_way_comes_back_in_the_time_it_ran(io: Trackside) -> None:
     io.receive({"PNC1832": 0, "PRC1832": 1}, 0.0)
     io.handle_timer(1.0)
-    out = io.receive({"PNC1832": 1, "PRC1832": 0}, 1.0)
-    assert out.deadline == pytest.approx(2.0)
+    io.receive({"PNC1832": 1, "PRC1832": 0}, 1.0)
+    assert io.next_deadline() == pytest.approx(2.0)
     assert dict(io.handle_timer(2.0).changes) == {"SRN1832": 0, "SNI1832": 1}
 
 

@@ -134,7 +134,7 @@ def test_center_local_modes_and_cmr_handshake(line: Line) -> None:
 def test_automatic_grant_keeps_cmr_visible(line: Line) -> None:
     ixl = Interlocking(line.view(22), auto_grant_s=1.0)
     out = ixl.control("CMQ22", 1, 10.0)
-    assert ("CMR22", 1) in out.ctc and out.deadline == 11.0
+    assert ("CMR22", 1) in out.ctc and ixl.next_deadline() == 11.0
     out = ixl.handle_timer(11.0)
     assert set(out.ctc) >= {("CMR22", 0), ("CTC22", 1), ("LOC22", 0)}
 
@@ -169,6 +169,19 @@ def test_signal_to_stop_when_the_train_enters_then_sequential_release(rig: Stati
     assert rs.status is RouteStatus.ENTERED  # berth still held under the train
     rig.occupy("TC2056", False)
     assert rs.status is RouteStatus.IDLE and rig.ctc["RSI200112"] == 0
+
+
+def test_the_overlap_timer_waits_while_no_train_movement_can_be_read(rig: StationRig) -> None:
+    _run_train_into_track_2(rig)
+    for tc, occupied in (("TC2053A", True), ("TC2056", True), ("TC2047", False)):
+        rig.occupy(tc, occupied)
+    rig.occupy("TC2053A", False)  # the train stands in the berth: the overlap timer runs
+    rs = rig.ixl.routes["0112"]
+    rig.set_link("atc", False)  # occupancy unknown: everything shows occupied
+    rig.advance(60)  # past the 30 s -- the timer has nothing to do, so it is no deadline
+    assert "32" in rs.held_points and rig.ixl.next_deadline() is None
+    rig.set_link("atc", True)  # the ATC reports again: the time has run out
+    assert "32" not in rs.held_points and "TC2057A" not in rs.held_tcs
 
 
 def test_cancel_with_approach_locking_and_timed_release(rig: StationRig) -> None:

@@ -349,6 +349,9 @@ class InterlockingMachine(RuleBasedStateMachine):
     def time_passes(self, seconds: float) -> None:
         self.now += seconds
         self.apply(self.ixl.handle_timer(self.now))
+        # what was due is done: a deadline a driver cannot get past would have it spin at `now`
+        deadline = self.ixl.next_deadline()
+        assert deadline is None or deadline > self.now
 
     @rule(data=st.data())
     def train_enters(self, data: st.DataObject) -> None:
