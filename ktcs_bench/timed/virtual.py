@@ -64,47 +64,58 @@ class VirtualClock:
 
     def step(self) -> bool:
         """Jump to the next deadline and run that instant; False when no core has one."""
-        return self._instant(None)
+        entries, deadlines, t = self._scan()
+        if t is None:
+            return False
+        if t > self.now:
+            self.now = t
+        self._call(self._due(entries, deadlines), self.now)
+        self.run_due()
+        return True
 
     def run_due(self) -> None:
         """Run every core due at `now`, pass after pass, until none is."""
-        now = self.now
         for _ in range(MAX_PASSES):
-            due = [
-                e for e in self._entries if (d := e.core.next_deadline()) is not None and d <= now
-            ]
-            if not due:
+            entries, deadlines, t = self._scan()
+            if t is None or t > self.now:
                 return
-            self._call(due, now)
-        raise RuntimeError(f"a core's deadline does not move past {now}")
+            self._call(self._due(entries, deadlines), self.now)
+        raise RuntimeError(f"a core's deadline does not move past {self.now}")
 
     def run_until(self, t: float, stop: Callable[[], bool] | None = None) -> None:
         """Run every instant up to and including `t` (or until `stop()` holds after one); the
         clock then reads `t` (or the instant it stopped at)."""
-        while self._instant(t):
-            if stop is not None and stop():
-                return
-        self.now = max(self.now, t)
+        ran = False
+        passes = 0  # at this instant
+        while True:
+            # one look at the deadlines both ends an instant and finds the next one
+            entries, deadlines, nxt = self._scan()
+            if nxt is None or nxt > self.now:  # nothing more is due now: the instant is over
+                if ran and stop is not None and stop():
+                    return
+                if nxt is None or nxt > t:
+                    self.now = max(self.now, t)
+                    return
+                self.now = nxt
+                passes = 0
+            passes += 1
+            if passes > MAX_PASSES:
+                raise RuntimeError(f"a core's deadline does not move past {self.now}")
+            self._call(self._due(entries, deadlines), self.now)
+            ran = True
 
     def run_for(self, dt: float, stop: Callable[[], bool] | None = None) -> None:
         self.run_until(self.now + dt, stop)
 
-    def _instant(self, limit: float | None) -> bool:
-        """Jump to the earliest deadline (if not beyond `limit`) and run that instant: its first
-        pass from the same look at the deadlines that found it, then `run_due`."""
+    def _scan(self) -> tuple[list[_Entry], list[float | None], float | None]:
+        """Every core's deadline, and the earliest."""
         entries = self._entries
         deadlines = [e.core.next_deadline() for e in entries]
-        t = min((d for d in deadlines if d is not None), default=None)
-        if t is None or (limit is not None and t > limit):
-            return False
-        if t > self.now:
-            self.now = t
+        return entries, deadlines, min((d for d in deadlines if d is not None), default=None)
+
+    def _due(self, entries: list[_Entry], deadlines: list[float | None]) -> list[_Entry]:
         now = self.now
-        self._call(
-            [e for e, d in zip(entries, deadlines, strict=True) if d is not None and d <= now], now
-        )
-        self.run_due()
-        return True
+        return [e for e, d in zip(entries, deadlines, strict=True) if d is not None and d <= now]
 
     @staticmethod
     def _call(due: list[_Entry], now: float) -> None:
