@@ -447,11 +447,11 @@ class FaultInjector:
     def handle_timer(self, now: float) -> bytes:
         """What the receiver gets by `now` (call after every `feed` and at `next_deadline()`)."""
         if self._decoder is not None and self._decoder.buffered:
-            if now - self._last_in >= self.hold_timeout:
+            if now >= self._last_in + self.hold_timeout:  # the sum next_deadline() gives
                 for rec in self._decoder.close():
                     self._schedule(rec.raw, now)
                 self._decoder = StreamDecoder(self.profile)
-        if self._held is not None and now - self._held[0] >= REORDER_TIMEOUT:
+        if self._held is not None and now >= self._held[0] + REORDER_TIMEOUT:
             self._schedule(self._held[1], now)
             self._held = None
             if self._ops and isinstance(self._ops[0].fault, ReorderFrames):

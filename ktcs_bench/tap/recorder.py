@@ -46,7 +46,9 @@ class Recorder:
         """A direction idle for `idle_flush` with a partial frame: that frame, as it stands."""
         out: list[CaptureRecord] = []
         for name, d in self._dirs.items():
-            if d.decoder.buffered and now - d.last >= self.idle_flush:
+            # the sum next_deadline() gives: `now - d.last >= idle_flush` can round the other
+            # way at that very deadline and leave it standing at `now`
+            if d.decoder.buffered and now >= d.last + self.idle_flush:
                 out += [CaptureRecord(d.last, name, r.raw) for r in d.decoder.close()]
                 d.decoder = StreamDecoder(self.profile, offset=d.total)
         return out

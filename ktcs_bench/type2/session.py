@@ -174,19 +174,21 @@ class Type2Session:
         if self.closed:
             return self._take_events()
         cfg = self.config
-        if now - self._last_rx >= cfg.t_max:
+        # each test is the sum next_deadline() gives, so a call at that deadline always sees it
+        # due (now - last >= period can round the other way, leaving the deadline at `now`)
+        if now >= self._last_rx + cfg.t_max:
             self._events.append(ev.LinkDown(now - self._last_rx))
             self._close(f"link down: nothing received for {now - self._last_rx:.1f} s")
             return self._take_events()
-        if self.state is SessionState.IDENTIFYING and now - self._opened_at >= cfg.ident_timeout:
+        if self.state is SessionState.IDENTIFYING and now >= self._opened_at + cfg.ident_timeout:
             self._close(f"no IDENT exchange within {cfg.ident_timeout:g} s")
             return self._take_events()
-        if self._awaiting is not None and now - self._nak_at >= cfg.nak_repeat:
+        if self._awaiting is not None and now >= self._nak_at + cfg.nak_repeat:
             self._nak_again(now)
             if self.closed:
                 return self._take_events()
         # no HEARTBEAT before the IDENT exchange: the IXL's IDENT is the first frame of a session
-        if self.state is SessionState.OPEN and now - self._last_tx >= cfg.heartbeat_period:
+        if self.state is SessionState.OPEN and now >= self._last_tx + cfg.heartbeat_period:
             self._send(OP_HEARTBEAT, 0, b"", now)
         return self._take_events()
 

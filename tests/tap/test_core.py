@@ -4,6 +4,8 @@ event stream and the next deadline out -- no loop, no pty, no socket, no clock."
 from __future__ import annotations
 
 import pytest
+from hypothesis import example, given
+from hypothesis import strategies as st
 
 from ktcs_bench.codec import FrameCodec, get_profile
 from ktcs_bench.errors import UsageError
@@ -47,6 +49,28 @@ def test_half_a_frame_is_recorded_as_it_stands_at_the_deadline() -> None:
     assert tap.handle_timer(deadline - 0.01).records == []
     (record,) = tap.handle_timer(deadline).records
     assert record.data == frame[:5] and record.time == T
+
+
+@example(start=0.145, cut=5)  # 0.145 + 0.2 - 0.145 < 0.2 (the recorder's idle flush)
+@example(start=0.037, cut=5)  # 0.037 + 0.25 - 0.037 < 0.25 (the injector's hold timeout)
+@given(start=st.floats(0.0, 1e7), cut=st.integers(1, 8))
+def test_a_timer_call_at_the_deadline_leaves_no_deadline_at_or_before_it(
+    start: float, cut: int
+) -> None:
+    tap = core()
+    tap.execute(parse_command("drop-frame ixl->atc", tap.names), start)  # holds partial frames
+    frame = CODEC.encode(1, 3, bytes(range(10)))
+    tap.receive("ixl>atc", frame[:cut], start)
+    tap.receive("atc>ixl", frame[:cut], start)
+    now = start
+    for _ in range(4):
+        due = tap.next_deadline()
+        if due is None:
+            break
+        now = max(now, due)
+        tap.handle_timer(now)
+        after = tap.next_deadline()
+        assert after is None or after > now, (after, now)
 
 
 def test_a_fault_command_is_answered_streamed_in_order_and_applied() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 from ktcs_bench.codec import FrameCodec, StreamDecoder, get_profile
@@ -28,8 +28,10 @@ def frames(data: bytes) -> list:
 class Wire:
     """An IXL and a CTC connection joined by a lossless in-memory pipe, plus a manual clock."""
 
-    def __init__(self, station: int = 20, config: Type2Config | None = None) -> None:
-        self.now = 0.0
+    def __init__(
+        self, station: int = 20, config: Type2Config | None = None, start: float = 0.0
+    ) -> None:
+        self.now = start
         self.ixl = IxlSession(station, self.now, config)
         self.ctc = CtcConnection(self.now, config)
         self.ixl_events: list[ev.SessionEvent] = []
@@ -200,6 +202,26 @@ def test_link_down_after_t_max_of_silence() -> None:
     (down,) = w.of(ev.LinkDown)
     assert down.silent_for == pytest.approx(3.0)
     assert "link down" in (w.ctc.close_reason or "")
+
+
+@example(start=3.35, opened=False)  # 3.35 + 3.0 - 3.35 < 3.0: once stuck at its deadline
+@example(start=3.35, opened=True)
+@given(start=st.floats(0.0, 1e7), opened=st.booleans())
+def test_a_timer_call_at_the_deadline_leaves_no_deadline_at_or_before_it(
+    start: float, opened: bool
+) -> None:
+    w = Wire(start=start)
+    if opened:
+        w.open(full=[])
+    for _ in range(6):  # heartbeats, then (nothing delivered) link down
+        for session in (w.ixl, w.ctc):
+            due = session.next_deadline()
+            if due is not None and due <= w.now + 1.0:
+                w.now = max(w.now, due)
+                session.handle_timer(w.now)
+                after = session.next_deadline()
+                assert after is None or after > w.now, (after, w.now)
+        w.now += 1.0
 
 
 def test_no_ident_within_the_timeout_closes() -> None:
