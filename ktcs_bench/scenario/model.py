@@ -98,16 +98,26 @@ class _Reader:
         place: str,
         default: float | None = None,
         minimum: float | None = None,
+        infinite: bool = False,
     ) -> float:
+        """A number at `m[key]`; never NaN, and infinite only where `infinite` says it means
+        "for ever" (a zone active until the end)."""
         if key not in m:
             if default is None:
                 raise self.fail(f"{place}.{key}", "missing")
             return default
-        v = m[key]
+        return self.value(m[key], f"{place}.{key}", minimum, infinite)
+
+    def value(
+        self, v: Any, place: str, minimum: float | None = None, infinite: bool = False
+    ) -> float:
+        """One number of the file (a list item, a field), checked as `num` checks."""
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(f"{place}.{key}", f"expected a number, got {v!r}")
+            raise self.fail(place, f"expected a number, got {v!r}")
+        if math.isnan(v) or (math.isinf(v) and not infinite):
+            raise self.fail(place, f"expected a finite number, got {v!r}")
         if minimum is not None and v < minimum:
-            raise self.fail(f"{place}.{key}", f"must be at least {minimum}, got {v}")
+            raise self.fail(place, f"must be at least {minimum}, got {v}")
         return float(v)
 
     def text(self, m: dict[str, Any], key: str, place: str, default: str | None = None) -> str:
@@ -173,13 +183,19 @@ def load_scenario(path: str | Path) -> Scenario:
         tm = r.mapping(line_m["tags"], "line.tags")
         r.known(tm, {"spacing_m", "first_m", "at_m", "extra_m"}, "line.tags")
         if "at_m" in tm:
-            tags = [float(x) for x in r.seq(tm["at_m"], "line.tags.at_m")]
+            tags = [
+                r.value(x, f"line.tags.at_m[{i}]")
+                for i, x in enumerate(r.seq(tm["at_m"], "line.tags.at_m"))
+            ]
         else:
             spacing = r.num(tm, "spacing_m", "line.tags", minimum=1.0)
             first = r.num(tm, "first_m", "line.tags", default=0.0)
             n = int(math.floor((length - first) / spacing + 1e-9)) + 1
             tags = [first + i * spacing for i in range(n)]
-        extra = [float(x) for x in r.seq(tm.get("extra_m", []), "line.tags.extra_m")]
+        extra = [
+            r.value(x, f"line.tags.extra_m[{i}]")
+            for i, x in enumerate(r.seq(tm.get("extra_m", []), "line.tags.extra_m"))
+        ]
         tags = sorted(set(tags) | set(extra))
     grads: list[tuple[float, float]] = []
     for i, g in enumerate(r.seq(line_m.get("gradients", []), "line.gradients")):
@@ -212,7 +228,7 @@ def load_scenario(path: str | Path) -> Scenario:
                 r.num(zm, "from_m", place),
                 r.num(zm, "to_m", place),
                 r.num(zm, "active_from_s", place, default=0.0),
-                r.num(zm, "active_until_s", place, default=math.inf),
+                r.num(zm, "active_until_s", place, default=math.inf, infinite=True),
             )
         )
     stations = []

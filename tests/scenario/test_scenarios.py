@@ -80,6 +80,9 @@ def test_protection_zone_stops_the_train(tmp_path: Path) -> None:
         ("trains: [{id: A, start_m: fast}]", "trains[0].start_m"),
         ("trains: [{id: A, start_m: 1, colour: red}]", "trains[0].colour"),
         ("trains: [{id: A, start_m: 1, mode: etcs}]", "trains[0].mode"),
+        ("trains: [{id: A, start_m: .nan}]", "trains[0].start_m"),
+        ("trains: [{id: A, start_m: .inf}]", "trains[0].start_m"),
+        ("trains: [{id: A, start_m: 300, driver_speed_kmh: -.inf}]", "trains[0].driver_speed_kmh"),
     ],
 )
 def test_bad_train_is_one_config_error_naming_the_key(
@@ -140,3 +143,11 @@ def test_max_speed_on_a_stretch_fails_when_exceeded(tmp_path: Path) -> None:
     outcomes = check_all(run(load_scenario(_write(tmp_path, text))))
     assert [o.passed for o in outcomes] == [False, True, True, True, True]
     assert "on [1400, 1800) m" in outcomes[0].detail
+
+
+@pytest.mark.parametrize("item", [".nan", "ten", "[1]"])
+def test_a_bad_tag_position_is_one_config_error_naming_the_item(tmp_path: Path, item: str) -> None:
+    text = BASE.replace("tags: {spacing_m: 100}", f"tags: {{at_m: [100, {item}]}}")
+    with pytest.raises(ConfigError) as exc:
+        load_scenario(_write(tmp_path, text))
+    assert exc.value.place == "line.tags.at_m[1]"
