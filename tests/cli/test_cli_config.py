@@ -13,7 +13,8 @@ import pytest
 
 from ktcs_bench.cli._common import duration
 from ktcs_bench.cli.main import build_parser
-from ktcs_bench.datafiles import data_dir
+from ktcs_bench.datafiles import data_dir, load_yaml, yaml_parser_in_c
+from ktcs_bench.errors import ConfigError
 
 from .conftest import cli, shipped_lab
 
@@ -119,6 +120,34 @@ def test_every_kind_of_yaml_file_refuses_a_key_given_twice(
     copy = duplicate_line(path, line)
     result = cli(*args)
     assert_refused(result, f"{path}: line {copy}", f"duplicate key {key!r}")
+
+
+def test_yaml_is_parsed_by_libyaml() -> None:
+    """Every device process loads its line; the pure-Python parser made that ten times slower."""
+    import yaml
+
+    assert yaml.__with_libyaml__, "PyYAML was built without libyaml (its C parser is missing)"
+    assert yaml_parser_in_c(), "load_yaml fell back to PyYAML's pure-Python parser"
+
+
+@pytest.mark.parametrize(
+    ("text", "place", "problem"),
+    [
+        ("a: [1, 2\n", "line 2, column 1", "expected ',' or ']', but got '<stream end>'"),
+        ("a:\n\tb: 1\n", "line 2, column 1", "found character '\\t' that cannot start any token"),
+        ("- a\nb: 1\n", "line 2, column 1", "expected <block end>, but found '?'"),
+    ],
+)
+def test_yaml_syntax_error_reads_the_same_as_without_libyaml(
+    tmp_path: Path, text: str, place: str, problem: str
+) -> None:
+    """libyaml words its errors otherwise ('did not find expected ...'); the message stays the
+    one the pure-Python parser gives, at its line and column."""
+    path = tmp_path / "bad.yaml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError) as caught:
+        load_yaml(path)
+    assert str(caught.value) == f"{path}: {place}: invalid YAML: {problem}"
 
 
 # -- ports: 1..65535, 0 only where any free port is meant -----------------------------------------
