@@ -22,6 +22,7 @@ class IndicationTable:
     peer: str | None = None
     connections: int = 0  # accepted connections so far
     full_states: int = 0  # full-state dumps received so far
+    version: int = 0  # counts every change of the table or the link (a reader may cache on it)
 
     @property
     def known(self) -> bool:
@@ -44,12 +45,14 @@ class IndicationTables:
         table.synced = False
         table.peer = peer
         table.connections += 1
+        table.version += 1
 
     def link_down(self, station: int) -> None:
         table = self.stations.get(station)
         if table is not None:
             table.connected = False
             table.synced = False
+            table.version += 1
 
     def full_state(self, station: int, items: Sequence[tuple[int, int]]) -> None:
         table = self.stations.get(station)
@@ -57,8 +60,10 @@ class IndicationTables:
             table.state = dict(items)
             table.synced = True
             table.full_states += 1
+            table.version += 1
 
     def indications(self, station: int, items: Sequence[tuple[int, int]]) -> None:
         table = self.stations.get(station)
-        if table is not None:
+        if table is not None and items:
             table.state.update(items)
+            table.version += 1

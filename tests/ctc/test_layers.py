@@ -77,7 +77,7 @@ IO_AND_CLOCKS = {"asyncio", "time", "socket", "serial", "threading", "select", "
 CORES = ("codec", "codes", "binding", "type1", "type2.session", "type2.ctc_side",
          "type2.ixl_side", "faults", "station", "ixl", "field", "atc", "train", "scenario",
          "timed", "tap.core", "tap.control", "tap.recorder", "ctc.model", "ctc.tables",
-         "ctc.log")  # fmt: skip
+         "ctc.log", "ctc.ars", "ctc.describer")  # fmt: skip
 """The cores fed bytes/events and an explicit `now` (a package: every module in it)."""
 
 ADAPTERS = {"ktcs_bench.timed.aio"}

@@ -1,0 +1,192 @@
+"""The train describer: which train is on which track circuits, from occupancy alone (pure).
+
+A CTC sees track circuits, not trains. As a real train describer does, this one gives each train
+its number when it comes onto the line and steps the number from berth to berth as the track
+circuits ahead of it occupy and those behind it clear:
+
+* a train is **identified** when a track circuit occupies that no described train explains, and
+  it is where the next train of the timetable comes onto the line (`enters: track_circuit`) or
+  stands at the start (its first stop's platform circuit);
+* a train's head **steps** into a track circuit next to it (ahead, in its direction of travel)
+  that is occupied and not another train's;
+* its rear **clears**: track circuits of its footprint that report clear drop out of it;
+* a train whose track circuits all clear is **lost** at its last berth (a flicker, a train
+  running with its detection failed) and found again when that berth or the one ahead occupies --
+  unless its last berth was at the end of the line: then it has **left** the lab.
+
+Unknown occupancy (a station whose link is down) neither steps nor clears anything. Adjacency is
+data: two track circuits are next to each other where one ends at the chainage the other begins
+and they share a track (a plain-line circuit carries every track). No clock, no I/O: `update` takes
+the occupancy and `now` and returns what happened.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from ktcs_bench.station.model import Direction, Line, TrackCircuit
+from ktcs_bench.station.timetable import Timetable, TimetableTrain
+
+EPS_M = 1e-6
+
+
+@dataclass(frozen=True, slots=True)
+class DescriberEvent:
+    time: float
+    train: str | None
+    kind: str  # identified, lost, found, left, unexplained
+    track_circuit: str
+    text: str
+
+
+@dataclass
+class DescribedTrain:
+    """One train the describer follows. `footprint`: its occupied track circuits, rear first."""
+
+    service: TimetableTrain
+    footprint: list[str] = field(default_factory=list)
+    berth: str = ""  # the head's track circuit (kept while the train is lost)
+    identified_at: float = 0.0
+
+    @property
+    def id(self) -> str:
+        return self.service.id
+
+    @property
+    def direction(self) -> Direction:
+        return self.service.direction
+
+    @property
+    def lost(self) -> bool:
+        return not self.footprint
+
+
+def _adjacent(a: TrackCircuit, b: TrackCircuit) -> bool:
+    """`b` begins where `a` ends (rising chainage) and they share a track."""
+    if abs(a.to_m - b.from_m) > EPS_M:
+        return False
+    return not a.tracks or not b.tracks or bool(set(a.tracks) & set(b.tracks))
+
+
+class Describer:
+    """Train numbers on the line's track circuits. See the module docstring."""
+
+    def __init__(self, line: Line, timetable: Timetable) -> None:
+        self.line = line
+        self.circuits = {t.name: t for t in line.all_track_circuits()}
+        tcs = list(self.circuits.values())
+        self._ahead: dict[Direction, dict[str, tuple[str, ...]]] = {
+            "up": {a.name: tuple(b.name for b in tcs if _adjacent(a, b)) for a in tcs},
+            "down": {b.name: tuple(a.name for a in tcs if _adjacent(a, b)) for b in tcs},
+        }
+        self.expected: list[TimetableTrain] = sorted(
+            timetable.trains, key=lambda t: t.enters_at_s
+        )  # not yet on the line, in the order they enter
+        self.trains: dict[str, DescribedTrain] = {}
+        self.gone: list[str] = []  # trains that left the lab
+        self._unexplained: set[str] = set()
+
+    def ahead(self, tc: str, direction: Direction) -> tuple[str, ...]:
+        """The track circuits next to `tc` in `direction` of travel."""
+        return self._ahead[direction].get(tc, ())
+
+    def train_at(self, tc: str) -> DescribedTrain | None:
+        for t in self.trains.values():
+            if tc in t.footprint:
+                return t
+        return None
+
+    def _order(self) -> list[DescribedTrain]:
+        """Leading trains first, so a follower never takes the circuit its leader steps into."""
+
+        def lead(t: DescribedTrain) -> float:
+            tc = self.circuits[t.berth]
+            return tc.from_m if t.direction == "up" else -tc.to_m
+
+        return sorted(self.trains.values(), key=lead, reverse=True)
+
+    def update(self, occupancy: Mapping[str, bool | None], now: float) -> list[DescriberEvent]:
+        """Step the trains on `occupancy` (track circuit -> occupied; None or absent: unknown)."""
+        events: list[DescriberEvent] = []
+        owned = {tc for t in self.trains.values() for tc in t.footprint}
+        for t in self._order():
+            if t.lost:
+                nxt = [t.berth] if occupancy.get(t.berth) is True and t.berth not in owned else []
+                nxt = nxt or self._free_ahead(t.berth, t.direction, occupancy, owned)
+                if not nxt:
+                    continue
+                t.footprint = [nxt[0]]
+                t.berth = nxt[0]
+                owned.add(nxt[0])
+                events.append(
+                    DescriberEvent(
+                        now, t.id, "found", t.berth, f"train {t.id} found again at {t.berth}"
+                    )
+                )
+            while True:  # the head steps on while the circuit ahead is occupied
+                nxt = self._free_ahead(t.footprint[-1], t.direction, occupancy, owned)
+                if not nxt or nxt[0] in t.footprint:
+                    break
+                t.footprint.append(nxt[0])
+                owned.add(nxt[0])
+            t.berth = t.footprint[-1]
+            kept = [tc for tc in t.footprint if occupancy.get(tc) is not False]
+            owned -= set(t.footprint) - set(kept)
+            t.footprint = kept
+            if t.lost:
+                if self._at_edge(t.berth, t.direction):
+                    del self.trains[t.id]
+                    self.gone.append(t.id)
+                    events.append(
+                        DescriberEvent(
+                            now, t.id, "left", t.berth, f"train {t.id} left the lab at {t.berth}"
+                        )
+                    )
+                else:
+                    events.append(
+                        DescriberEvent(
+                            now,
+                            t.id,
+                            "lost",
+                            t.berth,
+                            f"train {t.id} lost at {t.berth}: its track circuits report clear",
+                        )
+                    )
+        for tc, occ in occupancy.items():
+            if occ is not True:
+                self._unexplained.discard(tc)
+                continue
+            if tc in owned:
+                continue
+            service = next((s for s in self.expected if s.appears_on == tc), None)
+            if service is not None:
+                self.expected.remove(service)
+                self.trains[service.id] = DescribedTrain(service, [tc], tc, now)
+                owned.add(tc)
+                self._unexplained.discard(tc)
+                events.append(
+                    DescriberEvent(
+                        now, service.id, "identified", tc, f"train {service.id} identified at {tc}"
+                    )
+                )
+            elif tc not in self._unexplained:
+                self._unexplained.add(tc)
+                events.append(
+                    DescriberEvent(
+                        now, None, "unexplained", tc, f"{tc} occupied: no train described there"
+                    )
+                )
+        return events
+
+    def _at_edge(self, tc: str, direction: Direction) -> bool:
+        """`tc` ends where the line does, in `direction`: a train there leaves the lab."""
+        c = self.circuits[tc]
+        if direction == "up":
+            return c.to_m >= self.line.end_m - EPS_M
+        return c.from_m <= self.line.start_m + EPS_M
+
+    def _free_ahead(
+        self, tc: str, direction: Direction, occupancy: Mapping[str, bool | None], owned: set[str]
+    ) -> list[str]:
+        return [x for x in self.ahead(tc, direction) if occupancy.get(x) is True and x not in owned]
