@@ -11,18 +11,27 @@ runs on the absence of a code.
 
 The train's line data (tags, gradients, speed limits) come from the lab's line file, so the ATP
 and the wayside ATC see the same line. Runs in the up direction (rising chainage).
+
+A train of the lab's timetable (`train: ID` with a lab-level `timetable:`) runs its entry
+(`timetable_run`): its train data, its platform stops for the ATO (with precision-stop markers
+before each mark), the station track it uses at each, and when it comes onto the line -- at
+`enters.at_s` of its own time (0 at its start), 50 m short of the far end of its entry track
+circuit, or standing at its first stop. Until then it is not on the rails. Its status carries
+what it is doing (`state`), its arrivals (stop error on the true position) and departures.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+from dataclasses import dataclass
 from typing import Any
 
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.emulator.rails import RailsClient
-from ktcs_bench.errors import UsageError
+from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.station.model import Line
+from ktcs_bench.station.timetable import TimetableTrain
 from ktcs_bench.train.deceleration import GradientProfile
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import (
@@ -30,6 +39,7 @@ from ktcs_bench.train.endpoint import (
     CycleInputs,
     CycleOutputs,
     LineData,
+    Station,
     TrackCode,
     TrainConfig,
     TrainEndpoint,
@@ -51,6 +61,66 @@ def train_line(line: Line) -> LineData:
     gradient = GradientProfile(tuple(g.from_m for g in grads), tuple(g.permille for g in grads))
     restrictions = [Restriction(s.from_m, s.to_m, kmh(s.kmh)) for s in line.speed_limits]
     return LineData(line.end_m, tags, gradient, restrictions, [])
+
+
+PSM_M = (50.0, 20.0, 5.0)
+"""Precision-stop markers (seed 002 Table 1): tags this far before each platform stop mark."""
+ENTRY_SHORT_M = 50.0
+"""A train entering at a track circuit comes on with its front this far short of its far end."""
+BRAKE_BUILD_UP_S = 0.5
+
+
+@dataclass(frozen=True)
+class TimetableRun:
+    """What the train process makes of its timetable entry (`timetable_run`)."""
+
+    config: TrainConfig
+    line: LineData
+    enter_s: float
+    """Its own time (s from its start) at which it comes onto the line."""
+    tracks: tuple[tuple[float, float, str], ...]
+    """(from_m, to_m, track): the station track it uses where its stations' tracks lie."""
+
+
+def timetable_run(train: TimetableTrain, line: Line, brake_build_up: float) -> TimetableRun:
+    """The onboard data and start of a timetable train (see the module docstring)."""
+    if train.direction != "up":
+        raise UsageError(f"train {train.id}: the train emulator runs up trains only")
+    d = train.data
+    params = TrainParams(
+        length=d.length_m,
+        max_speed=kmh(d.max_speed_kmh),
+        max_traction=kmh(d.traction_kmh_per_s),
+        service_decel=kmh(d.service_brake_kmh_per_s),
+        emergency_decel=kmh(d.emergency_brake_kmh_per_s),
+        brake_build_up=brake_build_up,
+    )
+    onboard = train_line(line)
+    marks = [s.stop_m for s in train.stops]
+    onboard.tags = sorted({*onboard.tags, *(m - back for m in marks for back in PSM_M)})
+    onboard.stations = [
+        Station(str(s.station), s.stop_m, s.dwell_s, train.depart_s if i == 0 else 0.0)
+        for i, s in enumerate(train.stops)
+    ]
+    tracks = []
+    for s in train.stops:
+        circuits = line.station(s.station).track_circuits
+        tracks.append((min(t.from_m for t in circuits), max(t.to_m for t in circuits), s.track))
+    if train.enters is not None:
+        entry = next(t for t in line.all_track_circuits() if t.name == train.enters.track_circuit)
+        start = entry.to_m - ENTRY_SHORT_M
+    else:
+        start = train.stops[0].stop_m
+    cfg = TrainConfig(
+        train_id=train.id,
+        params=params,
+        start=start,
+        mode="ktcs",
+        ato=True,
+        driver_speed=params.max_speed,
+        leaves_line=train.leaves_lab,
+    )
+    return TimetableRun(cfg, onboard, train.enters_at_s, tuple(tracks))
 
 
 def _code_fields(wire: Any) -> tuple[float, float, float] | None:
@@ -76,12 +146,19 @@ class TrainDevice(Device):
         config: TrainConfig,
         rails: Endpoint,
         control: tuple[str, int] = ("127.0.0.1", 0),
+        run: TimetableRun | None = None,
     ) -> None:
         super().__init__(name, control)
         self.line = line
-        self.config = config
-        # the first cycle one period after the start, on the train's own time (0 at the start)
-        self.endpoint = TrainEndpoint(config, train_line(line), sense=self._sense, first=CYCLE)
+        self.config = config if run is None else run.config
+        config = self.config
+        self.run_ = run
+        self.tracks = () if run is None else run.tracks
+        # the first cycle one period after the start (or at its entry time), on the train's own
+        # time (0 at the start); it is on the rails from its first cycle
+        first = CYCLE if run is None else max(CYCLE, run.enter_s)
+        onboard = train_line(line) if run is None else run.line
+        self.endpoint = TrainEndpoint(config, onboard, sense=self._sense, first=first)
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None
@@ -101,13 +178,25 @@ class TrainDevice(Device):
             raise UsageError(
                 "emulator train needs --link rails=tcp://HOST:PORT (the track circuits)"
             )
+        train_id = str(train or opts.get("train", name))
+        timetable = lab.load_timetable(line) if lab is not None else None
+        if timetable is not None:
+            try:
+                entry = timetable.train(train_id)
+            except KeyError:
+                raise ConfigError(
+                    timetable.file, "trains", f"no train {train_id!r} (device {name})"
+                ) from None
+            build_up = float(opts.get("brake_build_up_s", BRAKE_BUILD_UP_S))
+            run = timetable_run(entry, line, build_up)
+            return cls(name, line, run.config, links["rails"], control, run)
         params = TrainParams(
             length=float(opts.get("length_m", 100.0)),
             max_speed=kmh(float(opts.get("max_speed_kmh", 80.0))),
-            brake_build_up=float(opts.get("brake_build_up_s", 0.5)),
+            brake_build_up=float(opts.get("brake_build_up_s", BRAKE_BUILD_UP_S)),
         )
         cfg = TrainConfig(
-            train_id=str(train or opts.get("train", name)),
+            train_id=train_id,
             params=params,
             start=float(opts.get("start_m", 300.0)),
             mode="ktcs",
@@ -136,9 +225,22 @@ class TrainDevice(Device):
             return TrackCode.stop_here(self.endpoint.dynamics.state.position)
         return self.code
 
-    def _position(self) -> dict[str, float]:
+    def _position(self) -> dict[str, Any]:
         head = self.endpoint.dynamics.state.position
-        return {"head": head, "tail": head - self.config.params.length}
+        tail = head - self.config.params.length
+        if self.endpoint.left:  # off the end of the line: on no track circuit of the lab
+            return {"head": self.line.end_m + head - tail + 1.0, "tail": self.line.end_m + 1.0}
+        out: dict[str, Any] = {"head": head, "tail": tail}
+        track = next((t for lo, hi, t in self.tracks if lo <= head < hi), None)
+        track = track or next((t for lo, hi, t in self.tracks if lo < tail < hi), None)
+        if track is not None:
+            out["track"] = track
+        return out
+
+    @property
+    def on_line(self) -> bool:
+        """It has come onto the line (its first cycle has run)."""
+        return self.endpoint.cycles > 0
 
     def _sense(self, now: float) -> CycleInputs:
         """The cycle's inputs: the code under the antenna, the driver's EB release (once)."""
@@ -154,7 +256,8 @@ class TrainDevice(Device):
         self.rails.send({"position": self._position()})
 
     async def tasks(self) -> list[asyncio.Task[None]]:
-        self.rails.send({"position": self._position()})
+        if self.run_ is None:  # a train put on the line by the lab file stands there at once
+            self.rails.send({"position": self._position()})
         self.drive(self.endpoint, self._cycled, origin=self.loop.time())
         self.poke()
         return [asyncio.ensure_future(self.rails.run())]
@@ -162,10 +265,29 @@ class TrainDevice(Device):
     def status(self) -> dict[str, Any]:
         s = self.endpoint.dynamics.state
         verdict = self.last.verdict if self.last is not None else None
+        ep = self.endpoint
+        now = self.timer.now() if self.timer is not None else 0.0
         return {
             **super().status(),
             "train": self.config.train_id,
             **self._position(),
+            "time_s": round(now, 1),
+            "state": ep.service_state(now) if self.on_line else "waiting",
+            "enters_s": None if self.run_ is None else self.run_.enter_s,
+            "next_stop": None if ep.next_stop is None else ep.next_stop.name,
+            "arrivals": [
+                {
+                    "station": a.station,
+                    "stop_m": a.stop_mark,
+                    "head_m": round(a.head, 3),
+                    "error_m": round(a.error, 3),
+                    "time_s": round(a.time, 1),
+                }
+                for a in ep.arrivals
+            ],  # fmt: skip
+            "departures": [
+                {"station": d.station, "time_s": round(d.time, 1)} for d in ep.departures
+            ],
             "speed_kmh": round(s.speed * 3.6, 2),
             "code_tc": self.code_tc,
             "code": None

@@ -14,6 +14,7 @@ from ktcs_bench.datafiles import data_dir, load_yaml
 from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
+from ktcs_bench.station.timetable import Timetable, load_timetable
 from ktcs_bench.transport.endpoints import check_port
 
 KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
@@ -55,6 +56,7 @@ class Lab:
     console_port: int | None = None
     console_origins: tuple[str, ...] = ()  # web origins besides its own whose pages may operate
     ixl_mode: str = "center"
+    timetable_file: Path | None = None  # the lab's one timetable: its trains, ARS's routes
 
     def of_kind(self, kind: str) -> list[DeviceSpec]:
         return [d for d in self.devices.values() if d.kind == kind]
@@ -73,6 +75,12 @@ class Lab:
 
     def load_line(self) -> Line:
         return load_line(self.line_file)
+
+    def load_timetable(self, line: Line | None = None) -> Timetable | None:
+        """The lab's timetable checked against its line (None: the lab has none)."""
+        if self.timetable_file is None:
+            return None
+        return load_timetable(self.timetable_file, line or self.load_line())
 
 
 def default_lab_path() -> Path:
@@ -204,6 +212,11 @@ def load_lab(path: str | Path | None = None) -> Lab:
         isinstance(o, str) and _ORIGIN.fullmatch(o) for o in origins
     ):
         raise fail("console.origins", "a list of web origins, e.g. [http://ctc.lab:8020]")
+    timetable_file = None
+    if raw.get("timetable") is not None:
+        timetable_file = (file.parent / str(raw["timetable"])).resolve()
+        if not timetable_file.is_file():
+            raise fail("timetable", f"no such timetable file: {timetable_file}")
     mode = raw.get("ixl_mode", "center")
     if mode not in ("center", "local"):
         raise fail("ixl_mode", f"must be center or local, not {mode!r}")
@@ -222,11 +235,23 @@ def load_lab(path: str | Path | None = None) -> Lab:
         console_port=port(console, "console.port"),
         console_origins=tuple(origins),
         ixl_mode=mode,
+        timetable_file=timetable_file,
     )
     line = lab.load_line()
     for d in devices.values():
         if d.station is not None and d.station not in line.stations:
             raise fail(
                 f"devices.{d.name}.station", f"station {d.station} is not on the line {line.name}"
+            )
+    timetable = lab.load_timetable(line)
+    for d in lab.of_kind("train"):
+        if timetable is None or "train" not in d.options:
+            continue
+        train = str(d.options["train"])
+        if train not in {t.id for t in timetable.trains}:
+            raise fail(
+                f"devices.{d.name}.train",
+                f"train {train!r} is not in the timetable {timetable.file} "
+                f"({', '.join(t.id for t in timetable.trains)})",
             )
     return lab

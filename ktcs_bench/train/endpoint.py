@@ -126,9 +126,47 @@ class _Layer(NamedTuple):
 
 @dataclass(frozen=True)
 class Station:
+    """A platform stop the ATO makes: its front at `stop_mark`, standing `dwell` s, leaving no
+    sooner than `depart` (the train's time, s)."""
+
     name: str
     stop_mark: float
     dwell: float = 20.0
+    depart: float = 0.0
+
+
+@dataclass(frozen=True)
+class Arrival:
+    """A platform stop made: where the front came to rest, on the plant's (true) position."""
+
+    station: str
+    stop_mark: float
+    time: float
+    head: float
+
+    @property
+    def error(self) -> float:
+        """Stop error, m: + beyond the mark, − short of it."""
+        return self.head - self.stop_mark
+
+
+@dataclass(frozen=True)
+class Departure:
+    station: str
+    time: float
+
+
+SERVICE_STATES = ("running", "stopping", "dwelling", "held", "finished", "left")
+"""What a train is doing (`TrainEndpoint.service_state`): moving on its codes, braking for a stop,
+standing its dwell at a platform, standing for a code (at a signal, or at a platform with its
+dwell over), its service over at its last stop, gone off the end of the line."""
+STOP_TOLERANCE = 0.5
+"""A platform stop is good within ± this of the mark, m (its doors line up with the platform)."""
+BERTH_WINDOW = 1.0
+"""The ATO berths at a station standing within ± this of its mark by its own position, m (±DLS/2,
+seed 002 Table 2 g)."""
+LEAVE_WITHIN = 5.0
+"""A train whose service leaves the line has left once it stands this near the line's end, m."""
 
 
 @dataclass
@@ -164,6 +202,8 @@ class TrainConfig:
     """A_brake_safe = factor × emergency deceleration."""
     service_brake_command: bool = True
     depart_at: float = 0.0
+    leaves_line: bool = False
+    """After its last station the ATO runs on to the end of the line, and the train leaves."""
 
 
 @dataclass(frozen=True)
@@ -265,6 +305,11 @@ class TrainEndpoint:
         self._eb_seen = False
         self._next_station = 0
         self._dwell_until = cfg.depart_at
+        self.arrivals: list[Arrival] = []
+        self.departures: list[Departure] = []
+        self._berth: Station | None = None  # the platform it stands at, until it departs
+        self._to_go = math.inf  # the ATO's distance to go to its next stop, m
+        self.left = False
 
     # ------------------------------------------------------------------ the cycle
 
@@ -337,6 +382,10 @@ class TrainEndpoint:
         for tag in missed:
             self.supervisor.trip(f"missed tag {tag}")
             events.append(TrainEvent(now, cfg.train_id, "missed_tag", f"tag {tag} not read"))
+        if self._berth is not None and s.speed > 0.0:
+            events.append(TrainEvent(now, cfg.train_id, "departure", f"from {self._berth.name}"))
+            self.departures.append(Departure(self._berth.name, now))
+            self._berth = None
         pos = self.position
         msg = T2TMessage(cfg.train_id, pos.head, pos.min_safe_rear, s.speed, now)
         up_to = min(pos.head + MAX_MA, self.line.length)
@@ -488,13 +537,20 @@ class TrainEndpoint:
     ) -> tuple[float, float]:
         cfg, p = self.cfg, self.cfg.params
         s = self.dynamics.state
-        code_speed = inputs.code.speed if inputs.code is not None else verdict.permitted
+        code = inputs.code
+        # a kTCS code's speed holds at its circuit's exit: inside, the train may run at the speed
+        # it entered with towards the code's stop point (the distance to go brakes it there)
+        code_speed = (
+            verdict.permitted if code is None else max(code.speed, self._entry_speed)
+        )
         station = (
             self.line.stations[self._next_station]
             if self._next_station < len(self.line.stations)
             else None
         )
-        at_station = station is not None and abs(self.position.head - station.stop_mark) <= 1.0
+        at_station = (
+            station is not None and abs(self.position.head - station.stop_mark) <= BERTH_WINDOW
+        )
         ai = AtoInputs(speed=s.speed, speed_command=code_speed, at_station=at_station)
         for letter in self.ato_sm.step(ai, now):
             events.append(
@@ -504,25 +560,65 @@ class TrainEndpoint:
             )
         if self.ato_sm.state is not AtoState.ACTIVE_OPERATING:
             return 0.0, p.service_decel
-        if station is None and self.line.stations:
+        if station is None and self.line.stations and not cfg.leaves_line:
             return 0.0, p.service_decel  # service over: held at the last station
         if self.ato_sm.berthed and station is not None:
-            events.append(
-                TrainEvent(
-                    now, cfg.train_id, "berthed", f"{station.name} at {self.position.head:.2f} m"
-                )
-            )
-            self._dwell_until = now + station.dwell
-            self._next_station += 1
-            self.ato_sm.berthed = False
+            self._berthed(now, station, events)
             return 0.0, p.service_decel
+        if self._berth is not None and (code is None or code.speed <= 0.0):
+            return 0.0, p.service_decel  # at a platform it leaves only on a proceed code
         v_target = self.ato_ctl.target_speed(code_speed, cfg.recovery)
         v_target = min(v_target, verdict.permitted - kmh(1.0))
         stops = [self.target_point - 0.5 - self.position.uncertainty]
         if station is not None:
             stops.append(station.stop_mark)
-        dtg = min(stops) - self.position.head
+        dtg = self._to_go = min(stops) - self.position.head
+        if station is None and cfg.leaves_line and s.speed <= 0.0 and dtg < LEAVE_WITHIN:
+            if not self.left:
+                self.left = True
+                events.append(TrainEvent(now, cfg.train_id, "left", "off the end of the line"))
+            return 0.0, p.service_decel
         return self.ato_ctl.command(s.speed, max(v_target, 0.0), dtg, dt)
+
+    def _berthed(self, now: float, station: Station, events: list[TrainEvent]) -> None:
+        """Standing at `station`'s mark: an arrival (unless it has not moved since it was put
+        there: it starts its service at this platform), then the dwell, no sooner than the
+        station's departure time."""
+        head = self.dynamics.state.position
+        if self.dynamics.state.odometer > 0.0:
+            arrival = Arrival(station.name, station.stop_mark, now, head)
+            self.arrivals.append(arrival)
+            events.append(TrainEvent(now, self.cfg.train_id, "arrival",
+                                     f"{station.name}: front at {head:.2f} m, "
+                                     f"{arrival.error:+.2f} m from the mark"))  # fmt: skip
+        self._dwell_until = max(now + station.dwell, station.depart)
+        self._berth = station
+        self._next_station += 1
+        self.ato_sm.berthed = False
+
+    @property
+    def next_stop(self) -> Station | None:
+        """The platform stop it runs to next (None: none left)."""
+        stations = self.line.stations
+        return stations[self._next_station] if self._next_station < len(stations) else None
+
+    def service_state(self, now: float) -> str:
+        """One of `SERVICE_STATES`: what the train is doing at `now`."""
+        s = self.dynamics.state
+        if self.left:
+            return "left"
+        if s.speed > 0.0:
+            braking = s.speed * s.speed / (2.0 * self.ato_ctl.stop_decel) + 2.0 * s.speed
+            return "stopping" if self.cfg.ato and self._to_go <= braking else "running"
+        over = self.line.stations and self._next_station >= len(self.line.stations)
+        if over and not self.cfg.leaves_line:
+            return "finished"
+        nxt = self.next_stop
+        if nxt is not None and abs(self.position.head - nxt.stop_mark) <= BERTH_WINDOW:
+            return "stopping"  # at the mark: berthed at the ATO's next cycle
+        if self._berth is not None and now < self._dwell_until:
+            return "dwelling"
+        return "held"
 
     # ------------------------------------------------------------------ for reports
 

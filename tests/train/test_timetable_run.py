@@ -1,0 +1,135 @@
+"""A train runs its timetable entry in kTCS mode, on the virtual clock: its ATO stops at each
+platform's mark within ±0.5 m, stands its dwell, leaves no sooner than the timetable and the
+codes allow, and says what it is doing (running, stopping, dwelling, held, finished).
+
+The wayside here is a stand-in for the ATC: each track circuit's code from where the trains'
+stop points are -- the starting signal of a platform (at the exit of its track circuit) while
+it is at stop, and the end of the line -- graded as the reference ATC grades them (speed at the
+exit = what the code table allows for braking at `service_brake_mps2` to the stop point, the
+target distance counted from the circuit's entry). The real ATC and interlocking are in the lab
+tests; here the point is the train's logic.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import pytest
+
+from ktcs_bench.emulator.train import TimetableRun, timetable_run
+from ktcs_bench.station import load_line
+from ktcs_bench.station.model import Line
+from ktcs_bench.station.timetable import load_timetable
+from ktcs_bench.datafiles import data_dir
+from ktcs_bench.timed.virtual import VirtualClock
+from ktcs_bench.train.endpoint import (
+    STOP_TOLERANCE,
+    CycleInputs,
+    CycleOutputs,
+    TrackCode,
+    TrainEndpoint,
+)
+from ktcs_bench.train.units import kmh
+
+TIMETABLE = data_dir("emulators") / "timetables" / "reference.yaml"
+
+
+@dataclass
+class Wayside:
+    """Codes on the reference line's track circuits of one station track, from stop points."""
+
+    line: Line
+    track: str
+    decel: float
+    signals: dict[float, bool] = field(default_factory=dict)  # stop point -> at stop
+
+    def stop_points(self) -> list[float]:
+        return sorted([x for x, red in self.signals.items() if red] + [self.line.end_m])
+
+    def code(self, head: float) -> TrackCode | None:
+        speeds = [c.kmh for c in self.line.speed_codes]
+        for tc in self.line.all_track_circuits():
+            if not (tc.on_track(self.track) and tc.from_m <= head < tc.to_m):
+                continue
+            stop = next(x for x in self.stop_points() if x >= tc.to_m - 1e-6)
+            room = max(stop - tc.to_m, 0.0)
+            allowed = math.sqrt(2.0 * self.decel * room) * 3.6
+            kmh_ = max([v for v in speeds if v <= min(allowed, 80.0)], default=0.0)
+            grad = self.line.gradient_between(tc.from_m, tc.to_m)
+            return TrackCode.read(tc.from_m, tc.to_m, kmh(kmh_), grad, stop - tc.from_m)
+        return None
+
+
+def run_train(
+    train_id: str, release: dict[str, float], until: float
+) -> tuple[TrainEndpoint, list[tuple[float, str]], TimetableRun, Wayside]:
+    """Run timetable train `train_id` alone; the starting signal of each station turns to
+    proceed at `release[station]` (absent: never). Returns the endpoint and its state changes."""
+    line = load_line()
+    entry = load_timetable(TIMETABLE, line).train(train_id)
+    run = timetable_run(entry, line, 0.5)
+    starting = {}
+    for stop in entry.stops:
+        st = line.station(stop.station)
+        sig = next(s for s in st.signals if s.kind == "starting" and s.track == stop.track)
+        starting[str(stop.station)] = sig.position_m
+    wayside = Wayside(line, entry.stops[0].track, line.service_brake_mps2)
+    clock = VirtualClock()
+    ep = TrainEndpoint(run.config, run.line, first=max(0.1, run.enter_s))
+    ep.sense = lambda now: CycleInputs(code=wayside.code(ep.state.position))
+    states: list[tuple[float, str]] = []
+
+    def record(now: float, out: CycleOutputs | None) -> None:
+        if out is None:
+            return
+        for name, at in starting.items():
+            wayside.signals[at] = now < release.get(name, math.inf)
+        state = ep.service_state(now + ep.cycle)
+        if not states or states[-1][1] != state:
+            states.append((now, state))
+
+    for name, at in starting.items():
+        wayside.signals[at] = True
+    clock.add(ep, record)
+    clock.run_until(until)
+    return ep, states, run, wayside
+
+
+def test_the_ato_stops_at_each_platform_within_half_a_metre_dwells_and_departs_on_time() -> None:
+    ep, states, run, _ = run_train("1001", {"18": 100.0, "20": 330.0}, until=900.0)
+    marks = {s.name: s for s in run.line.stations}
+    assert [a.station for a in ep.arrivals] == ["18", "20", "22"], states
+    for a in ep.arrivals:
+        assert abs(a.error) <= STOP_TOLERANCE, a
+        assert a.stop_mark == marks[a.station].stop_mark
+    # each departure: no sooner than the dwell, and as soon as both the dwell and the signal allow
+    for a, d in zip(ep.arrivals, ep.departures, strict=False):
+        allowed = max(a.time + marks[a.station].dwell, {"18": 100.0, "20": 330.0}[a.station])
+        assert d.station == a.station
+        assert allowed <= d.time <= allowed + 3.0, (a, d)
+    assert [d.station for d in ep.departures] == ["18", "20"]
+    seen = [s for _, s in states]
+    assert seen[-1] == "finished" and {"running", "stopping", "dwelling", "held"} <= set(seen)
+    assert ep.eb_count == 0
+
+
+def test_a_train_held_at_a_red_starting_signal_stays_held_after_its_dwell() -> None:
+    """The dwell is over but the code says stop: the train stands, held, and never departs."""
+    ep, states, _, _ = run_train("1001", {}, until=250.0)
+    assert [a.station for a in ep.arrivals] == ["18"]
+    assert ep.departures == []
+    arrived = ep.arrivals[0].time
+    assert states[-2:] == [(pytest.approx(arrived, abs=0.2), "dwelling"),
+                           (pytest.approx(arrived + 30.0, abs=0.2), "held")]  # fmt: skip
+
+
+def test_a_train_enters_no_sooner_than_its_time_and_where_the_timetable_says() -> None:
+    """1003 enters at TC1851 at 120 s: no cycle before (the device puts nothing on the rails),
+    then its front 50 m short of the circuit's far end."""
+    ep, states, run, _ = run_train("1003", {"18": 0.0}, until=200.0)
+    assert run.enter_s == 120.0 and ep.first == 120.0
+    assert run.config.start == 450.0 and run.config.params.length == 200.0
+    assert states[0][0] == pytest.approx(120.0)
+    assert ep.arrivals and ep.arrivals[0].time > 120.0
+    assert abs(ep.arrivals[0].error) <= STOP_TOLERANCE
