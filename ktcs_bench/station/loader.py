@@ -9,6 +9,7 @@ track circuit or point without being declared conflicting.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -383,9 +384,41 @@ def default_line_path() -> Path:
     return data_dir("emulators") / DEFAULT_LINE
 
 
+_CACHED_LINES = 8  # lines a process keeps (a device loads one; a test run loads many)
+_lines: dict[Path, tuple[tuple[tuple[Path, bytes | None], ...], Line]] = {}
+
+
+def _digest(path: Path) -> bytes | None:
+    """What `path` holds, as a digest (None: it cannot be read)."""
+    try:
+        return hashlib.blake2b(path.read_bytes(), digest_size=16).digest()
+    except OSError:
+        return None
+
+
 def load_line(path: str | Path | None = None) -> Line:
-    """Load the line file and every station it names (default: the shipped reference line)."""
+    """Load the line file and every station it names (default: the shipped reference line).
+
+    Loaded once a process: a second call for the same file returns the same (frozen) Line as long
+    as the line file and every station file still hold what they held -- compared by content, not
+    by modification time, which a file rewritten within one clock tick would keep."""
     path = Path(path) if path is not None else default_line_path()
+    key = path.resolve()
+    cached = _lines.get(key)
+    if cached is not None and all(_digest(f) == d for f, d in cached[0]):
+        return cached[1]
+    read: list[tuple[Path, bytes | None]] = []
+    line = _read_line(path, read)
+    _lines.pop(key, None)
+    while len(_lines) >= _CACHED_LINES:
+        del _lines[next(iter(_lines))]
+    _lines[key] = (tuple(read), line)
+    return line
+
+
+def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
+    """`load_line` from the files, each file's digest appended to `read` before it is parsed."""
+    read.append((path, _digest(path)))
     doc = _Doc(path)
     raw = doc.mapping(load_yaml(path), "")
     name = doc.string(raw, "line", "")
@@ -421,6 +454,7 @@ def load_line(path: str | Path | None = None) -> Line:
 
     stations: dict[int, Station] = {}
     for number, file, _place in station_files:
+        read.append((file, _digest(file)))
         st = load_station(file, plain_names)
         if st.number != number:
             raise ConfigError(file, "station", f"is {st.number}, but {path} lists it as {number}")

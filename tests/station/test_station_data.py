@@ -268,3 +268,19 @@ def test_missing_station_file(copy: Path) -> None:
     with pytest.raises(ConfigError) as err:
         load_line(copy)
     assert "cannot read" in err.value.problem
+
+
+def test_a_line_is_loaded_once_until_one_of_its_files_changes(copy: Path) -> None:
+    """Every device process loads its lab's line (the lab file's check, then the device): the
+    second load is the first one's Line. A station file rewritten at once, same size (so within
+    one clock tick its modification time may not move), is read again."""
+    first = load_line(copy)
+    assert load_line(copy) is first
+    station = copy.parent.parent / "stations" / "st20.yaml"
+    text = station.read_text(encoding="utf-8")
+    station.write_text(text.replace("name: Station 20", "name: Station 2X"), encoding="utf-8")
+    second = load_line(copy)
+    assert second is not first
+    assert second.station(20).name == "Station 2X"
+    assert first.station(20).name == "Station 20"
+    assert load_line(copy) is second
