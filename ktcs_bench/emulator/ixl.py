@@ -131,6 +131,11 @@ class IxlDevice(Device):
             "links": {r: p.up for r, p in self.ports.items()}
             | {"ctc": bool(self.client and self.client.identified)},
             "routes": {n: str(ixl.route_status(n)) for n in ixl.routes},
+            "held": {
+                n: sorted(rs.held_tcs | rs.held_points)
+                for n, rs in ixl.routes.items()
+                if rs.holds_anything
+            },  # fmt: skip
             "points": {n: ixl.detection(n) for n in ixl.points},
             "signals": {n: ixl.aspect(n) for n in ixl.signals},
             "occupied": [t for t in ixl.tc_names if ixl.occupied(t)],

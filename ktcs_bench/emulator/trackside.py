@@ -52,6 +52,16 @@ class TracksideDevice(IxlPeerDevice):
         return {
             **super().status(),
             "state": self.io.full_state(),
+            # where the blades are (None between positions), whatever detection reports
+            "machines": {
+                p: {
+                    "position": m.position,
+                    "target": m.target,
+                    "moving": m.moving,
+                    "fault": m.fault,
+                }
+                for p, m in self.io.points.items()
+            },  # fmt: skip
         }
 
     async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
