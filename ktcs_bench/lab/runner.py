@@ -4,6 +4,11 @@ Order of start: the track-circuit emulator (the rails), the CTC (the Type II ser
 (a pty pair per Type I end; a TCP proxy per Type II link), then each station's ATC and trackside
 I/O, then its IXL. Every device is `ktcs-bench emulator KIND ...` -- the same command a user runs
 to put one device on another machine -- so the lab assumes nothing the devices do not.
+
+An external device (a real one, `external:` in the lab file) is not started: its link's tap opens
+its serial endpoint as that end (Type I), connects to it (a CTC) or serves the address it connects
+to (an IXL). It is alive while that link is up, as the device of ours at the other end sees it;
+`restart` and `kill` refuse it (the lab does not run it).
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from ktcs_bench.capture import open_writer
 from ktcs_bench.errors import KtcsError, UsageError
 from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
-from ktcs_bench.lab.topology import Lab, LinkSpec
+from ktcs_bench.lab.topology import ROLE, Lab, LinkSpec
 from ktcs_bench.runtime import private_dir, server_token, this_process
 from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.runner import Tap
@@ -93,17 +98,22 @@ class LabRunner:
 
     def _tap_for(self, link: LinkSpec, ctc_address: tuple[str, int] | None) -> Tap:
         names = (link.a, link.b)
+        ext_a, ext_b = self.lab.devices[link.a].external, self.lab.devices[link.b].external
         writers = []
         if self.capture:
             kind = "type1" if link.type == "type1" else "type2"
             writers.append(open_writer(str(self.dir / "captures" / f"{link.name}.hex"), link=kind))
         if link.type == "type1":
+            external = {link.b: str(ext_b.serial)} if ext_b is not None else {}
             tap: Tap = PtyTap(names=names, profile=self.lab.type1_profile, name=link.name,
-                              writers=writers, token_file=self.token_file)  # fmt: skip
+                              writers=writers, token_file=self.token_file, external=external,
+                              line_rate=None if self.unpaced else self.lab.line_rate)  # fmt: skip
         else:
             assert ctc_address is not None
-            host = self.lab.devices[link.a].host
-            tap = TcpTap((host, 0), ctc_address, names=names, profile=self.lab.type2_profile,
+            # a real IXL connects to the address its entry gives; ours to any free port
+            listen = ext_a.address if ext_a is not None else None
+            listen = listen or (self.lab.devices[link.a].host, 0)
+            tap = TcpTap(listen, ctc_address, names=names, profile=self.lab.type2_profile,
                          name=link.name, writers=writers, token_file=self.token_file)  # fmt: skip
         tap.start()  # a named tap announces itself in the registry
         return tap
@@ -122,6 +132,9 @@ class LabRunner:
             rails = (await self._start(tc.name))["listen"]
         ctc_address = None
         for ctc in lab.of_kind("ctc"):
+            if ctc.external is not None and ctc.external.address is not None:
+                ctc_address = ctc.external.address  # a real CTC, serving there
+                continue
             host, _, port = (await self._start(ctc.name))["listen"].rpartition(":")
             ctc_address = (host, int(port))
         for link in lab.links:
@@ -140,18 +153,30 @@ class LabRunner:
             elif link.tap:
                 tap = self.taps[link.name] = self._tap_for(link, None)
                 assert isinstance(tap, PtyTap)
-                ea[role_b], eb[role_a] = tap.paths[a], tap.paths[b]
+                ea[role_b] = tap.paths[a]
+                if b in tap.external:  # the tap opens the real device's serial line itself
+                    eb[role_a] = tap.external[b]
+                    if not tap.external_open(b):
+                        error = tap.status().get("external_ends", {}).get(b, {}).get("error")
+                        self.notices.append(f"{link.name}: {b} (external) is not there yet at "
+                                            f"{tap.external[b]} ({error}); the tap keeps trying")  # fmt: skip
+                else:
+                    eb[role_a] = tap.paths[b]
+            elif (ext := lab.devices[b].external) is not None:
+                ea[role_b] = str(ext.serial)  # the IXL opens the real line itself
             else:
                 ea[role_b] = "pty"  # the IXL makes the pty; the peer gets its path below
         if rails is not None:
             for d in lab.devices.values():
-                if d.kind in ("atc", "trackside", "train"):
+                if d.kind in ("atc", "trackside", "train") and d.external is None:
                     self.endpoints.setdefault(d.name, {})["rails"] = f"tcp://{rails}"
-        order = [d.name for d in lab.devices.values() if d.kind in ("atc", "trackside")]
-        untapped = {lk.b: lk for lk in lab.links if lk.type == "type1" and not lk.tap}
+        ours = [d.name for d in lab.devices.values() if d.external is None]
+        order = [n for n in ours if lab.devices[n].kind in ("atc", "trackside")]
+        untapped = {lk.b: lk for lk in lab.links
+                    if lk.type == "type1" and not lk.tap and lk.b in ours}  # fmt: skip
         for name in [n for n in order if n not in untapped]:
             await self._start(name)
-        for ixl in lab.of_kind("ixl"):
+        for ixl in lab.ours("ixl"):
             ready = await self._start(ixl.name)
             for peer, lk in untapped.items():
                 if lk.a == ixl.name:
@@ -166,7 +191,7 @@ class LabRunner:
 
     async def _trains_to_ctc(self) -> None:
         """Tell the CTC of every train process, whose curves its console draws."""
-        for ctc in self.lab.of_kind("ctc"):
+        for ctc in self.lab.ours("ctc"):
             host, _, port = self.children[ctc.name].ready["control"].rpartition(":")
             for d in self.lab.of_kind("train"):
                 train, ready = str(d.options.get("train", d.name)), self.children[d.name].ready
@@ -206,6 +231,7 @@ class LabRunner:
                 await self.restart(str(obj["device"]))
                 return {"ok": True}
             if cmd == "kill":
+                self._refuse_external(str(obj["device"]), "kill")
                 self._child(str(obj["device"])).kill()
                 return {"ok": True}
             if cmd == "down":
@@ -216,6 +242,15 @@ class LabRunner:
         except (KtcsError, OSError) as exc:  # a device that does not come back, a port taken
             return {"ok": False, "error": str(exc)}
         return {"ok": False, "error": f"unknown command {cmd!r} (status, map, restart, kill, down)"}
+
+    def _refuse_external(self, name: str, what: str) -> None:
+        d = self.lab.devices.get(name)
+        if d is not None and d.external is not None:
+            raise UsageError(
+                f"{name} is external (a real device at {d.external.endpoint}): the lab does not "
+                f"run it and cannot {what} it; {what} it where it runs -- its link comes back "
+                "through the tap when it is there again"
+            )
 
     def _child(self, name: str) -> Child:
         if name not in self.children:
@@ -228,13 +263,14 @@ class LabRunner:
         """Stop (if it still runs) and start a device again, at the addresses it had. What cannot
         keep its address is re-pointed: an IXL makes new ptys for its untapped Type I links, so
         the peers on them restart on the new paths; a new CTC learns the trains again."""
+        self._refuse_external(name, "restart")
         child = self._child(name)
         await asyncio.to_thread(child.stop)
         ready = await self._start(name)
         kind = self.lab.devices[name].kind
         if kind == "ixl":
             for lk in self.lab.links:
-                if lk.a == name and lk.type == "type1" and not lk.tap:
+                if lk.a == name and lk.type == "type1" and not lk.tap and lk.b in self.children:
                     role = self.lab.peer_role(lk, name)
                     self.endpoints.setdefault(lk.b, {})["ixl"] = ready["ptys"][role]
                     await asyncio.to_thread(self.children[lk.b].stop)
@@ -274,15 +310,40 @@ class LabRunner:
         results = await asyncio.gather(*(self.device_status(n) for n in names))
         devices = dict(zip(names, results, strict=True))
         ctc = next((s for n, s in devices.items() if self.lab.devices[n].kind == "ctc" and s), None)
-        return {
+        taps = {n: t.status() for n, t in self.taps.items()}
+        out = {
             "lab": self.lab.name,
             "stations": (ctc or {}).get("stations", {}),
             "devices": {
                 n: {"alive": self.children[n].alive, "crashed": self.crashed.get(n), "status": s}
                 for n, s in devices.items()
             },
-            "taps": {n: t.status() for n, t in self.taps.items()},
+            "taps": taps,
         }
+        for d in self.lab.devices.values():
+            if d.external is not None:
+                links = {
+                    lk.name: self._link_up(lk, devices, taps) for lk in self.lab.links_of(d.name)
+                }
+                out["devices"][d.name] = {
+                    "alive": bool(links) and all(links.values()), "crashed": None, "status": None,
+                    "external": d.external.endpoint, "links": links,
+                }  # fmt: skip
+        return out
+
+    def _link_up(
+        self, link: LinkSpec, devices: dict[str, Any], taps: dict[str, dict[str, Any]]
+    ) -> bool:
+        """Whether `link` is up, as the device of ours on it sees it: the IXL's link to that peer,
+        or the CTC's to that station; between two external devices, the tap's connection."""
+        a, b = self.lab.devices[link.a], self.lab.devices[link.b]
+        if a.external is None:
+            return bool(((devices.get(a.name) or {}).get("links") or {}).get(ROLE[b.kind]))
+        stations = (devices.get(b.name) or {}).get("stations") or {}
+        if b.external is None:
+            summary = stations.get(a.station) or stations.get(str(a.station)) or {}
+            return summary.get("link") == "up"
+        return bool(taps.get(link.name, {}).get("connected"))
 
     def link_map(self) -> list[dict[str, Any]]:
         out = []
@@ -290,7 +351,8 @@ class LabRunner:
             tap = self.taps.get(link.name)
             entry: dict[str, Any] = {"link": link.name, "type": link.type, "a": link.a, "b": link.b}
             if isinstance(tap, PtyTap):
-                entry.update(a_end=tap.paths[link.a], b_end=tap.paths[link.b])
+                entry.update(a_end=tap.paths[link.a],
+                             b_end=tap.paths.get(link.b) or tap.external[link.b])  # fmt: skip
             elif isinstance(tap, TcpTap) and tap.listen_address:
                 entry.update(a_end=f"tcp://{tap.listen_address[0]}:{tap.listen_address[1]}",
                              b_end=f"tcp://{tap.target[0]}:{tap.target[1]}")  # fmt: skip
@@ -298,6 +360,9 @@ class LabRunner:
                 entry.update(
                     a_end=self.endpoints.get(link.a, {}).get(self.lab.peer_role(link, link.a), "")
                 )
+            external = [n for n in (link.a, link.b) if self.lab.devices[n].external is not None]
+            if external:
+                entry["external"] = external
             if tap is not None and tap.control_address:
                 entry["tap"] = f"{tap.control_address[0]}:{tap.control_address[1]}"
             if self.capture:

@@ -1,26 +1,58 @@
 """The lab file: devices (kind, station, host), Type I / Type II links and whether a tap sits in
 each, the line they run on and the link settings. Every problem is a ConfigError naming the file,
-the key path and what is wrong."""
+the key path and what is wrong.
+
+A device may be external -- a real one the lab does not run, linked through its link's tap:
+    atc18: {kind: atc, station: 18, external: {serial: "rfc2217://10.0.0.2:4000"}}
+    ixl22: {kind: ixl, station: 22, external: {address: "0.0.0.0:6000"}}
+Type I devices (atc, trackside) give `serial`, a device path or any pyserial URL the tap opens;
+a CTC gives `address`, where the taps connect to it; an IXL gives `address`, where the tap serves
+it (the real IXL is set to connect there; its own Type I peers are its business, not the lab's).
+An external ATC or trackside is off the lab's rails unless `rails: true` says it joins them itself
+(then the track-circuit emulator needs a fixed port, so the device can be told where they are)."""
 
 from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import serial
 
 from ktcs_bench.datafiles import data_dir, load_yaml
 from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable, load_timetable
-from ktcs_bench.transport.endpoints import check_port
+from ktcs_bench.transport.endpoints import check_port, parse_endpoint, parse_host_port
 
 KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
 STATION_KINDS = ("ixl", "atc", "trackside")
 _ORIGIN = re.compile(r"https?://[^/\s:]+(:\d{1,5})?/?|https?://\[[0-9a-fA-F:]+\](:\d{1,5})?/?")
 ROLE = {"atc": "atc", "trackside": "io", "ctc": "ctc", "ixl": "ixl"}
+# the kinds that may be external, and the key that says where the real one is
+EXTERNAL_KEY = {"atc": "serial", "trackside": "serial", "ctc": "address", "ixl": "address"}
+_HOST_PORT_URL = re.compile(r"(rfc2217|socket)://([^/?]*)")  # pyserial URLs that name HOST:PORT
+
+
+@dataclass(frozen=True)
+class External:
+    """A real device the lab does not run, reached through its link's tap: at `serial` (a device
+    path or pyserial URL: Type I) or at `address` (HOST:PORT: where a CTC serves, or where the tap
+    serves an IXL). `rails`: an ATC or trackside that joins the lab's rails itself."""
+
+    serial: str | None = None
+    address: tuple[str, int] | None = None
+    rails: bool = False
+
+    @property
+    def endpoint(self) -> str:
+        if self.address is not None:
+            return f"tcp://{self.address[0]}:{self.address[1]}"
+        return str(self.serial)
 
 
 @dataclass(frozen=True)
@@ -30,6 +62,7 @@ class DeviceSpec:
     station: int | None = None
     host: str = "127.0.0.1"
     options: dict[str, Any] = field(default_factory=dict)
+    external: External | None = None  # a real device: the lab links it, does not run it
 
 
 @dataclass(frozen=True)
@@ -60,6 +93,10 @@ class Lab:
 
     def of_kind(self, kind: str) -> list[DeviceSpec]:
         return [d for d in self.devices.values() if d.kind == kind]
+
+    def ours(self, kind: str) -> list[DeviceSpec]:
+        """The devices of `kind` the lab runs (not external)."""
+        return [d for d in self.of_kind(kind) if d.external is None]
 
     @property
     def stations(self) -> list[int]:
@@ -156,10 +193,15 @@ def load_lab(path: str | Path | None = None) -> Lab:
         host = spec.get("host", "127.0.0.1")
         if not isinstance(host, str):
             raise fail(f"{place}.host", "must be an address")
-        options = {k: v for k, v in spec.items() if k not in ("kind", "station", "host")}
+        options = {
+            k: v for k, v in spec.items() if k not in ("kind", "station", "host", "external")
+        }
         if "port" in options:
             options["port"] = port(spec, f"{place}.port")
-        devices[name] = DeviceSpec(name, kind, station, host, options)
+        external = None
+        if "external" in spec:
+            external = _external(spec["external"], str(kind), f"{place}.external", fail)
+        devices[name] = DeviceSpec(name, kind, station, host, options, external)
     for kind in ("ctc", "trackcircuit"):
         count = sum(1 for d in devices.values() if d.kind == kind)
         if count > 1:
@@ -181,6 +223,12 @@ def load_lab(path: str | Path | None = None) -> Lab:
                 raise fail(f"{place}.{end}", f"unknown device {lk[end]!r}")
         if devices[a].kind != "ixl":
             raise fail(f"{place}.a", "end a of every link is an IXL")
+        if devices[a].external is not None and typ == "type1":
+            raise fail(f"{place}.a", f"{a} is external: its Type I peers are its own, not the "
+                       "lab's (list only its Type II link)")  # fmt: skip
+        if devices[a].external is not None and lk.get("tap", True) is not True:
+            raise fail(f"{place}.tap", f"{a} is external: the link's tap serves the address it "
+                       "connects to, so the tap must be there (tap: true)")  # fmt: skip
         peer = devices[b].kind
         allowed = {"type1": ("atc", "trackside"), "type2": ("ctc",)}.get(typ)
         if allowed is None:
@@ -237,6 +285,13 @@ def load_lab(path: str | Path | None = None) -> Lab:
         ixl_mode=mode,
         timetable_file=timetable_file,
     )
+    for d in devices.values():
+        if d.external is not None and d.external.rails:
+            tc = lab.of_kind("trackcircuit")
+            if not tc or tc[0].external is not None or not tc[0].options.get("port"):
+                raise fail(f"devices.{d.name}.external.rails", "a device that joins the lab's "
+                           "rails itself must be told where they are before the lab starts: give "
+                           "the track-circuit emulator a port (tc: {kind: trackcircuit, port: N})")  # fmt: skip
     line = lab.load_line()
     for d in devices.values():
         if d.station is not None and d.station not in line.stations:
@@ -255,3 +310,62 @@ def load_lab(path: str | Path | None = None) -> Lab:
                 f"({', '.join(t.id for t in timetable.trains)})",
             )
     return lab
+
+
+_Fail = Callable[[str, str], ConfigError]
+
+
+def _external(raw: Any, kind: str, place: str, fail: _Fail) -> External:
+    """A device's `external` mapping, checked: the key for its kind, a usable endpoint."""
+    key = EXTERNAL_KEY.get(kind)
+    if key is None:
+        raise fail(
+            place, f"a {kind} cannot be external (atc, trackside: serial; ctc, ixl: address)"
+        )
+    if not isinstance(raw, dict):
+        raise fail(place, f"must be a mapping, e.g. {{{key}: {_EXAMPLE[key]}}}")
+    allowed = (key, "rails") if key == "serial" else (key,)
+    for k in raw:
+        if k not in allowed:
+            raise fail(
+                f"{place}.{k}", f"unknown key (an external {kind} takes {', '.join(allowed)})"
+            )
+    if key not in raw:
+        raise fail(f"{place}.{key}", f"missing key: where the real {kind} is, e.g. {_EXAMPLE[key]}")
+    value = raw[key]
+    if not isinstance(value, str) or not value.strip():
+        raise fail(f"{place}.{key}", f"must be text, e.g. {_EXAMPLE[key]}, not {value!r}")
+    rails = raw.get("rails", False)
+    if not isinstance(rails, bool):
+        raise fail(f"{place}.rails", f"must be true or false, not {rails!r}")
+    if key == "address":  # a CTC is connected to (a port); an IXL is served (0: any free port)
+        try:
+            return External(address=parse_host_port(value, any_free=kind == "ixl"))
+        except UsageError as exc:
+            raise fail(f"{place}.address", str(exc)) from None
+    return External(serial=_serial_url(value.strip(), f"{place}.serial", fail), rails=rails)
+
+
+_EXAMPLE = {"serial": '"/dev/ttyUSB0" or "rfc2217://10.0.0.2:4000"', "address": '"10.0.0.5:6000"'}
+
+
+def _serial_url(text: str, place: str, fail: _Fail) -> str:
+    """A device path or a pyserial URL whose scheme pyserial knows (and whose HOST:PORT, for
+    rfc2217:// and socket://, is one), not `pty` or a TCP endpoint of ours."""
+    try:
+        kind = parse_endpoint(text).kind
+    except UsageError:
+        kind = "tcp"
+    if kind != "serial":
+        raise fail(place, f"the real device's serial port or a pyserial URL, not {text!r}")
+    try:
+        serial.serial_for_url(text, do_not_open=True)
+    except (ValueError, serial.SerialException) as exc:
+        raise fail(place, f"{text!r}: {exc}") from None
+    match = _HOST_PORT_URL.match(text)
+    if match:
+        try:
+            parse_host_port(match.group(2), f"{text}")
+        except UsageError as exc:
+            raise fail(place, str(exc)) from None
+    return text

@@ -24,7 +24,8 @@ def link_map_text(entries: list[dict[str, Any]], colour: bool) -> str:
         if e.get("b_end"):
             ends += f"  <->  {e.get('b', '')} {e['b_end']}"
         tap = f"  tap {e['tap']}" if e.get("tap") else ""
-        rows.append(f"  {e['link']:<18} {e['type']:<12} {ends}{tap}")
+        real = f"  external: {', '.join(e['external'])}" if e.get("external") else ""
+        rows.append(f"  {e['link']:<18} {e['type']:<12} {ends}{tap}{real}")
     return "\n".join(rows)
 
 
@@ -53,6 +54,10 @@ def station_lines(status: dict[str, Any], colour: bool) -> list[str]:
         out.append(f"    signals {signals}")
         out.append(f"    occupied {occ}")
     for name, d in devices.items():
+        if d.get("external"):  # a real device: alive while its link is up
+            up = bool(d.get("alive"))
+            state = _c("link up" if up else "link down", GREEN if up else RED, colour)
+            out.append(f"{_c(name, BOLD, colour)} external at {d['external']}: {state}")
         if d.get("crashed") is not None:
             out.append(
                 _c(

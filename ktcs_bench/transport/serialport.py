@@ -218,7 +218,7 @@ class SerialTransport(TransportBase):
                     raise TransportClosed(f"{self.name}: hung up")
                 return bytes(data)
             return self._poll(timeout)
-        except serial.SerialException as exc:
+        except (serial.SerialException, OSError) as exc:  # a pty whose far end closed: EIO
             raise TransportClosed(f"{self.name}: {exc}") from exc
 
     def _poll(self, timeout: float | None) -> bytes:

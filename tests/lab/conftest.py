@@ -125,10 +125,12 @@ def start_lab(
     console_port: int = 0,
     origins: str = "",
     path: Path | None = None,
+    ready: Callable[[RunningLab], Any] | None = None,
 ) -> Iterator[RunningLab]:
     """Start a lab and wait until every station is synced at the CTC in center mode (and, with
-    `clear`, the empty line reported clear). The lab is the reference lab renamed `name`
-    (`lab_file`), or the lab file at `path` (whose lab must be called `name`)."""
+    `clear`, the empty line reported clear), or until `ready(lab)` holds when given (a lab whose
+    CTC is not its own). The lab is the reference lab renamed `name` (`lab_file`), or the lab file
+    at `path` (whose lab must be called `name`)."""
     run_dir = tmp / "run"
     RUN_DIRS.append(run_dir)
     if path is None:
@@ -151,7 +153,9 @@ def start_lab(
         threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()  # type: ignore[union-attr]
         wait_until(
             "every station synced at the CTC, the empty line reported clear",
-            lambda: all(
+            (lambda: ready(lab))
+            if ready is not None
+            else lambda: all(
                 s["link"] == "up"
                 and s["synced"]
                 and s["mode"] == "center"
