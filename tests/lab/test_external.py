@@ -117,6 +117,8 @@ def test_a_real_atc_on_a_serial_line_is_linked_through_its_tap(tmp_path: Path) -
             wait_until("the stand-in on the lab's rails", lambda: request(
                 atc["control"], {"cmd": "status"}, token=read_token(token))["status"]["rails"])  # fmt: skip
             stop = atc_codes()["TC1853A"][1]
+            wait_until("point 31 detected normal at the CTC (the trackside reported it)",
+                       lambda: lab.ctc({"cmd": "show", "station": 18})["summary"]["points"]["31"] == "normal")  # fmt: skip
             route = lab.ctc({"cmd": "route", "action": "set", "station": 18, "entry": "01", "exit": "11"})  # fmt: skip
             assert route["ok"] and route["result"] == "accepted", route
             wait_until("signal 01 clears at the CTC",
