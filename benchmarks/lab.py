@@ -48,6 +48,12 @@ def run_lab(routes: int, unpaced: bool) -> list[float]:
     line_path = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
     text = text.replace("lab: reference", "lab: bench").replace("port: 8020", "port: 0")
     text = text.replace("line: ../lines/reference.yaml", f"line: {line_path}")
+    # the figure is of routes on an empty line: without the timetable and its trains
+    text = "".join(
+        ln
+        for ln in text.splitlines(keepends=True)
+        if not ln.startswith("timetable:") and "{kind: train," not in ln
+    )
     (tmp / "bench.yaml").write_text(text)
     env = {**os.environ, "KTCS_BENCH_RUN_DIR": str(tmp / "run")}
     argv = [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(tmp / "bench.yaml"), "--json",

@@ -68,11 +68,13 @@ def run_env(tmp_path: Path) -> dict[str, str]:
 
 
 def shipped_lab(tmp_path: Path, edit: dict[str, str]) -> Path:
-    """The shipped reference lab, its line named by absolute path, with the text replacements
+    """The shipped reference lab, its line and timetable named by absolute path, with the text replacements
     `edit` (old -> new, each old present exactly once) applied."""
     text = (data_dir("emulators") / "labs" / "reference.yaml").read_text(encoding="utf-8")
     line = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
     text = text.replace("line: ../lines/reference.yaml", f"line: {line}")
+    timetable = (data_dir("emulators") / "timetables" / "reference.yaml").resolve()
+    text = text.replace("timetable: ../timetables/reference.yaml", f"timetable: {timetable}")
     for old, new in edit.items():
         assert text.count(old) == 1, old
         text = text.replace(old, new)

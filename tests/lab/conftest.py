@@ -97,13 +97,34 @@ class RunningLab:
         )  # fmt: skip
 
 
+def without_trains(text: str) -> str:
+    """A lab file's text without its timetable and the train devices that run it: an empty
+    line, for tests that place trains of their own or need no train at all."""
+    kept = [
+        ln
+        for ln in text.splitlines(keepends=True)
+        if not ln.startswith("timetable:") and "{kind: train," not in ln
+    ]
+    return "".join(kept)
+
+
 def lab_file(
-    tmp: Path, name: str, extra_devices: str = "", console_port: int = 0, origins: str = ""
+    tmp: Path,
+    name: str,
+    extra_devices: str = "",
+    console_port: int = 0,
+    origins: str = "",
+    trains: bool = False,
 ) -> Path:
     """The shipped reference lab under another name, with the console on `console_port` (default
     any free port) taking pages from `origins` too (a YAML list), and `extra_devices`, YAML lines
-    added under `devices:`."""
+    added under `devices:`. Its timetable trains run only with `trains`: most tests need the
+    line empty (`without_trains`)."""
     text = (data_dir("emulators") / "labs" / "reference.yaml").read_text(encoding="utf-8")
+    if not trains:
+        text = without_trains(text)
+    timetable = (data_dir("emulators") / "timetables" / "reference.yaml").resolve()
+    text = text.replace("timetable: ../timetables/reference.yaml", f"timetable: {timetable}")
     text = text.replace("lab: reference", f"lab: {name}")
     text = text.replace("port: 8020", f"port: {console_port}")
     text = text.replace("origins: []", f"origins: {origins or '[]'}")
@@ -126,15 +147,16 @@ def start_lab(
     origins: str = "",
     path: Path | None = None,
     ready: Callable[[RunningLab], Any] | None = None,
+    trains: bool = False,
 ) -> Iterator[RunningLab]:
     """Start a lab and wait until every station is synced at the CTC in center mode (and, with
     `clear`, the empty line reported clear), or until `ready(lab)` holds when given (a lab whose
-    CTC is not its own). The lab is the reference lab renamed `name` (`lab_file`), or the lab file
-    at `path` (whose lab must be called `name`)."""
+    CTC is not its own). The lab is the reference lab renamed `name` (`lab_file`, with its
+    timetable trains if `trains`), or the lab file at `path` (whose lab must be called `name`)."""
     run_dir = tmp / "run"
     RUN_DIRS.append(run_dir)
     if path is None:
-        path = lab_file(tmp, name, extra_devices, console_port, origins)
+        path = lab_file(tmp, name, extra_devices, console_port, origins, trains)
     stderr = open(tmp / f"{name}.stderr", "w")  # noqa: SIM115 -- closed below
     proc = subprocess.Popen(
         [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(path), "--json", "--interval", "5"],

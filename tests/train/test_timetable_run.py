@@ -17,11 +17,11 @@ from dataclasses import dataclass, field
 
 import pytest
 
+from ktcs_bench.datafiles import data_dir
 from ktcs_bench.emulator.train import TimetableRun, timetable_run
 from ktcs_bench.station import load_line
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import load_timetable
-from ktcs_bench.datafiles import data_dir
 from ktcs_bench.timed.virtual import VirtualClock
 from ktcs_bench.train.endpoint import (
     STOP_TOLERANCE,
@@ -89,7 +89,7 @@ def run_train(
         if not states or states[-1][1] != state:
             states.append((now, state))
 
-    for name, at in starting.items():
+    for at in starting.values():
         wayside.signals[at] = True
     clock.add(ep, record)
     clock.run_until(until)
@@ -120,8 +120,9 @@ def test_a_train_held_at_a_red_starting_signal_stays_held_after_its_dwell() -> N
     assert [a.station for a in ep.arrivals] == ["18"]
     assert ep.departures == []
     arrived = ep.arrivals[0].time
-    assert states[-2:] == [(pytest.approx(arrived, abs=0.2), "dwelling"),
-                           (pytest.approx(arrived + 30.0, abs=0.2), "held")]  # fmt: skip
+    (dwelt, dwelling), (held, holding) = states[-2:]
+    assert (dwelling, holding) == ("dwelling", "held"), states
+    assert dwelt == pytest.approx(arrived, abs=0.2) and held == pytest.approx(arrived + 30, abs=0.2)
 
 
 def test_a_train_enters_no_sooner_than_its_time_and_where_the_timetable_says() -> None:

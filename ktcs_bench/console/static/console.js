@@ -243,8 +243,11 @@ function setupTrains(trains) {
   sel.style.display = "";
   sel.appendChild(new Option("— choose a train —", ""));
   trains.forEach((t) => sel.appendChild(new Option(t, t)));
-  $("#speed-status").textContent = "Choose a train.";
   sel.onchange = () => send({ type: "train", train: sel.value || null });
+  // a lab with trains shows the first one's panel at once (a living railway, not a blank panel)
+  sel.value = trains[0];
+  $("#speed-status").textContent = `train ${trains[0]}: waiting for data`;
+  send({ type: "train", train: trains[0] });
 }
 
 function svgEl(tag, attrs, text) {
