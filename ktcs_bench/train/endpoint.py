@@ -540,9 +540,7 @@ class TrainEndpoint:
         code = inputs.code
         # a kTCS code's speed holds at its circuit's exit: inside, the train may run at the speed
         # it entered with towards the code's stop point (the distance to go brakes it there)
-        code_speed = (
-            verdict.permitted if code is None else max(code.speed, self._entry_speed)
-        )
+        code_speed = verdict.permitted if code is None else max(code.speed, self._entry_speed)
         station = (
             self.line.stations[self._next_station]
             if self._next_station < len(self.line.stations)

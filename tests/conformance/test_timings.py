@@ -32,6 +32,7 @@ def _peer_lab(folder: Path) -> Path:
     ref = resolve_lab_path("reference")
     raw = yaml.safe_load(ref.read_text())
     raw["line"] = str((ref.parent / raw["line"]).resolve())
+    raw["timetable"] = str((ref.parent / raw["timetable"]).resolve())
     raw["type1"]["longest_frame_data"] = None
     lab = folder / "peer.yaml"
     lab.write_text(yaml.safe_dump(raw))
