@@ -9,8 +9,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import replace
+from pathlib import Path
+
+import pytest
 
 from ktcs_bench.codes.stations import station_chart
+from ktcs_bench.errors import ConfigError
 from ktcs_bench.lab.invariants import (
     Geometry,
     LabSnapshot,
@@ -24,6 +28,7 @@ from ktcs_bench.lab.invariants import (
     train_separation,
     views_agree,
 )
+from ktcs_bench.lab.safety import Replay, load_replay
 from ktcs_bench.station import load_line
 
 LINE = load_line()
@@ -213,3 +218,24 @@ def test_the_checker_keeps_history_between_looks() -> None:
     found = checker.feed(snap(1, {"A": (6010, 5910)}))
     assert kinds(found) == ["danger_point"] and checker.violations == found
     assert str(found[0]).startswith("t=1.000 s invariant 2 (danger_point) at TC2053A")
+
+
+# ------------------------------------------------------------------------------------------ replay files
+
+
+def test_a_replay_file_round_trips_and_a_bad_one_is_a_clear_error(tmp_path: Path) -> None:
+    steps = ({"do": "route", "station": 20, "entry": "01", "exit": "11", "action": "set",
+              "run_s": 2.0}, {"do": "settle", "run_s": 10.0})  # fmt: skip
+    replay = Replay("emulators/labs/safety.yaml", 7, 8.0, steps, ("t=1 s invariant 2 ...",))
+    assert load_replay(replay.write(tmp_path / "r.json")) == replay
+    for text, why in (
+        ("{", "not JSON"),
+        ("[]", "a JSON object"),
+        ('{"lab": "x", "steps": [{"do": "fly"}]}', "each with do"),
+        ('{"steps": []}', "lab, seed"),
+    ):
+        (tmp_path / "bad.json").write_text(text)
+        with pytest.raises(ConfigError, match=why):
+            load_replay(tmp_path / "bad.json")
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_replay(tmp_path / "absent.json")
