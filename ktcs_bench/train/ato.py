@@ -122,6 +122,8 @@ class AtoController:
     """Nominal deceleration the precision-stop profile is planned with, m/s²."""
     band: float = kmh(4.0)
     """Speed error beyond which the time-optimal law acts."""
+    creep: float = kmh(1.0)
+    """A target speed below this is a stop (PI control would hold a crawl of micrometres/s)."""
     kp: float = 1.2
     ki: float = 0.15
     integral: float = 0.0
@@ -145,6 +147,10 @@ class AtoController:
                 return 0.0, min(need, self.service_decel)
             v_profile = math.sqrt(2.0 * self.stop_decel * s)
             v_target = min(v_target, v_profile)
+        if v_target < self.creep:  # nothing worth driving towards: brake to a standstill
+            self.mode = "code-stop"
+            self.integral = 0.0
+            return 0.0, self.service_decel
         e = v_target - v
         if abs(e) > self.band:
             self.mode = "time-optimal"

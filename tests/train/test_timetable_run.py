@@ -47,12 +47,21 @@ class Wayside:
     def stop_points(self) -> list[float]:
         return sorted([x for x, red in self.signals.items() if red] + [self.line.end_m])
 
-    def code(self, head: float) -> TrackCode | None:
+    def code(self, head: float, ahead: tuple[float, ...] = ()) -> TrackCode | None:
+        """The code under an antenna at `head`; `ahead`: the rears of trains ahead, whose track
+        circuits are occupied (a stop point at the entry of each)."""
         speeds = [c.kmh for c in self.line.speed_codes]
-        for tc in self.line.all_track_circuits():
+        tcs = self.line.all_track_circuits()
+        rears = [
+            tc.from_m
+            for rear in ahead
+            for tc in tcs
+            if tc.on_track(self.track) and tc.from_m <= rear < tc.to_m and tc.from_m > head
+        ]
+        for tc in tcs:
             if not (tc.on_track(self.track) and tc.from_m <= head < tc.to_m):
                 continue
-            stop = next(x for x in self.stop_points() if x >= tc.to_m - 1e-6)
+            stop = next(x for x in sorted([*self.stop_points(), *rears]) if x >= tc.to_m - 1e-6)
             room = max(stop - tc.to_m, 0.0)
             allowed = math.sqrt(2.0 * self.decel * room) * 3.6
             kmh_ = max([v for v in speeds if v <= min(allowed, 80.0)], default=0.0)
@@ -134,3 +143,57 @@ def test_a_train_enters_no_sooner_than_its_time_and_where_the_timetable_says() -
     assert states[0][0] == pytest.approx(120.0)
     assert ep.arrivals and ep.arrivals[0].time > 120.0
     assert abs(ep.arrivals[0].error) <= STOP_TOLERANCE
+
+
+def test_a_following_train_is_held_by_the_codes_behind_the_first() -> None:
+    """1001 stands at station 20 (its starting signal stays at stop); 1003, entering 120 s
+    later, stops at 18 and follows: the codes behind 1001's rear circuit hold it in the
+    interval, short of that circuit, without an emergency brake."""
+    line = load_line()
+    timetable = load_timetable(TIMETABLE, line)
+    runs = {t: timetable_run(timetable.train(t), line, 0.5) for t in ("1001", "1003")}
+    wayside = Wayside(line, "1", line.service_brake_mps2)
+    starts = {
+        18: line.station(18).signal("11").position_m,
+        20: line.station(20).signal("11").position_m,
+    }
+    clock = VirtualClock()
+    trains = {
+        t: TrainEndpoint(r.config, r.line, first=max(0.1, r.enter_s)) for t, r in runs.items()
+    }
+    leader, follower = trains["1001"], trains["1003"]
+    on = {t: False for t in trains}
+    closest: list[float] = []
+
+    def sense(me: str) -> CycleInputs:
+        ep = trains[me]
+        other = next(t for t in trains if t != me)
+        ahead = trains[other].state.position - runs[other].config.params.length
+        rears = (ahead,) if on[other] and ahead > ep.state.position else ()
+        return CycleInputs(code=wayside.code(ep.state.position, rears))
+
+    def record(me: str, now: float, out: CycleOutputs | None) -> None:
+        if out is None:
+            return
+        on[me] = True
+        wayside.signals[starts[18]] = now < 60.0
+        wayside.signals[starts[20]] = True
+        if on["1003"]:
+            closest.append(leader.state.position - 200.0 - follower.state.position)
+
+    for t, ep in trains.items():
+        ep.sense = lambda now, t=t: sense(t)  # type: ignore[misc]
+        clock.add(ep, lambda now, out, t=t: record(t, now, out))  # type: ignore[misc]
+    clock.run_until(700.0)
+    assert [a.station for a in leader.arrivals] == ["18", "20"]
+    assert [a.station for a in follower.arrivals] == ["18"]
+    assert follower.next_stop is not None and follower.next_stop.name == "20"
+    assert follower.service_state(clock.now) == "held" and follower.state.speed == 0.0
+    # held short of the circuit holding the leader's rear, never in it
+    rear = leader.state.position - 200.0
+    entry = next(
+        tc.from_m for tc in line.all_track_circuits() if tc.covers(rear) and tc.on_track("1")
+    )
+    assert follower.state.position < entry
+    assert min(closest) > 0.0
+    assert leader.eb_count == 0 and follower.eb_count == 0
