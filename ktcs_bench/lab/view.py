@@ -1,5 +1,6 @@
 """The lab's live status, per station, as a signalling engineer reads it: mode, routes, points,
-signals, occupancy and link states, in colour on a terminal."""
+signals, occupancy and link states, then each train -- what it is doing, where, how fast, and the
+platform stops it made -- in colour on a terminal."""
 
 from __future__ import annotations
 
@@ -29,6 +30,28 @@ def link_map_text(entries: list[dict[str, Any]], colour: bool) -> str:
     return "\n".join(rows)
 
 
+TRAIN_STATE = {"running": GREEN, "stopping": YELLOW, "dwelling": CYAN, "held": RED}
+
+
+def train_lines(status: dict[str, Any], colour: bool) -> list[str]:
+    """One line per train process: state, front, speed, next stop, and its arrivals (station,
+    stop error in m, time s)."""
+    out = []
+    for d in status.get("devices", {}).values():
+        t = d.get("status") or {}
+        if t.get("kind") != "train":
+            continue
+        state = str(t.get("state") or "?")
+        stops = " ".join(f"{a['station']}:{a['error_m']:+.2f}m@{a['time_s']:.0f}s"
+                         for a in t.get("arrivals", []))  # fmt: skip
+        nxt = f"next {t['next_stop']}" if t.get("next_stop") else "no stop left"
+        out.append(f"{_c('train ' + str(t.get('train')), BOLD, colour)} "
+                   f"{_c(state, TRAIN_STATE.get(state, ''), colour):<10} front "
+                   f"{float(t.get('head', 0.0)):8.1f} m {float(t.get('speed_kmh', 0.0)):5.1f} km/h  "
+                   f"{nxt}   {'stops ' + stops if stops else ''}".rstrip())  # fmt: skip
+    return out
+
+
 def station_lines(status: dict[str, Any], colour: bool) -> list[str]:
     out = []
     devices = status.get("devices", {})
@@ -53,6 +76,7 @@ def station_lines(status: dict[str, Any], colour: bool) -> list[str]:
         out.append(f"    routes {routes}   points {points}")
         out.append(f"    signals {signals}")
         out.append(f"    occupied {occ}")
+    out += train_lines(status, colour)
     for name, d in devices.items():
         if d.get("external"):  # a real device: alive while its link is up
             up = bool(d.get("alive"))
