@@ -30,6 +30,7 @@ from ktcs_bench.type1.config import BITS_PER_BYTE, LINE_RATE
 
 BURST = 0.002  # s of line time written per wake-up at most; 2 bytes at 9600 bit/s
 READ_SIZE = 4096
+WRITE_TIMEOUT = 0.5  # s a write may block before the writer tries again
 
 
 def byte_time_of(line_rate: float | None, bits_per_byte: int = BITS_PER_BYTE) -> float:
@@ -186,8 +187,11 @@ class SerialTransport(TransportBase):
     ) -> None:
         self.name = name or url
         try:
-            self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=0.5)
-        except (serial.SerialException, ValueError) as exc:
+            self._port = serial.serial_for_url(url, baudrate=baudrate, timeout=0, do_not_open=True)
+            if not url.startswith("rfc2217://"):  # pyserial's RFC 2217 client refuses one
+                self._port.write_timeout = WRITE_TIMEOUT
+            self._port.open()
+        except (serial.SerialException, ValueError, OSError) as exc:
             raise TransportClosed(f"cannot open {url}: {exc}") from exc
         self._closed = False
         try:

@@ -148,6 +148,32 @@ def test_a_real_atc_on_a_serial_line_is_linked_through_its_tap(tmp_path: Path) -
             assert not status["taps"]["st18-atc"]["external_ends"]["atc18"]["open"]
 
 
+def test_without_a_tap_our_ixl_opens_the_real_line_itself(tmp_path: Path) -> None:
+    name, run_dir = "extuntapped", tmp_path / "run"
+    with stand_in(run_dir, "atc", "--station", "18", "--name", "atc18", "--link", "ixl=pty") as atc:
+        serial_line = atc["ptys"]["ixl"]
+        path = write_lab(
+            tmp_path, name,
+            "  ctc:   {kind: ctc}\n  tc:    {kind: trackcircuit}\n"
+            "  ixl18: {kind: ixl, station: 18}\n  io18:  {kind: trackside, station: 18}\n"
+            f"  atc18: {{kind: atc, station: 18, external: {{serial: '{serial_line}'}}}}\n",
+            "  - {name: st18-ctc, type: type2, a: ixl18, b: ctc}\n"
+            "  - {name: st18-atc, type: type1, a: ixl18, b: atc18, tap: false}\n"
+            "  - {name: st18-io,  type: type1, a: ixl18, b: io18}\n",
+        )  # fmt: skip
+        # off the rails, the ATC reports every track circuit occupied: the line is not clear
+        with start_lab(tmp_path, name, path=path, clear=False) as lab:
+            assert "st18-atc" not in lab.lab({"cmd": "status"})["status"]["taps"]
+            assert lab.links["st18-atc"]["a_end"] == serial_line
+            wait_until(
+                "ixl18's ATC link up on the real line", lambda: lab.status("ixl18")["links"]["atc"]
+            )
+            wait_until("atc18 alive", lambda: external_status(lab, "atc18")["alive"])
+            # not given `rails: true`, the real ATC is not on the bench's rails (the stand-in was
+            # not told where they are): it reports its track circuits occupied, fail-safe
+            assert lab.ctc({"cmd": "show", "station": 18})["summary"]["occupied"]
+
+
 def test_a_real_ctc_and_a_real_ixl_at_addresses(tmp_path: Path) -> None:
     """Type II both ways: the taps connect to a real CTC at its address, and serve a real IXL the
     address it is set to connect to (here both ends of that link are real)."""
