@@ -23,6 +23,9 @@ commands:
   mode center|local ST           center: request center mode (CMR handshake)
   control ST CODE [VALUE]        any CTC->IXL chart code by name
   show ST                        mode, routes, points, signals, occupancy, link
+  ars [on|off] [ST]              automatic route setting: switch it at ST (no ST: every
+                                 station); without on/off, where it is on and what each train
+                                 waits for
   status                         every station
   log                            the CTC's command log
   help, quit
@@ -31,6 +34,7 @@ EPILOG = """\
 examples:
   ktcs-bench ctc                                  # interactive, against the running reference lab
   ktcs-bench ctc route set 18 01 11               # one command
+  ktcs-bench ctc ars off 20                       # routes at station 20 by hand from now on
   ktcs-bench ctc --script morning.txt --json      # scripted controls, JSON results
 """
 
@@ -79,6 +83,11 @@ def parse(words: list[str]) -> dict[str, Any]:
             return {"cmd": "show", "station": int(w[1])}
         if w[0] in ("status", "log") and len(w) == 1:
             return {"cmd": w[0]}
+        if w[0] == "ars" and len(w) == 1:
+            return {"cmd": "ars"}
+        if w[0] == "ars" and w[1] in ("on", "off") and len(w) in (2, 3):
+            switch: dict[str, Any] = {"cmd": "ars", "on": w[1] == "on"}
+            return switch if len(w) == 2 else {**switch, "station": int(w[2])}
     except (IndexError, ValueError):
         pass
     raise UsageError(f"cannot read {' '.join(words)!r}; type `help`")
@@ -113,6 +122,21 @@ def show_text(answer: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def ars_text(answer: dict[str, Any]) -> str:
+    """ARS as the operator reads it: where it is on, each train and what it waits for."""
+    a = answer["ars"]
+    on = ", ".join(f"{st} {'on' if v else 'off'}" for st, v in a["stations"].items())
+    lines = [f"ARS (timetable {a['timetable']}): station {on}"]
+    for t in a["trains"]:
+        text = f"  train {t['train']}: {t['state']}"
+        if t.get("next"):
+            text += f"; next {t['next']}"
+        if t.get("waiting"):
+            text += f"; waits: {t['waiting']}"
+        lines.append(text)
+    return "\n".join(lines)
+
+
 async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -> int:
     host, port = _address(args)
     colour: bool = args.colour
@@ -138,10 +162,13 @@ async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -
         elif obj["cmd"] == "status" and answer.get("ok"):
             for st in answer["status"].get("stations", {}).values():
                 print(show_text({"summary": st}))
+        elif obj["cmd"] == "ars" and answer.get("ok"):
+            print(ars_text(answer))
         elif obj["cmd"] == "log":
             for e in answer.get("log", []):
                 at = time.strftime("%H:%M:%S", time.localtime(e["time"]))
-                print(f"{at} {e['command']} -> {e.get('result', 'no result yet')}")
+                by = f" (by {e['source'].upper()})" if e.get("source") == "ars" else ""
+                print(f"{at} {e['command']}{by} -> {e.get('result', 'no result yet')}")
         else:
             text = (
                 answer.get("result")

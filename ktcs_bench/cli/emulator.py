@@ -184,9 +184,12 @@ def build_device(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         from ktcs_bench.emulator.ctc import CtcDevice
 
         listen = args.listen or ("127.0.0.1", lab.type2_port)
+        ars = lab.ars  # automatic route setting of the lab's timetable: the lab file's `ars:`
         return CtcDevice(name, line, lab.stations, listen, control=control, console=args.console,
                          console_origins=args.console_origin, taps=args.tap, faults=faults, allowed_sources=args.allow_source or None,
-                         ssl=tls_context(args, server=True))  # fmt: skip
+                         ssl=tls_context(args, server=True),
+                         timetable=lab.load_timetable(line) if ars else None,
+                         ars_on=ars.start_on if ars else ())  # fmt: skip
     if kind == "train":
         from ktcs_bench.emulator.train import TrainDevice
 

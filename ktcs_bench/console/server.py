@@ -5,6 +5,8 @@ CTC's model draws (`ctc.model.CtcModel.picture`) whenever the CTC's state change
 operator's clicks to the CTC's desk (`ctc.desk.Desk.operate`, the same path `ktcs-bench ctc`
 takes), whose results come back to the page and the log. Side panels: a link monitor over tap
 control ports (Fig. 7 console text) and a speed–distance view of a train (`trains.TrainSource`).
+Given the CTC's automatic route setting (`ars`, an `ArsSwitch`), each station card shows whether
+ARS is on there and switches it (a click goes the same way as the operator's other requests).
 
 Embedding (e.g. in the CTC emulator process, on its event loop):
 
@@ -34,7 +36,7 @@ from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
@@ -77,6 +79,18 @@ REQUESTS = {
 REQUEST_FIELDS = ("station", "entry", "exit", "point", "position", "mode")
 
 
+class ArsSwitch(Protocol):
+    """The CTC's automatic route setting as the console sees it (the CTC device is one)."""
+
+    def ars_state(self) -> dict[str, bool] | None:
+        """Station (as text) -> ARS on; None: the CTC runs no timetable."""
+        ...
+
+    def switch_ars(self, station: object, on: bool) -> list[int]:
+        """ARS on or off at `station`; the stations switched. UsageError if it cannot."""
+        ...
+
+
 def _clock(t: float) -> str:
     return time.strftime("%H:%M:%S", time.localtime(t)) + f".{int((t % 1) * 1000):03d}"
 
@@ -113,8 +127,10 @@ class ConsoleServer:
         port: int = 0,
         origins: Sequence[str] = (),
         token: str | None = None,
+        ars: ArsSwitch | None = None,
     ) -> None:
         self.desk = desk
+        self.ars = ars
         self.ctc = desk.server
         self.model = desk.model
         self.line = desk.model.line
@@ -200,6 +216,12 @@ class ConsoleServer:
     def snapshot(self) -> dict[str, Any]:
         return {str(n): self.model.picture(n) for n in self.model.models}
 
+    def ars_state(self) -> dict[str, bool] | None:
+        return self.ars.ars_state() if self.ars is not None else None
+
+    def _state_text(self) -> str:
+        return json.dumps({"type": "state", "stations": self.snapshot(), "ars": self.ars_state()})
+
     def _changed(self) -> None:
         if not self._flush_scheduled:
             self._flush_scheduled = True
@@ -207,7 +229,7 @@ class ConsoleServer:
 
     def _flush(self) -> None:
         self._flush_scheduled = False
-        text = json.dumps({"type": "state", "stations": self.snapshot()})
+        text = self._state_text()
         if text != self._last_state:
             self._last_state = text
             self._broadcast_text(text)
@@ -240,6 +262,8 @@ class ConsoleServer:
     async def perform(self, msg: Mapping[str, Any]) -> dict[str, Any]:
         """Carry out one operator request; the result as sent to the page (and logged)."""
         kind = msg.get("type")
+        if kind == "ars":
+            return self._switch_ars(msg)
         words = REQUESTS.get(kind) if isinstance(kind, str) else None
         if words is None:
             text = f"unknown request {kind!r}"
@@ -263,6 +287,22 @@ class ConsoleServer:
         self._log(text, "error")
         return {"ok": False, "reason": outcome.why, "text": text}
 
+    def _switch_ars(self, msg: Mapping[str, Any]) -> dict[str, Any]:
+        station, on = msg.get("station"), msg.get("on")
+        what = f"station {station}: ARS {'on' if on else 'off'}"
+        try:
+            if self.ars is None:
+                raise UsageError("this CTC runs no timetable (no ars: in its lab file)")
+            if not isinstance(on, bool) or station is None:
+                raise UsageError("an ARS switch needs a station and on: true or false")
+            self.ars.switch_ars(station, on)
+        except UsageError as exc:
+            self._log(f"refused by the CTC: {what}: {exc}", "error")
+            return {"ok": False, "reason": str(exc), "text": f"{what}: {exc}"}
+        self._log(what, "ok")
+        self._changed()
+        return {"ok": True, "reason": None, "text": what}
+
     # ------------------------------------------------------------------ HTTP
 
     async def _index(self, request: web.Request) -> web.StreamResponse:
@@ -274,7 +314,12 @@ class ConsoleServer:
     async def _api_state(self, request: web.Request) -> web.Response:
         trains = self.trains.train_ids() if self.trains is not None else []
         return web.json_response(
-            {"stations": self.snapshot(), "trains": trains, "log": list(self.log_entries)}
+            {
+                "stations": self.snapshot(),
+                "ars": self.ars_state(),
+                "trains": trains,
+                "log": list(self.log_entries),
+            }  # fmt: skip
         )
 
     def origin_allowed(self, origin: str, host_header: str | None) -> bool:
@@ -320,7 +365,7 @@ class ConsoleServer:
             "log": list(self.log_entries),
         }
         await ws.send_str(json.dumps(hello))
-        await ws.send_str(json.dumps({"type": "state", "stations": self.snapshot()}))
+        await ws.send_str(self._state_text())
         try:
             async for raw in ws:
                 if raw.type != WSMsgType.TEXT:
@@ -339,7 +384,7 @@ class ConsoleServer:
 
     async def _on_message(self, client: _Client, msg: dict[str, Any]) -> None:
         kind = msg.get("type")
-        if kind in ("route_set", "route_cancel", "point", "mode"):
+        if kind in ("route_set", "route_cancel", "point", "mode", "ars"):
 
             async def run() -> None:
                 result = await self.perform(msg)

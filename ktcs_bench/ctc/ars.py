@@ -26,13 +26,14 @@ retry), `switch(station, on, now)` and `result(request, accepted, why, now)` wit
 request. `update` and `handle_timer` return the `RouteRequest`s to send, in the CTC desk's words
 (`request.command`). A rejected or unanswered request is asked again after `RETRY_S`; an accepted
 one not again for that train unless its route drops before the train has entered it (an operator
-cancelled it). No clock, no I/O.
+cancelled it). Every log entry is also handed to `on_log` (the CTC device puts it in its events).
+No clock, no I/O.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -116,6 +117,7 @@ class Ars:
         self.describer = Describer(self.line, timetable)
         self.progress: dict[str, _Progress] = {}
         self.log: deque[dict[str, Any]] = deque(maxlen=keep)
+        self.on_log: Callable[[dict[str, Any]], None] | None = None  # told of each entry
         self.pending: dict[tuple[int, str], RouteRequest] = {}  # sent, no result yet
         self.granted: dict[tuple[str, int, str], _Grant] = {}  # (train, station, route)
         self.retry_at: dict[tuple[str, int, str], tuple[float, str]] = {}  # -> (when, why)
@@ -557,7 +559,10 @@ class Ars:
     def _log(
         self, now: float, text: str, station: int | None = None, train: str | None = None
     ) -> None:
-        self.log.append({"time": now, "station": station, "train": train, "text": text})
+        entry = {"time": now, "station": station, "train": train, "text": text}
+        self.log.append(entry)
+        if self.on_log is not None:
+            self.on_log(entry)
 
     def _state_text(self, t: DescribedTrain, p: _Progress) -> str:
         stops = t.service.stops

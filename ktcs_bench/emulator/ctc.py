@@ -6,26 +6,64 @@ normal/reverse, signal stop/release, center/local mode. The operator's desk (`ct
 each into the CONTROL code of the station's CTC->IXL chart, sends it, and logs the command and its
 CONTROL_RESULT (accepted, or the rejection reason) with its time -- the same desk the console's
 clicks go through.
+
+With a timetable (the lab file's `ars:`), the CTC runs automatic route setting (`ctc.ars`): ARS
+reads the indications after every change the server brings (and at its own deadlines, on the
+device's clock: seconds from the CTC's start), and each route it asks for goes out through the
+same desk, logged with source "ars"; why a train waits goes to the device's events. The operator
+switches it per station (`{"cmd": "ars", "station": N, "on": bool}`, `ktcs-bench ctc ars`, the
+console's ARS button); where it is off, routes are set by hand.
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from ktcs_bench.console.server import ConsoleServer
-from ktcs_bench.ctc.desk import Desk
+from ktcs_bench.ctc.ars import Ars, RouteRequest
+from ktcs_bench.ctc.desk import Desk, Outcome
 from ktcs_bench.ctc.model import CtcModel, signal_name
+from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
+from ktcs_bench.station.timetable import Timetable
 from ktcs_bench.train.speed_distance import SpeedDistance
 from ktcs_bench.transport import jsonlines
+from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")
+
+
+class _Watched:
+    """The CTC's indication tables as the server's application, telling `changed` after each
+    change the server brings (a link up or down, a full state, indications)."""
+
+    def __init__(self, tables: IndicationTables, changed: Callable[[], None]) -> None:
+        self.tables = tables
+        self.changed = changed
+
+    def link_up(self, station: int, peer: str) -> None:
+        self.tables.link_up(station, peer)
+        self.changed()
+
+    def link_down(self, station: int) -> None:
+        self.tables.link_down(station)
+        self.changed()
+
+    def full_state(self, station: int, items: Sequence[ev.Item]) -> None:
+        self.tables.full_state(station, items)
+        self.changed()
+
+    def indications(self, station: int, items: Sequence[ev.Item]) -> None:
+        self.tables.indications(station, items)
+        self.changed()
 
 
 class RemoteTrains:
@@ -70,14 +108,20 @@ class CtcDevice(Device):
         console_origins: list[str] | None = None,
         taps: list[str] | None = None,
         faults: frozenset[str] = frozenset(),
+        timetable: Timetable | None = None,
+        ars_on: Iterable[int] = (),
     ) -> None:
         super().__init__(name, control)
         self.line = line
         self.listen = listen
         self.stations = stations
         self.model = CtcModel(line, stations)
+        # automatic route setting, when given a timetable (its clock starts with the device)
+        self.ars = Ars(self.model, timetable, ars_on) if timetable is not None else None
+        self._ars_tasks: set[asyncio.Task[None]] = set()
+        app = _Watched(self.model.tables, self.ars_update) if self.ars else self.model.tables
         self.server: CtcServer = variants.ctc_server(
-            faults, stations, self.model.tables,
+            faults, stations, app,
             allowed_sources=list(allowed_sources) if allowed_sources else None,
             host=listen[0], port=listen[1], ssl=ssl,
         )  # fmt: skip
@@ -101,6 +145,8 @@ class CtcDevice(Device):
             return {"ok": True, "log": self.desk.log.last(int(obj.get("last", 50)))}
         if cmd in ("route", "point", "signal", "mode", "control"):
             return await self.operate(obj)
+        if cmd == "ars":
+            return self.ars_command(obj)
         if cmd == "timed_route":
             return await self.timed_route(obj)
         if cmd == "add_train":  # a train process the console may draw (the lab tells us)
@@ -112,14 +158,86 @@ class CtcDevice(Device):
         return await super().command(obj)
 
     async def operate(self, obj: dict[str, Any]) -> dict[str, Any]:
-        outcome = await self.desk.operate(obj, "ctc")
+        outcome = await self.carry_out(obj, "ctc")
         action = outcome.action
         if action is None or not outcome.answered:  # refused by the CTC, or no answer
             return {"ok": False, "error": outcome.why}
-        self.note("control", f"station {action.station} {action.name}={action.value}: "
-                  f"{outcome.result}")  # fmt: skip
         return {"ok": outcome.accepted, "code": action.name, "result": outcome.result,
                 "reason": outcome.reason}  # fmt: skip
+
+    async def carry_out(self, command: dict[str, Any], source: str) -> Outcome:
+        """One command through the desk (`source`: who gives it), its outcome in the events."""
+        outcome = await self.desk.operate(command, source)
+        action = outcome.action
+        if action is not None and outcome.answered:
+            by = "" if source == "ctc" else f" (by {source.upper()})"
+            self.note("control", f"station {action.station} {action.name}={action.value}{by}: "
+                      f"{outcome.result}")  # fmt: skip
+        return outcome
+
+    # -- automatic route setting -----------------------------------------------------------------
+    def ars_state(self) -> dict[str, bool] | None:
+        """Station -> ARS on (None: this CTC runs no timetable)."""
+        return None if self.ars is None else {str(k): v for k, v in self.ars.enabled.items()}
+
+    def switch_ars(self, station: object, on: bool) -> list[int]:
+        """ARS on or off at `station` (None: every station); the stations switched. UsageError
+        when this CTC runs no timetable or does not serve the station."""
+        if self.ars is None:
+            raise UsageError("this CTC runs no timetable: ARS needs `ars:` in the lab file")
+        stations = sorted(self.ars.enabled) if station is None else [station]
+        done = []
+        for st in stations:
+            number = self.model.station(st).number
+            self.ars.switch(number, on, self._ars_now())
+            done.append(number)
+        self.ars_update()
+        return done
+
+    def ars_command(self, obj: dict[str, Any]) -> dict[str, Any]:
+        """{"cmd": "ars"}: the state and the last `last` log entries; with "on": true/false
+        (and "station", else every station) switch it first."""
+        if self.ars is None:
+            return {"ok": False, "error": "this CTC runs no timetable: ARS needs `ars:` in the "
+                    "lab file"}  # fmt: skip
+        if "on" in obj:
+            on = obj["on"]
+            if not isinstance(on, bool):
+                return {"ok": False, "error": f"on must be true or false, not {on!r}"}
+            try:
+                self.switch_ars(obj.get("station"), on)
+            except UsageError as exc:
+                return {"ok": False, "error": str(exc)}
+        last = obj.get("last", 20)
+        count = last if isinstance(last, int) and not isinstance(last, bool) else 20
+        return {"ok": True, "ars": self.ars.status(), "log": self.ars.last(count)}
+
+    def _ars_now(self) -> float:
+        """ARS's time: seconds since the device started (the timetable's times count from it)."""
+        return self.timer.now() if self.timer is not None else 0.0
+
+    def ars_update(self) -> None:
+        """The indications changed (or ARS was switched): let ARS look, send what it asks for."""
+        if self.ars is None or self.timer is None:
+            return
+        now = self._ars_now()
+        self._ars_send(now, self.ars.update(now))
+
+    def _ars_send(self, now: float, requests: list[RouteRequest]) -> None:
+        for request in requests:
+            task = asyncio.get_running_loop().create_task(self._ars_request(request))
+            self._ars_tasks.add(task)
+            task.add_done_callback(self._ars_tasks.discard)
+        self.poke()
+
+    async def _ars_request(self, request: RouteRequest) -> None:
+        assert self.ars is not None
+        outcome = await self.carry_out(request.command, "ars")
+        self.ars.result(request, outcome.accepted, outcome.why, self._ars_now())
+        self.ars_update()
+
+    def _ars_logged(self, entry: dict[str, Any]) -> None:
+        self.note("ars", str(entry["text"]))
 
     async def timed_route(self, obj: dict[str, Any]) -> dict[str, Any]:
         """Set a route and time, in this process's clock, CONTROL sent -> CONTROL_RESULT -> the
@@ -140,6 +258,9 @@ class CtcDevice(Device):
     # -- life cycle ------------------------------------------------------------------------------
     async def start(self) -> None:
         await super().start()
+        if self.ars is not None:  # its zero is now: the timetable counts from the CTC's start
+            self.ars.on_log = self._ars_logged
+            self.drive(self.ars, self._ars_send, origin=self.now())
         await self.server.start()
         self.ready_info["listen"] = f"{self.listen[0]}:{self.server.port}"
         if self.console_address is not None:  # the web console (seed 004 Fig. 8), same process
@@ -153,6 +274,7 @@ class CtcDevice(Device):
                 port=port,
                 origins=self.console_origins,
                 token=self.token,
+                ars=self if self.ars is not None else None,
             )
             await self.console.start()
             self.ready_info["console"] = self.console.url
@@ -160,9 +282,13 @@ class CtcDevice(Device):
     async def close(self) -> None:
         if self.console is not None:
             await self.console.close()
+        for task in list(self._ars_tasks):
+            task.cancel()
+        await asyncio.gather(*self._ars_tasks, return_exceptions=True)
         await self.server.close()
         await super().close()
 
     def status(self) -> dict[str, Any]:
         return {**super().status(),
-                "stations": {st: self.model.summary(st) for st in self.stations}}  # fmt: skip
+                "stations": {st: self.model.summary(st) for st in self.stations},
+                "ars": None if self.ars is None else self.ars.status()}  # fmt: skip

@@ -1,6 +1,7 @@
 """The lab file: devices (kind, station, host), Type I / Type II links and whether a tap sits in
-each, the line they run on and the link settings. Every problem is a ConfigError naming the file,
-the key path and what is wrong.
+each, the line they run on, the link settings, the lab's timetable and whether the CTC's
+automatic route setting runs it (`ars:`, the stations where it starts on). Every problem is a
+ConfigError naming the file, the key path and what is wrong.
 
 A device may be external -- a real one the lab does not run, linked through its link's tap:
     atc18: {kind: atc, station: 18, external: {serial: "rfc2217://10.0.0.2:4000"}}
@@ -16,7 +17,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -75,6 +76,17 @@ class LinkSpec:
 
 
 @dataclass(frozen=True)
+class ArsSpec:
+    """The lab file's `ars:` section: the CTC runs automatic route setting from the lab's
+    timetable (`timetable:`), on at the stations `start_on` at start and off at the others."""
+
+    start_on: tuple[int, ...]
+
+
+ARS_KEYS = ("start_on",)
+
+
+@dataclass(frozen=True)
 class Lab:
     name: str
     file: Path
@@ -90,6 +102,7 @@ class Lab:
     console_origins: tuple[str, ...] = ()  # web origins besides its own whose pages may operate
     ixl_mode: str = "center"
     timetable_file: Path | None = None  # the lab's one timetable: its trains, ARS's routes
+    ars: ArsSpec | None = None  # None: no `ars:` section, the operator sets every route
 
     def of_kind(self, kind: str) -> list[DeviceSpec]:
         return [d for d in self.devices.values() if d.kind == kind]
@@ -309,6 +322,8 @@ def load_lab(path: str | Path | None = None) -> Lab:
                 f"train {train!r} is not in the timetable {timetable.file} "
                 f"({', '.join(t.id for t in timetable.trains)})",
             )
+    if raw.get("ars") is not None:
+        lab = replace(lab, ars=_ars(raw["ars"], lab, fail))
     return lab
 
 
@@ -369,3 +384,34 @@ def _serial_url(text: str, place: str, fail: _Fail) -> str:
         except UsageError as exc:
             raise fail(place, str(exc)) from None
     return text
+
+
+def _ars(section: object, lab: Lab, fail: _Fail) -> ArsSpec:
+    """The `ars:` section, ARS in the CTC from the lab's `timetable:` -- `start_on`: the stations
+    where it starts on (a list of the lab's stations, or `all`, the default; the others start
+    off). Not `on:`: YAML reads that key as true."""
+    if not isinstance(section, dict):
+        raise fail("ars", "must be a mapping {start_on: [STATION, ...] | all}")
+    for key in section:
+        if isinstance(key, bool):  # on: / yes: / off: read as a boolean key
+            raise fail(f"ars.{str(key).lower()}", "YAML reads this key as a boolean: the "
+                       "stations where ARS starts on are `start_on`")  # fmt: skip
+        if key not in ARS_KEYS:
+            raise fail(f"ars.{key}", f"unknown key (ars takes {', '.join(ARS_KEYS)})")
+    if not lab.ours("ctc"):
+        raise fail("ars", "the lab runs no CTC to set routes (an external CTC sets its own)")
+    if lab.timetable_file is None:
+        raise fail("ars", "ARS sets the routes of the lab's timetable: give it (timetable: FILE)")
+    on = section.get("start_on", "all")
+    if on == "all":
+        stations = tuple(lab.stations)
+    elif isinstance(on, list):
+        for i, st in enumerate(on):
+            if isinstance(st, bool) or not isinstance(st, int) or st not in lab.stations:
+                raise fail(
+                    f"ars.start_on[{i}]", f"must be a station of the lab {lab.stations}, not {st!r}"
+                )
+        stations = tuple(sorted(set(on)))
+    else:
+        raise fail("ars.start_on", f"a list of the lab's stations, or all; not {on!r}")
+    return ArsSpec(stations)

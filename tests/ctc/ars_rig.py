@@ -112,6 +112,16 @@ class ArsLine:
         self.sync()
         self.send(self.ars.update(self.now))
 
+    def link(self, station: int, up: bool) -> None:
+        """The station's Type II link down (the CTC no longer knows its indications) or up again
+        (its full state as it is now)."""
+        if up:
+            self.model.tables.link_up(station, "rig")
+            self._pushed.pop(station, None)
+        else:
+            self.model.tables.link_down(station)
+        self.update()
+
     def advance(self, seconds: float) -> None:
         """Move virtual time on (`timed.virtual.VirtualClock`: every deadline of the stations and
         of ARS on the way); the stations' own time reaches the end too."""

@@ -24,6 +24,7 @@ function describe(m) {
   if (m.type === "route_cancel") return `station ${m.station}: cancel route from ${m.entry}`;
   if (m.type === "point") return `station ${m.station}: point ${m.point} to ${m.position}`;
   if (m.type === "mode") return `station ${m.station}: ${m.mode} mode`;
+  if (m.type === "ars") return `station ${m.station}: ARS ${m.on ? "on" : "off"}`;
   return m.type;
 }
 
@@ -110,9 +111,13 @@ function stationCard(n) {
   card.className = "st-card";
   card.id = "card-" + n;
   card.innerHTML = `<b></b><span class="badge mode"></span><span class="badge link"></span>
-    <button data-mode="center">Center</button><button data-mode="local">Local</button>`;
-  card.querySelectorAll("button").forEach((b) => b.addEventListener("click", () =>
+    <button data-mode="center">Center</button><button data-mode="local">Local</button>
+    <button class="ars" hidden title="automatic route setting: click to switch"></button>`;
+  card.querySelectorAll("button[data-mode]").forEach((b) => b.addEventListener("click", () =>
     request({ type: "mode", station: n, mode: b.dataset.mode })));
+  const ars = card.querySelector("button.ars");
+  ars.addEventListener("click", () =>
+    request({ type: "ars", station: n, on: ars.dataset.on !== "true" }));
   $("#stations").appendChild(card);
   return card;
 }
@@ -181,6 +186,17 @@ function applyState(stations) {
       const t = document.querySelector(`#iv-${iv} .iv-dir`);
       if (t) t.textContent = d === "up" ? "→" : d === "down" ? "←" : "";
     }
+  }
+}
+
+// ARS per station (null: the CTC runs no timetable, no button)
+function applyArs(ars) {
+  for (const [n, on] of Object.entries(ars || {})) {
+    const b = stationCard(Number(n)).querySelector("button.ars");
+    b.hidden = false;
+    b.dataset.on = on ? "true" : "false";
+    b.textContent = on ? "ARS on" : "ARS off";
+    b.className = "ars " + (on ? "on" : "off");
   }
 }
 
@@ -311,6 +327,7 @@ function connect() {
       setupTrains(msg.trains);
     } else if (msg.type === "state") {
       applyState(msg.stations);
+      applyArs(msg.ars);
     } else if (msg.type === "log") {
       addLog(msg.entry);
     } else if (msg.type === "result") {
