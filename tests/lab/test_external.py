@@ -109,6 +109,10 @@ def test_a_real_atc_on_a_serial_line_is_linked_through_its_tap(tmp_path: Path) -
             wait_until("the lab reports atc18 external and alive",
                        lambda: external_status(lab, "atc18")["alive"])  # fmt: skip
             assert external_status(lab, "atc18")["external"] == serial_line
+            # and so do the commands an operator reads
+            status = lab.cli("lab", "status", name)
+            assert f"atc18 external at {serial_line}: link up" in status.stdout, status
+            assert "external: atc18" in lab.cli("lab", "map", name).stdout
 
             def atc_codes() -> dict[str, Any]:
                 answer = request(atc["control"], {"cmd": "status"}, token=read_token(token))
