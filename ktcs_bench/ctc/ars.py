@@ -17,8 +17,12 @@ everything the CTC can see says the interlocking will take it: ARS is on at the 
 station's indications are known and it is in center mode, the route is not set already, no
 conflicting route is set (or asked for), none of its track circuits (overlap included) is
 occupied, none of its points has lost detection or is locked the other way, and the interval it
-leads into is not occupied against its direction. Otherwise the train **waits** and the reason goes
-to the log once, when it changes. Of two trains wanting the same signal, the one nearer asks.
+leads into is not occupied against its direction. Otherwise the train **waits** and the reason
+goes to the log once, when it changes. Of two trains wanting the same signal, the one nearer asks.
+
+A station showing every one of its track circuits occupied shows its interlocking's fail-safe
+picture (its ATC link down, or up and not yet reporting): ARS reads that as occupancy not known,
+not as trains -- it steps, clears and identifies no train, and sets no route over it.
 
 Inputs: `update(now)` after the CTC's indication tables changed (it reads them through the
 `CtcModel`), `handle_timer(now)` at `next_deadline()` (a dwell ending, a train becoming due, a
@@ -45,6 +49,7 @@ from ktcs_bench.station.timetable import Stop, Timetable, TimetableTrain, start_
 RETRY_S = 5.0  # a rejected or unanswered request: ask again no sooner
 GRANT_GRACE_S = 10.0  # an accepted request whose route is not indicated set by then: ask again
 LOG_KEEP = 2_000  # log entries kept
+FAIL_SAFE_MIN = 3  # a station with this many circuits or more, all occupied: its fail-safe picture
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,7 +150,7 @@ class Ars:
         readings = self._readings()
         occupancy: dict[str, bool | None] = {}
         for reading in readings.values():
-            occupancy.update(reading.track_circuits)
+            occupancy.update(self._occupancy(reading))
         for e in self.describer.update(occupancy, now):
             self._log(now, e.text, train=e.train)
         for train_id in list(self.progress):
@@ -192,6 +197,17 @@ class Ars:
                 cached = self._read[st] = (table.version, model.read(table.state))
             out[st] = cached[1]
         return out
+
+    @staticmethod
+    def _occupancy(reading: StationReading) -> dict[str, bool | None]:
+        """A station's occupancy as ARS takes it. Every circuit of a station occupied at once is
+        its interlocking's fail-safe picture (its ATC link down, or up and not yet reporting):
+        not known, not trains. A station with fewer than `FAIL_SAFE_MIN` circuits is taken as
+        read."""
+        tcs = reading.track_circuits
+        if len(tcs) >= FAIL_SAFE_MIN and all(v is True for v in tcs.values()):
+            return dict.fromkeys(tcs, None)
+        return tcs
 
     def handle_timer(self, now: float) -> list[RouteRequest]:
         """Timers (a dwell over, a train due, a retry): call at (or after) `next_deadline()`."""

@@ -6,10 +6,7 @@ circuits ahead of it occupy and those behind it clear:
 
 * a train is **identified** when a track circuit occupies that no described train explains, and
   it is where the next train of the timetable comes onto the line (`enters: track_circuit`) or
-  stands at the start (its first stop's platform circuit). A train entering must be seen to
-  enter: its circuit must have reported clear since its occupancy was last unknown. A station
-  whose link comes up reports every circuit occupied until its ATC reports them (fail-safe);
-  that picture is no train;
+  stands at the start (its first stop's platform circuit);
 * a train's head **steps** into a track circuit next to it (ahead, in its direction of travel)
   that is occupied and not another train's;
 * its rear **clears**: track circuits of its footprint that report clear drop out of it;
@@ -17,7 +14,8 @@ circuits ahead of it occupy and those behind it clear:
   running with its detection failed) and found again when that berth or the one ahead occupies --
   unless its last berth was at the end of the line: then it has **left** the lab.
 
-Unknown occupancy (a station whose link is down) neither steps nor clears anything. Adjacency is
+Unknown occupancy (a station whose link is down, or showing its fail-safe picture: ARS hands
+that on as unknown) neither steps nor clears anything. Adjacency is
 data: two track circuits are next to each other where one ends at the chainage the other begins
 and they share a track (a plain-line circuit carries every track). No clock, no I/O: `update` takes
 the occupancy and `now` and returns what happened.
@@ -89,7 +87,6 @@ class Describer:
         self.trains: dict[str, DescribedTrain] = {}
         self.gone: list[str] = []  # trains that left the lab
         self._unexplained: set[str] = set()
-        self._seen_clear: set[str] = set()  # reported clear since last unknown: entry watched
 
     def ahead(self, tc: str, direction: Direction) -> tuple[str, ...]:
         """The track circuits next to `tc` in `direction` of travel."""
@@ -157,19 +154,13 @@ class Describer:
                             f"train {t.id} lost at {t.berth}: its track circuits report clear",
                         )
                     )
-        for tc in self._seen_clear - {tc for tc, occ in occupancy.items() if occ is not None}:
-            self._seen_clear.discard(tc)  # unknown now (absent or None)
         for tc, occ in occupancy.items():
             if occ is not True:
                 self._unexplained.discard(tc)
-                if occ is False:
-                    self._seen_clear.add(tc)
                 continue
             if tc in owned:
                 continue
             service = next((s for s in self.expected if s.appears_on == tc), None)
-            if service is not None and service.enters is not None and tc not in self._seen_clear:
-                service = None  # occupied since it became known: not seen entering
             if service is not None:
                 self.expected.remove(service)
                 self.trains[service.id] = DescribedTrain(service, [tc], tc, now)

@@ -248,19 +248,19 @@ def test_the_describer_loses_a_train_and_finds_it_again() -> None:
     assert "train 1001 found again at TC1853A" in b.log_text()
 
 
-def test_a_station_whose_link_comes_up_all_occupied_is_no_train_entering() -> None:
+def test_a_station_showing_every_circuit_occupied_is_read_as_not_known_not_as_trains() -> None:
     b = ArsLine()
     own = [tc for tc, st in b.owner.items() if st == 18]
     b.link(18, False)
-    b.occupy(*own)  # what station 18 reports while its ATC is not yet up: every circuit occupied
+    b.occupy(*own)  # station 18's fail-safe picture: its ATC not yet reporting
     b.link(18, True)
-    assert b.ars.describer.trains == {}
-    assert "TC1851 occupied: no train described there" in b.log_text()
-    assert b.requested() == []
-    b.clear(*own)  # its ATC reports: the line is clear
-    b.occupy("TC1851")  # and now a train comes onto it
+    assert b.ars.describer.trains == {} and b.requested() == []
+    b.clear(*[tc for tc in own if tc != "TC1851"])  # its ATC reports: a train stands on TC1851
     assert "train 1001 identified at TC1851" in b.log_text()
     assert b.requested("1001") == [(18, "0111")]
+    b.occupy(*own)  # its ATC link drops: every circuit occupied again
+    assert b.ars.describer.trains["1001"].footprint == ["TC1851"]  # the train stays where it was
+    assert b.waiting("1001") is None
 
 
 def test_a_train_leaving_the_lab_is_no_longer_described(tmp_path: Path) -> None:
