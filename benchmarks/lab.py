@@ -48,11 +48,11 @@ def run_lab(routes: int, unpaced: bool) -> list[float]:
     line_path = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
     text = text.replace("lab: reference", "lab: bench").replace("port: 8020", "port: 0")
     text = text.replace("line: ../lines/reference.yaml", f"line: {line_path}")
-    # the figure is of routes on an empty line: without the timetable and its trains
+    # the figure is of routes on an empty line: without the timetable, its trains and ARS
     text = "".join(
         ln
         for ln in text.splitlines(keepends=True)
-        if not ln.startswith("timetable:") and "{kind: train," not in ln
+        if not ln.startswith(("timetable:", "ars:")) and "{kind: train," not in ln
     )
     (tmp / "bench.yaml").write_text(text)
     env = {**os.environ, "KTCS_BENCH_RUN_DIR": str(tmp / "run")}

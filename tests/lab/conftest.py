@@ -98,12 +98,13 @@ class RunningLab:
 
 
 def without_trains(text: str) -> str:
-    """A lab file's text without its timetable and the train devices that run it: an empty
-    line, for tests that place trains of their own or need no train at all."""
+    """A lab file's text without its timetable, the train devices that run it and the CTC's
+    automatic route setting over it: an empty line, for tests that place trains of their own
+    or need no train at all."""
     kept = [
         ln
         for ln in text.splitlines(keepends=True)
-        if not ln.startswith("timetable:") and "{kind: train," not in ln
+        if not ln.startswith(("timetable:", "ars:")) and "{kind: train," not in ln
     ]
     return "".join(kept)
 
