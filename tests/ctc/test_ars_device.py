@@ -125,8 +125,10 @@ def test_a_ctc_without_a_timetable_says_ars_needs_one() -> None:
 
 
 def lab_with(tmp_path: Path, ars: str, timetable: bool = True) -> Path:
-    """The shipped reference lab with `ars` (YAML text) added, its timetable only if `timetable`."""
+    """The shipped reference lab with `ars` (YAML text) for its own `ars:` section, its timetable
+    only if `timetable`."""
     text = (data_dir("emulators") / "labs" / "reference.yaml").read_text(encoding="utf-8")
+    text = "".join(ln for ln in text.splitlines(keepends=True) if not ln.startswith("ars:"))
     line = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
     text = text.replace("line: ../lines/reference.yaml", f"line: {line}")
     wanted = f"timetable: {TIMETABLE_FILE}" if timetable else ""
@@ -142,7 +144,8 @@ TIMETABLE_FILE = (data_dir("emulators") / "timetables" / "reference.yaml").resol
 def test_the_lab_files_ars_section_runs_the_labs_timetable_on_where_it_starts_on(
     tmp_path: Path,
 ) -> None:
-    assert load_lab().ars is None  # the shipped reference lab: routes by hand, for now
+    shipped = load_lab().ars  # the shipped reference lab runs its timetable with ARS on
+    assert shipped is not None and shipped.start_on == (18, 20, 22)
     lab = load_lab(lab_with(tmp_path, "ars: {}\n"))
     assert lab.ars is not None and lab.ars.start_on == (18, 20, 22)  # on everywhere unless told
     lab = load_lab(lab_with(tmp_path, "ars: {start_on: [22, 18]}\n"))
