@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import pytest
 
@@ -197,3 +198,38 @@ def test_a_following_train_is_held_by_the_codes_behind_the_first() -> None:
     assert follower.state.position < entry
     assert min(closest) > 0.0
     assert leader.eb_count == 0 and follower.eb_count == 0
+
+
+def test_a_train_that_leaves_the_lab_runs_to_the_end_of_the_line_and_goes_off_the_rails(
+    tmp_path: Path,
+) -> None:
+    """`leaves_lab`: after its last stop the ATO runs on to the end of the line; standing there
+    the train has left, and its process puts it beyond the line (on no track circuit)."""
+    from ktcs_bench.emulator.train import TrainDevice
+    from ktcs_bench.transport.endpoints import parse_endpoint
+
+    line = load_line()
+    path = tmp_path / "leaves.yaml"
+    path.write_text(
+        "timetable: leaves\ntrain_data:\n  seed001-table1: {length_m: 200, max_speed_kmh: 80,"
+        + " traction_kmh_per_s: 3, service_brake_kmh_per_s: 3, emergency_brake_kmh_per_s: 4}\n"
+        + 'trains:\n  - {id: "9", train: seed001-table1, direction: up, leaves_lab: true,\n'
+        + '     depart_s: 5, stops: [{station: 22, track: "1", stop_m: 12680, dwell_s: 0}]}\n'
+    )
+    run = timetable_run(load_timetable(path, line).train("9"), line, 0.5)
+    assert run.config.start == 12680.0 and run.config.leaves_line
+    wayside = Wayside(line, "1", line.service_brake_mps2)
+    ep = TrainEndpoint(run.config, run.line, first=0.1)
+    ep.sense = lambda now: CycleInputs(code=wayside.code(ep.state.position))
+    clock = VirtualClock()
+    clock.add(ep)
+    clock.run_until(4.0)
+    assert ep.departures == [] and ep.service_state(clock.now) == "dwelling"
+    clock.run_until(200.0)
+    assert [d.station for d in ep.departures] == ["22"] and ep.departures[0].time >= 5.0
+    assert ep.left and ep.service_state(clock.now) == "left"
+    assert line.end_m - 5.0 < ep.state.position <= line.end_m
+    device = TrainDevice("t9", line, run.config, parse_endpoint("tcp://127.0.0.1:9"), run=run)
+    device.endpoint = ep
+    where = device._position()
+    assert where["tail"] > line.end_m and "track" not in where
