@@ -80,7 +80,7 @@ CORES = ("codec", "codes", "binding", "type1", "type2.session", "type2.ctc_side"
          "ctc.log", "ctc.ars", "ctc.describer")  # fmt: skip
 """The cores fed bytes/events and an explicit `now` (a package: every module in it)."""
 
-ADAPTERS = {"ktcs_bench.timed.aio"}
+ADAPTERS = {"ktcs_bench.timed.aio", "ktcs_bench.timed.vloop"}
 """Modules inside a core package that are its drivers' adapters, not the core."""
 
 
