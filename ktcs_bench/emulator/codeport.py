@@ -87,8 +87,9 @@ class CodePort:
             try:
                 if self.transport is None:
                     self.transport = open_transport(
-                        self.endpoint.address, self.name, self.link.config.line_rate
-                    )
+                        self.endpoint.address, self.name, self.link.config.line_rate,
+                        profile=self.link.profile,
+                    )  # fmt: skip
                 self.runner = LinkRunner(self.link, self.transport, self._event)
                 await self.runner.run()
                 return

@@ -3,7 +3,8 @@
 Owns: `LinkRunner`. It feeds the link what the transport reads (through `loop.add_reader` when the
 transport has an fd, else a small reader thread), leaves the link's deadlines to the one
 wall-clock driver (`ktcs_bench.timed.aio.LoopTimer`), and hands `data_to_send()` to the transport
-after every call. The clock is the loop's (monotonic) clock. Events go to `on_event(now, event)`
+after every call; a push-style transport (a virtual wire in a lab run in one process) hands its
+bytes over itself. The clock is the loop's (monotonic) clock. Events go to `on_event(now, event)`
 if given, else to the `events` queue.
 """
 
@@ -15,7 +16,7 @@ import threading
 from collections.abc import Callable
 
 from ktcs_bench.timed.aio import LoopTimer
-from ktcs_bench.transport.base import Transport, TransportClosed
+from ktcs_bench.transport.base import PushTransport, Transport, TransportClosed
 from ktcs_bench.type1 import LinkEvent, Message, Type1Link
 
 EventSink = Callable[[float, LinkEvent], None]
@@ -65,7 +66,9 @@ class LinkRunner:
         loop = self._loop = asyncio.get_running_loop()
         self._done = loop.create_future()
         fd = self.transport.fileno()
-        if fd is not None:
+        if isinstance(self.transport, PushTransport):
+            self.transport.attach(self._data, self._fail)
+        elif fd is not None:
             loop.add_reader(fd, self._readable)
         else:
             self._thread = threading.Thread(target=self._reader, name="link-reader", daemon=True)

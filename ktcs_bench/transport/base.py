@@ -9,6 +9,7 @@ or None when the transport can only be polled. Protocol rules never live here.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from types import TracebackType
 from typing import Protocol, Self, runtime_checkable
 
@@ -32,6 +33,16 @@ class Transport(Protocol):
     def drain(self, timeout: float | None = None) -> bool: ...
 
     def close(self) -> None: ...
+
+
+@runtime_checkable
+class PushTransport(Transport, Protocol):
+    """A transport that hands what arrives to a callback instead of being read (a virtual wire
+    in a lab run in one process): no fd, no reader thread."""
+
+    def attach(
+        self, on_data: Callable[[bytes], None], on_closed: Callable[[BaseException], None]
+    ) -> None: ...
 
 
 class TransportBase:

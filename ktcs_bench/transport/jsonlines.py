@@ -21,6 +21,7 @@ from typing import Any
 
 from ktcs_bench.errors import PeerError
 from ktcs_bench.runtime import client_token, token_matches
+from ktcs_bench.transport import net
 from ktcs_bench.transport.tcp import open_tcp
 
 log = logging.getLogger("ktcs_bench.control")
@@ -77,9 +78,11 @@ async def serve(
     on_close: Callable[[Peer], None] | None = None,
     *,
     token: str,
-) -> asyncio.Server:
+    real: bool = False,
+) -> net.Server:
     """A JSON-lines server: each object of an admitted connection (see the module docstring) goes
-    to `handler`, whose answer (if any) is sent back."""
+    to `handler`, whose answer (if any) is sent back. `real`: on a real socket even in a lab run
+    in one process (`transport.net`)."""
 
     async def client(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         peer = Peer(reader, writer)
@@ -122,7 +125,7 @@ async def serve(
                 on_close(peer)
             writer.close()
 
-    return await asyncio.start_server(client, host, port, limit=LIMIT)
+    return await net.start_server(client, host, port, limit=LIMIT, real=real)
 
 
 async def connect(host: str, port: int) -> Peer:

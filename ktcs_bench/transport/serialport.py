@@ -14,6 +14,7 @@ whose UART already paces).
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
 import select
@@ -25,7 +26,9 @@ from typing import Any
 
 import serial
 
+from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.transport.base import TransportBase, TransportClosed
+from ktcs_bench.transport.memory import VIRTUAL_SCHEME, MemorySerialTransport, network_of
 from ktcs_bench.type1.config import BITS_PER_BYTE, LINE_RATE
 
 BURST = 0.002  # s of line time written per wake-up at most; 2 bytes at 9600 bit/s
@@ -262,8 +265,19 @@ def open_transport(
     name: str | None = None,
     line_rate: float | None = LINE_RATE,
     bits_per_byte: int = BITS_PER_BYTE,
-) -> PtyTransport | SerialTransport:
-    """`pty` makes a pty pair (give `.path` to the peer); anything else is a pyserial URL/path."""
+    profile: FrameProfile | None = None,
+) -> PtyTransport | SerialTransport | MemorySerialTransport:
+    """`pty` makes a pty pair (give `.path` to the peer); `virtual://LINK/END` is that end of a
+    wire of the memory network on the running loop (a lab in one process: paced at the line rate
+    in the loop's time; `profile` is the wire's framing); anything else is a pyserial URL/path."""
+    if endpoint.startswith(VIRTUAL_SCHEME):
+        net = network_of(asyncio.get_running_loop())
+        if net is None:
+            raise TransportClosed(
+                f"{endpoint}: virtual wires exist only in a lab run in one process"
+            )
+        wire_profile = profile if profile is not None else get_profile("ktcs-type1")
+        return net.open_serial(endpoint, wire_profile, byte_time_of(line_rate, bits_per_byte))
     if endpoint == "pty":
         return PtyTransport(name or "pty", line_rate, bits_per_byte)
     return SerialTransport(endpoint, name, line_rate, bits_per_byte)

@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import asyncio
 
-LIMIT = 1 << 16  # asyncio's default line limit
+from ktcs_bench.transport import net
+
+LIMIT = net.LIMIT
 
 
 async def open_tcp(
     host: str, port: int, limit: int = LIMIT
 ) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
-    reader, writer = await asyncio.open_connection(host, port, limit=limit)
+    reader, writer = await net.open_connection(host, port, limit=limit)
     if writer.get_extra_info("sockname") == writer.get_extra_info("peername"):
         writer.close()
         raise ConnectionRefusedError(f"nothing listens on {host}:{port}")

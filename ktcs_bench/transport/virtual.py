@@ -36,6 +36,7 @@ class VirtualWire:
     piece: int = 8
     faults: FaultInjector | None = None
     seed: int = 0
+    record: bool = True  # keep `sent` and `arrived` (a long-running wire does not)
     sent: list[tuple[float, bytes]] = field(default_factory=list)  # as the sender handed them
     arrived: list[tuple[float, bytes]] = field(default_factory=list)  # as the receiver got them
     _free_at: float = 0.0
@@ -58,7 +59,8 @@ class VirtualWire:
 
     def put(self, data: bytes, now: float) -> None:
         """What the sender writes at `now`: through the faults, onto the line."""
-        self.sent.append((now, data))
+        if self.record:
+            self.sent.append((now, data))
         if self.faults is None:
             self._line(data, now)
             return
@@ -85,7 +87,7 @@ class VirtualWire:
         out = bytearray()
         while self._flight and self._flight[0][0] <= now:
             out += self._flight.popleft()[1]
-        if out:
+        if out and self.record:
             self.arrived.append((now, bytes(out)))
         return bytes(out)
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.transport import net
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.admission import AdmissionPolicy, BadFrameMeter
 from ktcs_bench.type2.config import Type2Config
@@ -118,7 +119,7 @@ class CtcServer(Waitable):
         self._tasks: set[asyncio.Task[None]] = set()
         self._handshaking: set[asyncio.Task[None]] = set()  # connections still in the TLS handshake
         self._stopping = False
-        self._server: asyncio.Server | None = None
+        self._server: net.Server | None = None
         self._waiters: list[asyncio.Future[None]] = []
         self.refusals: list[tuple[str, str]] = []  # (peer, reason), newest last
 
@@ -126,7 +127,7 @@ class CtcServer(Waitable):
     async def start(self) -> None:
         # plain TCP even for type2-tls: `_serve` upgrades after the address check, so a failed
         # handshake is a refusal logged with the peer's address (SPEC §10), not a silent drop
-        self._server = await asyncio.start_server(
+        self._server = await net.start_server(
             self._serve, self.host, self._port, reuse_address=True
         )
         log.info("Type II CTC listening on %s:%s", self.host, self.port)
@@ -135,7 +136,7 @@ class CtcServer(Waitable):
     def port(self) -> int:
         if self._server is None or not self._server.sockets:
             raise UsageError("the CTC server is not started")
-        return int(self._server.sockets[0].getsockname()[1])
+        return net.server_address(self._server)[1]
 
     async def close(self) -> None:
         self._stopping = True

@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable, Mapping
 from typing import Protocol
 
 from ktcs_bench.errors import UsageError
+from ktcs_bench.transport import net
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.config import Type2Config
 from ktcs_bench.type2.ixl_side import IxlSession
@@ -184,7 +185,7 @@ class IxlClient(Waitable):
         while not self._closing:
             self.attempts += 1
             try:
-                reader, writer = await asyncio.open_connection(
+                reader, writer = await net.open_connection(
                     self.host,
                     self.port,
                     ssl=self.ssl,
