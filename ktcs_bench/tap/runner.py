@@ -36,7 +36,7 @@ from ktcs_bench.tap import registry
 from ktcs_bench.tap.control import HELP, Command, parse_command
 from ktcs_bench.tap.core import HISTORY, Subscription, TapCore, TapOutput
 from ktcs_bench.timed.aio import LoopTimer
-from ktcs_bench.transport import jsonlines
+from ktcs_bench.transport import jsonlines, net
 
 T = TypeVar("T")
 START_TIMEOUT = 10.0
@@ -58,6 +58,7 @@ class Tap:
         writers: Iterable[CaptureWriter] = (),
         history: int = HISTORY,
         token_file: str | Path | None = None,
+        epoch: bool = True,
     ) -> None:
         self.profile = get_profile(profile) if isinstance(profile, str) else profile
         self.core = TapCore(names, self.profile, seed=seed, history=history)
@@ -69,6 +70,7 @@ class Tap:
         # the token its control port requires (runtime.server_token; the user's by default)
         self._token, self.token_file = server_token(token_file)
         self._writers = list(writers)
+        self.epoch = epoch  # records in epoch time (live); else in the loop's (a virtual lab)
         self._wakes: dict[Subscription, asyncio.Event] = {}
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: int | None = None
@@ -78,6 +80,7 @@ class Tap:
         self._stop_event: asyncio.Event | None = None
         self.timer = LoopTimer(self.core, lambda now, out: self._apply(out))
         self._tasks: set[asyncio.Task[Any]] = set()
+        self._server: net.Server | None = None
         self._closing = False
 
     # -- life cycle --------------------------------------------------------------------------
@@ -127,26 +130,45 @@ class Tap:
             self._error = self._error or exc
             self._ready.set()
 
-    async def _main(self, on_ready: Callable[[Tap], None] | None, signals: bool) -> None:
+    async def open_here(self) -> None:
+        """Run the tap on the running loop, with no thread of its own (a lab in one process);
+        `close_here()` ends it."""
+        if not await self._open():
+            assert self._error is not None
+            raise self._error
+        self._ready.set()
+
+    async def close_here(self) -> None:
+        await self._shut(own_loop=False)
+
+    async def _open(self) -> bool:
+        """Open the ends and the control port on the running loop; False (and `_error`) if not."""
         loop = asyncio.get_running_loop()
         self._loop = loop
-        self.timer.origin = loop.time() - time.time()  # the core's `now`: epoch time, monotonic
+        # the core's `now`: epoch time (monotonic) live; the loop's own time in a virtual lab
+        self.timer.origin = loop.time() - time.time() if self.epoch else 0.0
         self._loop_thread = threading.get_ident()
         self._stop_event = asyncio.Event()
-        server: asyncio.Server | None = None
+        self._server = None
         try:
-            try:
-                await self._open_ends()
-                if self._control_want is not None:
-                    server = await jsonlines.serve(
-                        *self._control_want, self._handle, token=self._token
-                    )
-                    sockname = server.sockets[0].getsockname()
-                    self.control_address = (str(sockname[0]), int(sockname[1]))
-            except OSError as exc:
-                self._error = PeerError(f"tap cannot open its ends: {exc}")
+            await self._open_ends()
+            if self._control_want is not None:
+                self._server = await jsonlines.serve(
+                    *self._control_want, self._handle, token=self._token
+                )
+                self.control_address = net.server_address(self._server)
+        except OSError as exc:
+            self._error = PeerError(f"tap cannot open its ends: {exc}")
+            return False
+        return True
+
+    async def _main(self, on_ready: Callable[[Tap], None] | None, signals: bool) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            if not await self._open():
                 self._ready.set()
                 return
+            assert self._stop_event is not None
             if signals:
                 for sig in (signal.SIGINT, signal.SIGTERM):
                     loop.add_signal_handler(sig, self._stop_event.set)
@@ -157,24 +179,29 @@ class Tap:
                 on_ready(self)
             await self._stop_event.wait()
         finally:
-            self._closing = True
             if self.name and self._ready.is_set() and self._error is None:
                 registry.withdraw(self.name)
-            if server is not None:
-                server.close()
-            self.timer.cancel()
-            for wake in self._wakes.values():
-                wake.set()  # subscribers see the tap closing and end their streams
-            # everything else on this loop is the tap's: connections, readers, subscribers
+            await self._shut(own_loop=True)
+
+    async def _shut(self, own_loop: bool) -> None:
+        self._closing = True
+        if self._server is not None:
+            self._server.close()
+        self.timer.cancel()
+        for wake in self._wakes.values():
+            wake.set()  # subscribers see the tap closing and end their streams
+        if own_loop:  # everything else on this loop is the tap's: connections, readers, subscribers
             others = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
-            for task in others:
-                task.cancel()
-            await asyncio.gather(*others, return_exceptions=True)
-            await self._close_ends()
-            self._apply(self.core.close())
-            for w in self._writers:
-                w.close()
-            self._loop = None
+        else:
+            others = sorted(self._tasks, key=lambda t: t.get_name())
+        for task in others:
+            task.cancel()
+        await asyncio.gather(*others, return_exceptions=True)
+        await self._close_ends()
+        self._apply(self.core.close())
+        for w in self._writers:
+            w.close()
+        self._loop = None
 
     def _spawn(self, coro: Coroutine[Any, Any, None]) -> None:
         """A task of the tap's (held here: the loop keeps only a weak reference)."""

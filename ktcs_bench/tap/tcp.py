@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ktcs_bench.tap.runner import Tap
+from ktcs_bench.transport import net
 from ktcs_bench.transport.tcp import open_tcp
 
 CONNECT_TIMEOUT = 5.0
@@ -45,7 +46,7 @@ class TcpTap(Tap):
         self.listen = listen
         self.target = target
         self.listen_address: tuple[str, int] | None = None
-        self._server: asyncio.Server | None = None
+        self._listener: net.Server | None = None
         self._conn: _Conn | None = None
         self.connections = 0
 
@@ -58,9 +59,8 @@ class TcpTap(Tap):
         return self._conn is not None
 
     async def _open_ends(self) -> None:
-        self._server = await asyncio.start_server(self._accept, *self.listen)
-        sockname = self._server.sockets[0].getsockname()
-        self.listen_address = (str(sockname[0]), int(sockname[1]))
+        self._listener = await net.start_server(self._accept, *self.listen)
+        self.listen_address = net.server_address(self._listener)
 
     async def _accept(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         peer = writer.get_extra_info("peername") or ("?", 0)
@@ -128,5 +128,5 @@ class TcpTap(Tap):
 
     async def _close_ends(self) -> None:
         self._drop("tap stopped")
-        if self._server is not None:
-            self._server.close()
+        if self._listener is not None:
+            self._listener.close()
