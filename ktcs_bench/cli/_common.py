@@ -11,8 +11,10 @@ import sys
 from collections.abc import Callable
 from typing import Any, TextIO
 
+from ktcs_bench.argtypes import host_port as host_port
+from ktcs_bench.argtypes import positive as positive
 from ktcs_bench.errors import UsageError
-from ktcs_bench.transport.endpoints import check_port, parse_host_port
+from ktcs_bench.transport.endpoints import check_port
 
 
 def use_colour(stream: TextIO, flag: bool | None = None) -> bool:
@@ -37,41 +39,12 @@ def duration(text: str) -> float:
     return value
 
 
-def positive(kind: type[int] | type[float], minimum: float = 1) -> Callable[[str], Any]:
-    """The argparse type of a count or rate (`--baud`, `--count`, `--retry-count`, ...): a finite
-    number of `kind`, at least `minimum` (0 for a count where none is meaningful)."""
-
-    def parse(text: str) -> Any:
-        try:
-            value = kind(text)
-        except ValueError:
-            value = None
-        if value is None or not math.isfinite(value) or value < minimum:
-            what = "a whole number" if kind is int else "a number"
-            raise argparse.ArgumentTypeError(f"must be {what} ≥ {minimum:g}, not {text!r}")
-        return value
-
-    return parse
-
-
 def port(any_free: bool = False) -> Callable[[str], int]:
     """The argparse type of a port option: 1..65535 (`any_free`: 0 too, any free port)."""
 
     def parse(text: str) -> int:
         try:
             return check_port(text, any_free=any_free)
-        except UsageError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-
-    return parse
-
-
-def host_port(any_free: bool = False) -> Callable[[str], tuple[str, int]]:
-    """The argparse type of a HOST:PORT option -> (host, port); `any_free`: port 0 allowed."""
-
-    def parse(text: str) -> tuple[str, int]:
-        try:
-            return parse_host_port(text, any_free=any_free)
         except UsageError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
 

@@ -30,7 +30,7 @@ from ktcs_bench.runtime import server_token
 from ktcs_bench.station.model import Line
 from ktcs_bench.timed import Out, Sink, Timed
 from ktcs_bench.timed.aio import LoopTimer
-from ktcs_bench.transport import jsonlines
+from ktcs_bench.transport import jsonlines, net
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
 
@@ -46,11 +46,14 @@ class Device:
         self.events: deque[dict[str, Any]] = deque(maxlen=2000)
         self.timer: LoopTimer[Any] | None = None  # the device's core on the wall clock
         self._stop: asyncio.Event | None = None
-        self._server: asyncio.Server | None = None
+        self._server: net.Server | None = None
         self.ready_info: dict[str, Any] = {}
         self.lifeline: int | None = None  # fd: end of file there means the launcher is gone
         self.token_file: str | None = None  # the token its control port requires (runtime)
         self.token = ""
+        # where `note` takes its time (wall time live; a lab in one process gives its loop's)
+        self.clock: Callable[[], float] = time.time
+        self.on_note: Callable[[Device, dict[str, Any]], None] | None = None  # the lab's log
 
     # -- clock and timers ----------------------------------------------------------------------
     @property
@@ -71,7 +74,10 @@ class Device:
             self.timer.poke()
 
     def note(self, kind: str, text: str) -> None:
-        self.events.append({"time": time.time(), "kind": kind, "text": text})
+        event = {"time": self.clock(), "kind": kind, "text": text}
+        self.events.append(event)
+        if self.on_note is not None:
+            self.on_note(self, event)
         log.info("%s %s: %s", self.name, kind, text)
 
     # -- control port ----------------------------------------------------------------------------
@@ -103,8 +109,8 @@ class Device:
         """Override: open links and servers (call super().start() first)."""
         host, port = self.control_address
         self._server = await jsonlines.serve(host, port, self._handle, token=self.token)
-        sock = self._server.sockets[0].getsockname()
-        self.ready_info["control"] = f"{sock[0]}:{sock[1]}"
+        host, port = net.server_address(self._server)
+        self.ready_info["control"] = f"{host}:{port}"
 
     async def tasks(self) -> list[asyncio.Task[None]]:
         """Override: long-running tasks (links)."""
@@ -133,6 +139,21 @@ class Device:
             log.warning("%s: the process that started it is gone; stopping", self.name)
             self.stop()
 
+    async def launch(self, token: str) -> list[asyncio.Task[None]]:
+        """Start the device (its control port obeys `token`, and so do the rails) and its
+        long-running tasks: what `run` does before its "ready" line, and what a lab run in one
+        process does for each device. An OSError (a port taken) closes it again and is raised."""
+        self.token = token
+        rails = getattr(self, "rails", None)
+        if isinstance(rails, RailsClient):  # the rails are the lab's too: same token
+            rails.token = self.token
+        try:
+            await self.start()
+        except OSError:
+            await self.close()
+            raise
+        return await self.tasks()
+
     async def run(self) -> int:
         self._stop = asyncio.Event()
         loop = asyncio.get_running_loop()
@@ -141,19 +162,13 @@ class Device:
         if self.lifeline is not None:
             os.set_blocking(self.lifeline, False)
             loop.add_reader(self.lifeline, self._lifeline_readable)
-        self.token = server_token(self.token_file)[0]
-        rails = getattr(self, "rails", None)
-        if isinstance(rails, RailsClient):  # the rails are the lab's too: same token
-            rails.token = self.token
         try:
-            await self.start()
+            running = await self.launch(server_token(self.token_file)[0])
         except OSError as exc:  # a port taken, an address not ours: say so, no traceback
-            await self.close()
             log.error("%s cannot start: %s", self.name, exc)
             sys.stdout.write(json.dumps({"error": str(exc)}) + "\n")
             sys.stdout.flush()
             return 3
-        running = await self.tasks()
         ready = {"ready": self.name, "kind": self.kind, **self.ready_info}
         sys.stdout.write(json.dumps(ready) + "\n")
         sys.stdout.flush()

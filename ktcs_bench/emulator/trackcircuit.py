@@ -10,7 +10,7 @@ from ktcs_bench.atc.codes import AtcCode
 from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.station.model import Line
-from ktcs_bench.transport import jsonlines
+from ktcs_bench.transport import jsonlines, net
 
 
 class TrackCircuitDevice(Device):
@@ -26,7 +26,8 @@ class TrackCircuitDevice(Device):
         super().__init__(name, control)
         self.model = TrackCircuitModel(line)
         self.listen = listen
-        self.peers: set[jsonlines.Peer] = set()
+        # in the order they said hello: a broadcast goes out in the same order every run
+        self.peers: dict[jsonlines.Peer, None] = {}
         self.trains: dict[str, jsonlines.Peer] = {}
         self._server2: Any = None
 
@@ -57,7 +58,7 @@ class TrackCircuitDevice(Device):
     async def _rails(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any] | None:
         if "hello" in obj and isinstance(obj["hello"], dict):
             peer.info.update(obj["hello"])
-            self.peers.add(peer)
+            self.peers[peer] = None
             if peer.info.get("role") == "train" and peer.info.get("train"):
                 self.trains[str(peer.info["train"])] = peer
             return {"occupancy": self._occ(), "full": True}
@@ -85,7 +86,7 @@ class TrackCircuitDevice(Device):
         return await self.command(obj)
 
     def _closed(self, peer: jsonlines.Peer) -> None:
-        self.peers.discard(peer)
+        self.peers.pop(peer, None)
         train = peer.info.get("train")
         if train is not None and self.trains.get(str(train)) is peer:
             del self.trains[str(train)]
@@ -121,8 +122,8 @@ class TrackCircuitDevice(Device):
         self._server2 = await jsonlines.serve(
             host, port, self._rails, self._closed, token=self.token
         )
-        sock = self._server2.sockets[0].getsockname()
-        self.ready_info["listen"] = f"{sock[0]}:{sock[1]}"
+        host, port = net.server_address(self._server2)
+        self.ready_info["listen"] = f"{host}:{port}"
 
     async def close(self) -> None:
         if self._server2 is not None:

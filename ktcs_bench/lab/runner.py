@@ -18,7 +18,7 @@ import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 from urllib.parse import urlsplit
 
 from ktcs_bench.capture import open_writer
@@ -33,6 +33,157 @@ from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.transport import jsonlines
 
 log = logging.getLogger("ktcs_bench.lab")
+
+
+def device_args(
+    lab: Lab,
+    name: str,
+    *,
+    before: dict[str, Any],
+    endpoints: dict[str, str],
+    token_file: Path | None,
+    unpaced: bool = False,
+    console: bool = True,
+) -> list[str]:
+    """The arguments of `ktcs-bench emulator` for device `name` of `lab` -- what `lab up` starts
+    a process with, and what a lab in one process builds the device object from
+    (`emulator.build.build_device`). A device started before (a restart) gets back the addresses it
+    had (`before`: its ready line) -- control port, Type II / rails port, console -- so the taps in
+    front of it, the devices that reach it and the clients that know it find it again where it
+    was. `endpoints`: its links, role -> endpoint."""
+    d = lab.devices[name]
+    argv = [d.kind, "--lab", str(lab.file), "--name", name,
+            "--control", before.get("control") or f"{d.host}:0"]  # fmt: skip
+    if token_file is not None:
+        argv += ["--token-file", str(token_file)]
+    if d.station is not None:
+        argv += ["--station", str(d.station)]
+    if unpaced:
+        argv.append("--unpaced")
+    for role, ep in endpoints.items():
+        argv += ["--link", f"{role}={ep}"]
+    if d.kind == "trackcircuit":
+        argv += ["--listen", before.get("listen") or f"{d.host}:{d.options.get('port', 0)}"]
+    if d.kind == "ctc":
+        argv += ["--listen", before.get("listen") or f"{d.host}:{lab.type2_port}"]
+        if lab.console_port is not None and console:
+            url = urlsplit(str(before.get("console", "")))
+            port = url.port if url.port is not None else lab.console_port
+            argv += ["--console", f"{d.host}:{port}"]
+            argv += [arg for o in lab.console_origins for arg in ("--console-origin", o)]
+            argv += [arg for lk in lab.links if lk.tap for arg in ("--tap", lk.name)]
+    if d.kind == "train" and "train" in d.options:
+        argv += ["--train", str(d.options["train"])]
+    return argv
+
+
+class LabStarter(Protocol):
+    """How a lab makes its links and starts its devices (`start_in_order`): as processes on
+    ptys and TCP (`LabRunner`), or as objects in one process (`inprocess.InProcessLab`)."""
+
+    async def _start(self, name: str) -> dict[str, Any]:
+        """Start device `name` (its endpoints are set); its ready line."""
+        ...
+
+    async def type2_end(self, link: LinkSpec, index: int, ctc: tuple[str, int]) -> str:
+        """The endpoint the IXL of Type II `link` connects to (a tap's, or the CTC's own)."""
+        ...
+
+    async def type1_ends(self, link: LinkSpec, index: int) -> tuple[str, str] | None:
+        """The endpoints of Type I `link` for its a and b ends; None (a link with no tap): the IXL
+        makes a pty and the peer starts after it, on the path it reports (or the IXL opens an
+        external peer's line)."""
+        ...
+
+
+async def start_in_order(
+    lab: Lab, starter: LabStarter, endpoints: dict[str, dict[str, str]]
+) -> None:
+    """Start a lab's devices in the order every lab starts them, filling in `endpoints` (device ->
+    role -> endpoint) on the way: the track circuits (the rails), the CTC (the Type II server),
+    the links (taps), each station's ATC and trackside I/O, its IXL, then the trains. An
+    external device is not started: a real CTC's address is the Type II target, a real Type I
+    peer's serial line is the IXL's (or its tap's) end."""
+    rails = None
+    for tc in lab.of_kind("trackcircuit"):
+        rails = (await starter._start(tc.name))["listen"]
+    ctc_address = None
+    for ctc in lab.of_kind("ctc"):
+        if ctc.external is not None and ctc.external.address is not None:
+            ctc_address = ctc.external.address  # a real CTC, serving there
+            continue
+        host, _, port = (await starter._start(ctc.name))["listen"].rpartition(":")
+        ctc_address = (host, int(port))
+    untapped: dict[str, LinkSpec] = {}
+    for index, link in enumerate(lab.links):
+        a, b = link.a, link.b
+        ea, eb = endpoints.setdefault(a, {}), endpoints.setdefault(b, {})
+        role_b, role_a = lab.peer_role(link, a), lab.peer_role(link, b)
+        if link.type == "type2":
+            if ctc_address is None:
+                raise UsageError(f"link {link.name}: the lab has no CTC")
+            ea[role_b] = await starter.type2_end(link, index, ctc_address)
+        elif (ends := await starter.type1_ends(link, index)) is not None:
+            ea[role_b], eb[role_a] = ends
+        elif (ext := lab.devices[b].external) is not None:
+            ea[role_b] = str(ext.serial)  # the IXL opens the real line itself
+        else:
+            ea[role_b] = "pty"
+            untapped[b] = link
+    if rails is not None:
+        for d in lab.devices.values():
+            if d.kind in ("atc", "trackside", "train") and d.external is None:
+                endpoints.setdefault(d.name, {})["rails"] = f"tcp://{rails}"
+    ours = [d.name for d in lab.devices.values() if d.external is None]
+    order = [n for n in ours if lab.devices[n].kind in ("atc", "trackside")]
+    for name in [n for n in order if n not in untapped]:
+        await starter._start(name)
+    for ixl in lab.ours("ixl"):
+        ready = await starter._start(ixl.name)
+        for peer, lk in untapped.items():
+            if lk.a == ixl.name:
+                endpoints.setdefault(peer, {})["ixl"] = ready["ptys"][lab.peer_role(lk, ixl.name)]
+                await starter._start(peer)
+    for d in lab.of_kind("train"):
+        await starter._start(d.name)
+
+
+class LabCommands(Protocol):
+    """What a lab offers its own control port (`lab_command`), live or in one process."""
+
+    stop_requested: asyncio.Event
+
+    async def status(self) -> dict[str, Any]: ...
+
+    def link_map(self) -> list[dict[str, Any]]: ...
+
+    async def restart(self, name: str) -> None: ...
+
+    async def kill(self, name: str) -> None: ...
+
+
+async def lab_command(lab: LabCommands, obj: dict[str, Any]) -> dict[str, Any]:
+    """The lab's own commands -- status, map, restart, kill, down -- and their answers."""
+    cmd = obj.get("cmd")
+    try:
+        if cmd == "status":
+            return {"ok": True, "status": await lab.status()}
+        if cmd == "map":
+            return {"ok": True, "links": lab.link_map()}
+        if cmd == "restart":
+            await lab.restart(str(obj["device"]))
+            return {"ok": True}
+        if cmd == "kill":
+            await lab.kill(str(obj["device"]))
+            return {"ok": True}
+        if cmd == "down":
+            lab.stop_requested.set()
+            return {"ok": True}
+    except KeyError as exc:
+        return {"ok": False, "error": f"{cmd}: missing {exc}"}
+    except (KtcsError, OSError) as exc:  # a device that does not come back, a port taken
+        return {"ok": False, "error": str(exc)}
+    return {"ok": False, "error": f"unknown command {cmd!r} (status, map, restart, kill, down)"}
 
 
 @dataclass
@@ -57,33 +208,12 @@ class LabRunner:
 
     # -- start -------------------------------------------------------------------------------
     def _argv(self, name: str) -> list[str]:
-        """The device's command line. A device started before (a restart) gets back the addresses
-        it had -- control port, Type II / rails port, console -- so the taps in front of it, the
-        devices that reach it and the clients that know it find it again where it was."""
-        d = self.lab.devices[name]
+        """The device's command line (`device_args`), with what it had before if it ran."""
         before = self.children[name].ready if name in self.children else {}
-        argv = emulator_argv(d.kind, "--lab", str(self.lab.file), "--name", name,
-                             "--control", before.get("control") or f"{d.host}:0",
-                             "--token-file", str(self.token_file))  # fmt: skip
-        if d.station is not None:
-            argv += ["--station", str(d.station)]
-        if self.unpaced:
-            argv.append("--unpaced")
-        for role, ep in self.endpoints.get(name, {}).items():
-            argv += ["--link", f"{role}={ep}"]
-        if d.kind == "trackcircuit":
-            argv += ["--listen", before.get("listen") or f"{d.host}:{d.options.get('port', 0)}"]
-        if d.kind == "ctc":
-            argv += ["--listen", before.get("listen") or f"{d.host}:{self.lab.type2_port}"]
-            if self.lab.console_port is not None and self.console:
-                url = urlsplit(str(before.get("console", "")))
-                port = url.port if url.port is not None else self.lab.console_port
-                argv += ["--console", f"{d.host}:{port}"]
-                argv += [arg for o in self.lab.console_origins for arg in ("--console-origin", o)]
-                argv += [arg for lk in self.lab.links if lk.tap for arg in ("--tap", lk.name)]
-        if d.kind == "train" and "train" in d.options:
-            argv += ["--train", str(d.options["train"])]
-        return argv
+        return emulator_argv(*device_args(
+            self.lab, name, before=before, endpoints=self.endpoints.get(name, {}),
+            token_file=self.token_file, unpaced=self.unpaced, console=self.console,
+        ))  # fmt: skip
 
     async def _start(self, name: str) -> dict[str, Any]:
         child = self.children.get(name) or Child(name, [], self.dir / "logs" / f"{name}.log")
@@ -95,6 +225,27 @@ class LabRunner:
             self._write_state()
         self.crashed.pop(name, None)
         return ready
+
+    async def type2_end(self, link: LinkSpec, index: int, ctc: tuple[str, int]) -> str:
+        if not link.tap:
+            return f"tcp://{ctc[0]}:{ctc[1]}"
+        tap = self.taps[link.name] = self._tap_for(link, ctc)
+        assert isinstance(tap, TcpTap) and tap.listen_address is not None
+        return f"tcp://{tap.listen_address[0]}:{tap.listen_address[1]}"
+
+    async def type1_ends(self, link: LinkSpec, index: int) -> tuple[str, str] | None:
+        if not link.tap:
+            return None
+        tap = self.taps[link.name] = self._tap_for(link, None)
+        assert isinstance(tap, PtyTap)
+        b = link.b
+        if b not in tap.external:
+            return tap.paths[link.a], tap.paths[b]
+        if not tap.external_open(b):  # the tap opens the real device's serial line itself
+            error = tap.status().get("external_ends", {}).get(b, {}).get("error")
+            self.notices.append(f"{link.name}: {b} (external) is not there yet at "
+                                f"{tap.external[b]} ({error}); the tap keeps trying")  # fmt: skip
+        return tap.paths[link.a], tap.external[b]
 
     def _tap_for(self, link: LinkSpec, ctc_address: tuple[str, int] | None) -> Tap:
         names = (link.a, link.b)
@@ -126,65 +277,7 @@ class LabRunner:
         private_dir(self.dir / "captures")
         self.token, self.token_file = server_token(self.dir / "token")
         self._write_state()  # from now on, whatever kills this lab, the next one can clean up
-        lab = self.lab
-        rails = None
-        for tc in lab.of_kind("trackcircuit"):
-            rails = (await self._start(tc.name))["listen"]
-        ctc_address = None
-        for ctc in lab.of_kind("ctc"):
-            if ctc.external is not None and ctc.external.address is not None:
-                ctc_address = ctc.external.address  # a real CTC, serving there
-                continue
-            host, _, port = (await self._start(ctc.name))["listen"].rpartition(":")
-            ctc_address = (host, int(port))
-        for link in lab.links:
-            a, b = link.a, link.b
-            ea, eb = self.endpoints.setdefault(a, {}), self.endpoints.setdefault(b, {})
-            role_b, role_a = lab.peer_role(link, a), lab.peer_role(link, b)
-            if link.type == "type2":
-                if ctc_address is None:
-                    raise UsageError(f"link {link.name}: the lab has no CTC")
-                if link.tap:
-                    tap = self.taps[link.name] = self._tap_for(link, ctc_address)
-                    assert isinstance(tap, TcpTap) and tap.listen_address is not None
-                    ea[role_b] = f"tcp://{tap.listen_address[0]}:{tap.listen_address[1]}"
-                else:
-                    ea[role_b] = f"tcp://{ctc_address[0]}:{ctc_address[1]}"
-            elif link.tap:
-                tap = self.taps[link.name] = self._tap_for(link, None)
-                assert isinstance(tap, PtyTap)
-                ea[role_b] = tap.paths[a]
-                if b in tap.external:  # the tap opens the real device's serial line itself
-                    eb[role_a] = tap.external[b]
-                    if not tap.external_open(b):
-                        error = tap.status().get("external_ends", {}).get(b, {}).get("error")
-                        self.notices.append(f"{link.name}: {b} (external) is not there yet at "
-                                            f"{tap.external[b]} ({error}); the tap keeps trying")  # fmt: skip
-                else:
-                    eb[role_a] = tap.paths[b]
-            elif (ext := lab.devices[b].external) is not None:
-                ea[role_b] = str(ext.serial)  # the IXL opens the real line itself
-            else:
-                ea[role_b] = "pty"  # the IXL makes the pty; the peer gets its path below
-        if rails is not None:
-            for d in lab.devices.values():
-                if d.kind in ("atc", "trackside", "train") and d.external is None:
-                    self.endpoints.setdefault(d.name, {})["rails"] = f"tcp://{rails}"
-        ours = [d.name for d in lab.devices.values() if d.external is None]
-        order = [n for n in ours if lab.devices[n].kind in ("atc", "trackside")]
-        untapped = {lk.b: lk for lk in lab.links
-                    if lk.type == "type1" and not lk.tap and lk.b in ours}  # fmt: skip
-        for name in [n for n in order if n not in untapped]:
-            await self._start(name)
-        for ixl in lab.ours("ixl"):
-            ready = await self._start(ixl.name)
-            for peer, lk in untapped.items():
-                if lk.a == ixl.name:
-                    role = lab.peer_role(lk, ixl.name)
-                    self.endpoints.setdefault(peer, {})["ixl"] = ready["ptys"][role]
-                    await self._start(peer)
-        for d in lab.of_kind("train"):
-            await self._start(d.name)
+        await start_in_order(self.lab, self, self.endpoints)
         await self._trains_to_ctc()
         await self._serve_control()
         self._write_state()
@@ -221,27 +314,11 @@ class LabRunner:
         write_state(self.lab.name, state)
 
     async def _handle(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any]:
-        cmd = obj.get("cmd")
-        try:
-            if cmd == "status":
-                return {"ok": True, "status": await self.status()}
-            if cmd == "map":
-                return {"ok": True, "links": self.link_map()}
-            if cmd == "restart":
-                await self.restart(str(obj["device"]))
-                return {"ok": True}
-            if cmd == "kill":
-                self._refuse_external(str(obj["device"]), "kill")
-                self._child(str(obj["device"])).kill()
-                return {"ok": True}
-            if cmd == "down":
-                self.stop_requested.set()
-                return {"ok": True}
-        except KeyError as exc:
-            return {"ok": False, "error": f"{cmd}: missing {exc}"}
-        except (KtcsError, OSError) as exc:  # a device that does not come back, a port taken
-            return {"ok": False, "error": str(exc)}
-        return {"ok": False, "error": f"unknown command {cmd!r} (status, map, restart, kill, down)"}
+        return await lab_command(self, obj)
+
+    async def kill(self, name: str) -> None:
+        self._refuse_external(name, "kill")
+        self._child(name).kill()
 
     def _refuse_external(self, name: str, what: str) -> None:
         d = self.lab.devices.get(name)

@@ -24,16 +24,15 @@ from typing import Any
 import serial
 
 from ktcs_bench.datafiles import data_dir, load_yaml
+from ktcs_bench.emulator.build import KINDS, ROLE
 from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable, load_timetable
 from ktcs_bench.transport.endpoints import check_port, parse_endpoint, parse_host_port
 
-KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
 STATION_KINDS = ("ixl", "atc", "trackside")
 _ORIGIN = re.compile(r"https?://[^/\s:]+(:\d{1,5})?/?|https?://\[[0-9a-fA-F:]+\](:\d{1,5})?/?")
-ROLE = {"atc": "atc", "trackside": "io", "ctc": "ctc", "ixl": "ixl"}
 # the kinds that may be external, and the key that says where the real one is
 EXTERNAL_KEY = {"atc": "serial", "trackside": "serial", "ctc": "address", "ixl": "address"}
 _HOST_PORT_URL = re.compile(r"(rfc2217|socket)://([^/?]*)")  # pyserial URLs that name HOST:PORT

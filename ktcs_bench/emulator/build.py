@@ -1,0 +1,192 @@
+"""Building a device object from its `ktcs-bench emulator` command line: one way for a device
+process (`cli.emulator`) and for a lab run in one process (`lab.inprocess`), which builds each
+device from the very arguments a live lab starts its process with (`lab.runner.device_args`).
+
+`arguments(parser)` declares the options, `device_namespace(argv)` reads them, and
+`build_device(args, lab)` makes the device of `args` in `lab` (a loaded lab file). Must not import
+`lab` or `cli` (they stand above): the lab object is handed in.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ssl
+from typing import Any
+
+from ktcs_bench.argtypes import host_port, positive
+from ktcs_bench.errors import UsageError
+from ktcs_bench.transport.endpoints import Endpoint, parse_links
+
+KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
+ROLE = {"atc": "atc", "trackside": "io", "ctc": "ctc", "ixl": "ixl"}
+"""The role a device of a kind plays on a link (`--link ROLE=...`)."""
+
+
+def device_namespace(argv: list[str]) -> argparse.Namespace:
+    """`ktcs-bench emulator` arguments (`lab.runner.device_args`) read as the command reads them:
+    a lab in one process builds its devices from the same command lines a live lab starts."""
+    p = argparse.ArgumentParser(prog="ktcs-bench emulator", add_help=False, exit_on_error=False)
+    arguments(p)
+    try:
+        args, extra = p.parse_known_args(argv)
+    except argparse.ArgumentError as exc:
+        raise UsageError(f"emulator {' '.join(argv)}: {exc}") from None
+    if extra:
+        raise UsageError(f"emulator: unexpected arguments {' '.join(extra)}")
+    return args
+
+
+def arguments(p: argparse.ArgumentParser) -> None:
+    """The options of `ktcs-bench emulator`."""
+    p.add_argument("kind", choices=KINDS)
+    p.add_argument("--lab", help="lab file or shipped lab name (default: the reference lab)")
+    p.add_argument("--station", type=positive(int), help="station number (ixl, atc, trackside)")
+    p.add_argument("--name", help="device name (default: KIND + station)")
+    p.add_argument("--link", action="append", default=[], metavar="PEER=ENDPOINT")
+    p.add_argument("--listen", type=host_port(any_free=True),
+                   help="HOST:PORT to serve (ctc: Type II; trackcircuit: the rails)")  # fmt: skip
+    p.add_argument("--control", type=host_port(any_free=True), default="127.0.0.1:0",
+                   help="HOST:PORT of the JSON control port")  # fmt: skip
+    p.add_argument(
+        "--mode", choices=("center", "local"), help="ixl: start mode (default: the lab's)"
+    )
+    p.add_argument("--unpaced", action="store_true", help="Type I: no line-rate pacing")
+    p.add_argument("--train", help="train: the train id / scenario train to run")
+    p.add_argument("--console", type=host_port(any_free=True), metavar="HOST:PORT",
+                   help="ctc: serve the web console here")  # fmt: skip
+    p.add_argument("--tap", action="append", default=[], help="ctc: a tap the console may monitor")
+    p.add_argument(
+        "--console-origin", action="append", default=[], metavar="ORIGIN",
+        help="ctc: a web origin (e.g. http://ctc.lab:8020) whose pages may operate through the "
+        "console, besides its own (repeatable)",
+    )  # fmt: skip
+    p.add_argument(
+        "--fault", action="append", default=[], metavar="VARIANT",
+        help="break one protocol rule on purpose, for the conformance suite to catch "
+        "(see `ktcs-bench conformance --list-faults`)",
+    )  # fmt: skip
+    p.add_argument(
+        "--allow-source", action="append", default=[], metavar="CIDR",
+        help="ctc: admit Type II connections only from these addresses/networks (repeatable)",
+    )  # fmt: skip
+    p.add_argument("--tls-cert", help="Type II over TLS (profile type2-tls): our certificate (PEM)")
+    p.add_argument("--tls-key", help="Type II over TLS: our private key (PEM)")
+    p.add_argument(
+        "--tls-ca", help="Type II over TLS: CA (PEM) the peer's certificate must chain to "
+        "(ctc: client certificates are then required)",
+    )  # fmt: skip
+    p.add_argument("--tls-server-name", help="ixl: the name (or IP) in the CTC's certificate")
+    p.add_argument(
+        "--token-file", metavar="FILE",
+        help="the token its control port requires, kept in FILE (mode 0600; made if missing); "
+        "default: $KTCS_BENCH_TOKEN_FILE, else the user's token in the run folder",
+    )  # fmt: skip
+    p.add_argument(
+        "--lifeline", type=int, metavar="FD",
+        help="stop when this file descriptor (a pipe from the launcher) reaches end of file: "
+        "the launcher is gone (`lab up` gives each device one)",
+    )  # fmt: skip
+    p.add_argument("-v", "--verbose", action="store_true", help="log every event to stderr")
+
+
+def _roles(links: dict[str, Endpoint], lab_devices: dict[str, str]) -> dict[str, Endpoint]:
+    """Peer names may be roles or lab device names; return {role: endpoint}."""
+    out = {}
+    for peer, ep in links.items():
+        role = (
+            peer
+            if peer in ("ctc", "ixl", "atc", "io", "rails")
+            else ROLE.get(lab_devices.get(peer, ""), "")
+        )
+        if not role:
+            raise UsageError(
+                f"--link {peer}=...: unknown peer (use ctc, ixl, atc, io, rails or a lab device)"
+            )
+        out[role] = ep
+    return out
+
+
+def tls_context(args: argparse.Namespace, server: bool) -> ssl.SSLContext | None:
+    """The type2-tls context from --tls-cert/--tls-key/--tls-ca (None when none is given)."""
+    cert, key, ca = args.tls_cert, args.tls_key, args.tls_ca
+    if not (cert or key or ca):
+        return None
+    if server and not (cert and key):
+        raise UsageError("a TLS server needs --tls-cert and --tls-key")
+    if bool(cert) != bool(key):
+        raise UsageError("--tls-cert and --tls-key go together")
+    purpose = ssl.Purpose.CLIENT_AUTH if server else ssl.Purpose.SERVER_AUTH
+    try:
+        ctx = ssl.create_default_context(purpose, cafile=ca)
+        if cert:
+            ctx.load_cert_chain(cert, key)
+    except (OSError, ssl.SSLError) as exc:
+        raise UsageError(f"TLS: {exc}") from None
+    if server and ca:
+        ctx.verify_mode = ssl.CERT_REQUIRED
+    return ctx
+
+
+def build_device(args: argparse.Namespace, lab: Any):  # type: ignore[no-untyped-def]
+    """The device `args` describe, in `lab` (a `lab.topology.Lab`)."""
+    from ktcs_bench.ixl.modes import Mode
+    from ktcs_bench.type1 import LinkConfig
+
+    line = lab.load_line()
+    links = _roles(parse_links(args.link), {d.name: d.kind for d in lab.devices.values()})
+    control = args.control
+    kind = args.kind
+    from ktcs_bench.emulator import variants
+
+    faults = variants.check(getattr(args, "fault", []) or [], kind)
+    name = args.name or (f"{kind}{args.station}" if args.station else kind)
+    type1 = LinkConfig(
+        line_rate=None if args.unpaced else lab.line_rate,
+        longest_frame_data=lab.longest_frame_data,
+    )
+    if kind in ("ixl", "atc", "trackside"):
+        if args.station is None:
+            raise UsageError(f"emulator {kind} needs --station (one of {lab.stations})")
+        if args.station not in line.stations:
+            raise UsageError(
+                f"station {args.station} is not on the line (stations {sorted(line.stations)})"
+            )
+    if kind == "ixl":
+        from ktcs_bench.emulator.ixl import IxlDevice
+
+        mode = Mode(args.mode or lab.ixl_mode)
+        return IxlDevice(name, line, args.station, links, mode=mode, type1=type1,
+                         type1_profile=lab.type1_profile, control=control, faults=faults,
+                         ssl=tls_context(args, server=False),
+                         server_hostname=args.tls_server_name)  # fmt: skip
+    if kind == "atc":
+        from ktcs_bench.emulator.atc import AtcDevice
+
+        return AtcDevice(name, line, args.station, links, type1=type1,
+                         type1_profile=lab.type1_profile, control=control,
+                         faults=faults)  # fmt: skip
+    if kind == "trackside":
+        from ktcs_bench.emulator.trackside import TracksideDevice
+
+        return TracksideDevice(name, line, args.station, links, type1=type1,
+                               type1_profile=lab.type1_profile, control=control,
+                               faults=faults)  # fmt: skip
+    if kind == "trackcircuit":
+        from ktcs_bench.emulator.trackcircuit import TrackCircuitDevice
+
+        return TrackCircuitDevice(name, line, args.listen or ("127.0.0.1", 0), control)
+    if kind == "ctc":
+        from ktcs_bench.emulator.ctc import CtcDevice
+
+        listen = args.listen or ("127.0.0.1", lab.type2_port)
+        ars = lab.ars  # automatic route setting of the lab's timetable: the lab file's `ars:`
+        return CtcDevice(name, line, lab.stations, listen, control=control, console=args.console,
+                         console_origins=args.console_origin, taps=args.tap, faults=faults, allowed_sources=args.allow_source or None,
+                         ssl=tls_context(args, server=True),
+                         timetable=lab.load_timetable(line) if ars else None,
+                         ars_on=ars.start_on if ars else ())  # fmt: skip
+    if kind == "train":
+        from ktcs_bench.emulator.train import TrainDevice
+
+        return TrainDevice.from_args(name, lab, line, links, args.train, control)
+    raise UsageError(f"unknown kind {kind}")
