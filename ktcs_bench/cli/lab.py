@@ -1,4 +1,5 @@
-"""`ktcs-bench lab up|down|restart|status|kill`: the whole lab as processes on ptys and TCP."""
+"""`ktcs-bench lab up|down|restart|status|kill|simulate`: the whole lab as processes on ptys and
+TCP, or in this process on a virtual (`simulate`) or scaled (`up --in-process`) clock."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import signal
 import sys
 from typing import Any
 
-from ktcs_bench.cli._common import duration
+from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
 from ktcs_bench.transport import jsonlines
@@ -21,6 +22,8 @@ examples:
   ktcs-bench lab status --json           # from another shell: the live state as JSON
   ktcs-bench lab restart ixl20           # bring a crashed device back (full resync follows)
   ktcs-bench lab down
+  ktcs-bench lab simulate --for 3600 --seed 1 --out run1   # an hour of the lab in virtual time
+  ktcs-bench lab up --in-process --speed 10                # one process, 10x real time, console
 """
 
 
@@ -40,6 +43,27 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--json", action="store_true", help="print the link map and status as JSON lines"
     )
     up.add_argument("--interval", type=duration, default=1.0, help="status refresh period (s)")
+    up.add_argument(
+        "--in-process", action="store_true",
+        help="every device in this one process on a scaled clock (the light way on a small "
+        "machine), with the web console and control ports on real sockets",
+    )  # fmt: skip
+    up.add_argument("--speed", type=positive(float, 0.001), default=1.0,
+                    help="--in-process: the clock's speed, times real time (default 1)")  # fmt: skip
+    sim = lsub.add_parser(
+        "simulate", help="run the whole lab in this process on a virtual clock, as fast as it goes",
+        description="Run every device of the lab in this process on a virtual clock that jumps "
+        "from deadline to deadline: the same device objects, Type I links paced at the line rate "
+        "on virtual wires, Type II on memory streams, the taps between. Writes OUT/events.jsonl "
+        "(every device's events, virtual timestamps), OUT/captures/LINK.pcapng and "
+        "OUT/summary.json. Same lab, seed and duration: byte-identical events and captures.",
+    )  # fmt: skip
+    sim.add_argument("lab", nargs="?", help="lab file or shipped lab name (default: reference)")
+    sim.add_argument("--for", dest="duration", type=duration, required=True,
+                     help="seconds of virtual time to run")  # fmt: skip
+    sim.add_argument("--seed", type=int, default=0, help="seed of the taps' fault injectors")
+    sim.add_argument("--out", required=True, help="folder for events, captures and summary")
+    sim.add_argument("--json", action="store_true", help="print the summary as JSON")
     for name, text in (("down", "stop a running lab"), ("status", "show a running lab's status"),
                        ("map", "show a running lab's link map")):  # fmt: skip
         q = lsub.add_parser(name, help=text)
@@ -55,7 +79,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def run(args: argparse.Namespace) -> int:
     if args.lab_command == "up":
-        return _up(args)
+        return _up_in_process(args) if args.in_process else _up(args)
+    if args.lab_command == "simulate":
+        return _simulate(args)
     lab_name = getattr(args, "lab", None) or "reference"
     lab_name = load_lab(resolve_lab_path(lab_name)).name if lab_name.endswith(".yaml") else lab_name
     if args.lab_command == "down":
@@ -180,3 +206,104 @@ def _up(args: argparse.Namespace) -> int:
                 )
 
     return asyncio.run(main())
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    import logging
+    from pathlib import Path
+
+    from ktcs_bench.lab.inprocess import InProcessLab
+    from ktcs_bench.timed.vloop import VirtualDeadlock
+
+    logging.basicConfig(level=logging.ERROR, stream=sys.stderr)
+    lab = InProcessLab(args.lab, seed=args.seed, out=Path(args.out))
+    watched = sys.stderr.isatty()
+
+    async def main(lab: InProcessLab) -> None:
+        step = max(1.0, args.duration / 50)
+        done = 0.0
+        while done < args.duration:
+            await lab.sleep(min(step, args.duration - done))
+            done = min(args.duration, done + step)
+            if watched:
+                s = lab.summary()
+                print(f"\rvirtual {done:.0f} / {args.duration:g} s, wall {s['wall_s']:.1f} s "
+                      f"({s['speed_up']}x)", end="", file=sys.stderr, flush=True)  # fmt: skip
+        if watched:
+            print(file=sys.stderr)
+
+    try:
+        lab.run(main)
+    except VirtualDeadlock as exc:
+        print(f"ktcs-bench: the lab stalled: {exc}", file=sys.stderr)
+        return 3
+    summary = json.loads((Path(args.out) / "summary.json").read_text(encoding="utf-8"))
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"lab {summary['lab']}: {summary['virtual_s']:g} s of virtual time in "
+              f"{summary['wall_s']:g} s ({summary['speed_up']}x real time); "
+              f"{args.out}/events.jsonl, {args.out}/captures/, {args.out}/summary.json")  # fmt: skip
+        for name, train in summary["trains"].items():
+            print(f"  {name}: {json.dumps(train)}")
+    for name, why in summary["crashed"].items():
+        print(f"!! {name} crashed: {why}", file=sys.stderr)
+    return 3 if summary["crashed"] else 0
+
+
+def _up_in_process(args: argparse.Namespace) -> int:
+    import logging
+
+    from ktcs_bench.lab.inprocess import InProcessLab
+    from ktcs_bench.lab.state import clean_up_after, lab_dir
+    from ktcs_bench.lab.view import link_map_text, station_lines
+    from ktcs_bench.runtime import private_dir, server_token
+
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
+    spec = load_lab(resolve_lab_path(args.lab))
+    for line in clean_up_after(spec.name):
+        print(line, file=sys.stderr)
+    private_dir(lab_dir(spec.name))
+    token, token_file = server_token(lab_dir(spec.name) / "token")
+    lab = InProcessLab(spec, clock="scaled", speed=args.speed, console=True, token=token)
+    colour = args.colour
+
+    async def main(lab: InProcessLab) -> None:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, lab.stop_requested.set)
+        await lab.serve(token_file)
+        links = lab.link_map()
+        ctc = lab.ready.get(next((d.name for d in spec.of_kind("ctc")), ""), {})
+        if args.json:
+            print(json.dumps({"lab": spec.name, "control": lab.control_address, "links": links,
+                              "console": ctc.get("console")}), flush=True)  # fmt: skip
+        else:
+            print(link_map_text(links, colour))
+            print(f"lab {spec.name} is up in this process at {args.speed:g}x real time "
+                  f"(control {lab.control_address}"
+                  + (f", console {ctc['console']}" if ctc.get("console") else "")
+                  + "); Ctrl-C or `ktcs-bench lab down` stops it", flush=True)  # fmt: skip
+        end = None if args.duration is None else lab.now() + args.duration
+        last = ""
+        while not lab.stop_requested.is_set():
+            if end is not None and lab.now() >= end:
+                break
+            status = await lab.status()
+            if args.json:
+                print(json.dumps({"status": status}, default=str), flush=True)
+            else:
+                text = "\n".join(station_lines(status, colour))
+                if text != last:
+                    print(text, flush=True)
+                    last = text
+            try:
+                async with asyncio.timeout(args.interval * args.speed):
+                    await lab.stop_requested.wait()
+            except TimeoutError:
+                pass
+
+    lab.run(main)
+    if not args.json:
+        print(f"lab {spec.name}: stopped")
+    return 0
