@@ -84,6 +84,12 @@ class InProcessLab:
                 f"lab {self.topology.name}: Type II over TLS ({self.topology.type2_profile}) runs in a live "
                 "lab only (lab up), not in one process"
             )
+        external = [d.name for d in self.topology.devices.values() if d.external is not None]
+        if external:
+            raise UsageError(
+                f"lab {self.topology.name}: external devices ({', '.join(external)}) are real "
+                "ones a live lab links to (lab up); a lab in one process runs only its own"
+            )
         self.clock, self.seed, self.out, self.speed = clock, seed, out, speed
         self.console = console
         # what the devices' ports require (the lab's token when it serves people: `serve`)

@@ -24,7 +24,8 @@ from typing import Any
 import serial
 
 from ktcs_bench.datafiles import data_dir, load_yaml
-from ktcs_bench.emulator.build import KINDS, ROLE
+from ktcs_bench.emulator.build import KINDS as KINDS
+from ktcs_bench.emulator.build import ROLE as ROLE
 from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line

@@ -209,7 +209,7 @@ def test_a_lab_file_with_tls_is_refused_in_process(tmp_path: Path) -> None:
     from ktcs_bench.lab.topology import default_lab_path
 
     text = default_lab_path().read_text().replace("profile: ktcs-type2", "profile: type2-tls")
-    text = text.replace("line: ../lines/", f"line: {default_lab_path().parent.parent}/lines/")
+    text = text.replace(": ../", f": {default_lab_path().parent.parent}/")  # line, timetable
     lab_file = tmp_path / "tls.yaml"
     lab_file.write_text(text)
     with pytest.raises(UsageError, match="TLS .* runs in a live lab only"):
