@@ -57,15 +57,24 @@ class TrackCircuitModel:
 
     def shunted(self, tc: TrackCircuit) -> bool:
         """A train's axles are in the track circuit (before any fault)."""
-        for t in self.trains.values():
-            lo, hi = min(t.head_m, t.tail_m), max(t.head_m, t.tail_m)
-            if lo < tc.to_m and hi > tc.from_m and tc.on_track(t.track):
+        return self._shunted(tc, self._spans())
+
+    def _spans(self) -> list[tuple[float, float, str]]:
+        """Each train's axles: (lowest, highest chainage, track)."""
+        return [(min(t.head_m, t.tail_m), max(t.head_m, t.tail_m), t.track)
+                for t in self.trains.values()]  # fmt: skip
+
+    @staticmethod
+    def _shunted(tc: TrackCircuit, spans: list[tuple[float, float, str]]) -> bool:
+        for lo, hi, track in spans:
+            if lo < tc.to_m and hi > tc.from_m and tc.on_track(track):
                 return True
         return False
 
     def occupancy(self) -> dict[str, bool]:
         """Every track circuit of the line: occupied as its receiver reports it."""
         out: dict[str, bool] = {}
+        spans = self._spans()  # once for all the track circuits (every train move asks)
         for tc in self.tcs:
             fault = self.faults.get(tc.name)
             if fault == "failed_occupied":
@@ -73,7 +82,7 @@ class TrackCircuitModel:
             elif fault == "failed_clear":
                 out[tc.name] = False
             else:
-                out[tc.name] = self.shunted(tc)
+                out[tc.name] = self._shunted(tc, spans) if spans else False
         return out
 
     def set_codes(self, codes: Mapping[str, AtcCode]) -> None:

@@ -63,8 +63,10 @@ class PcapngWriter:
         link: str = "type1",
         endpoints: Mapping[str, tuple[str, int]] | None = None,
         close_stream: bool = False,
+        flush_each: bool = True,
     ) -> None:
         self._stream = stream
+        self._flush_each = flush_each  # live: readable as it grows; a virtual run: at the end
         self.encoder = PcapngEncoder(link, endpoints)
         self._close_stream = close_stream
         self._stream.write(self.encoder.start())
@@ -72,7 +74,8 @@ class PcapngWriter:
 
     def write(self, record: CaptureRecord) -> None:
         self._stream.write(self.encoder.encode(record))
-        self._stream.flush()
+        if self._flush_each:
+            self._stream.flush()
 
     def set_endpoint(self, name: str, host: str, port: int) -> None:
         """The real address of Type II end `name` for the packets that follow."""
@@ -120,12 +123,21 @@ def open_writer(
     profile: str | None = None,
     start: float | None = None,
     endpoints: Mapping[str, tuple[str, int]] | None = None,
+    flush_each: bool = True,
 ) -> _Closing:
-    """A writer for `path`, the format chosen by its suffix; `link` is type1/type2 (pcapng)."""
+    """A writer for `path`, the format chosen by its suffix; `link` is type1/type2 (pcapng).
+    `flush_each`: pcapng is flushed after every record (off: when the buffer fills, and at the
+    end -- a run on a virtual clock that nobody reads while it runs)."""
     try:
         if capture_kind(path) == "pcapng":
             return _Closing(
-                PcapngWriter(open(path, "wb"), link=link, endpoints=endpoints, close_stream=True)
+                PcapngWriter(
+                    open(path, "wb"),
+                    link=link,
+                    endpoints=endpoints,
+                    close_stream=True,
+                    flush_each=flush_each,
+                )  # fmt: skip
             )
         stream = open(path, "w", encoding="utf-8")
     except OSError as exc:

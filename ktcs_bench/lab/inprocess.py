@@ -215,7 +215,8 @@ class InProcessLab:
     def _tap_args(self, link: LinkSpec, index: int) -> dict[str, Any]:
         writers: list[CaptureWriter] = []
         if self.out is not None:
-            writers.append(open_writer(str(self._capture_path(link)), link=link.type))
+            writers.append(open_writer(str(self._capture_path(link)), link=link.type,
+                                       flush_each=self.clock != "virtual"))  # fmt: skip
         profile = (
             self.topology.type1_profile if link.type == "type1" else self.topology.type2_profile
         )
