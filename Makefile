@@ -36,6 +36,7 @@ bench: setup
 	$(BIN)/python benchmarks/lab.py
 	$(BIN)/python benchmarks/atp.py
 	$(BIN)/python benchmarks/scale.py
+	$(BIN)/python benchmarks/virtual_lab.py
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info .pytest_cache .mypy_cache .ruff_cache .hypothesis

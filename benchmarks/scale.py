@@ -15,8 +15,9 @@ figure printed under the table splits it: the time until `lab up` has started ev
 answers, the time from then until the stations are synced, and a device's start-up (from its
 spawn to the next device's spawn) by kind, from the processes' start times in /proc.
 
-Virtual time: `lab simulate` (the whole lab in one process on a virtual clock, issue 15 §2) does
-not exist yet; `virtual_speed_up` is where its figure (goal: >= 50x real time at 20 stations) goes.
+Virtual time: the same lab in one process on the virtual clock, as `lab simulate` runs it (issue 15
+§2): VIRTUAL_S of virtual time against the wall, start-up included (goal: >= 50x real time at 20
+stations).
 
 Run: python benchmarks/scale.py [--stations 3 10 20] [--timeout 300]
 """
@@ -38,11 +39,13 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench.lab.generate import write_line
+from ktcs_bench.lab.inprocess import InProcessLab
 from ktcs_bench.runtime import process_alive, read_token
 from ktcs_bench.station.generate import LAB_FILE
 from ktcs_bench.transport import jsonlines
 
 GOAL_STATIONS, GOAL_S, GOAL_BYTES = 20, 20.0, 1.5e9
+VIRTUAL_S = 600.0  # virtual seconds of each generated lab in one process
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 IDLE_SAMPLE_S = 5.0  # how long the ready lab's CPU use is sampled
 
@@ -203,10 +206,19 @@ def _boot_time() -> float:
     return time.monotonic() - uptime
 
 
-def virtual_speed_up(n: int) -> float | None:
-    """Virtual seconds per wall second of the generated N-station lab under `lab simulate` (issue
-    15 §2, goal >= 50x at 20 stations). The in-process lab does not exist yet: no figure."""
-    return None
+def virtual_speed_up(n: int, seconds: float = VIRTUAL_S) -> float:
+    """Virtual seconds per wall second of the generated N-station lab in one process on the
+    virtual clock, as `lab simulate` runs it (issue 15 §2, goal >= 50x at 20 stations): `seconds`
+    of virtual time, start-up included, captures and events written."""
+    tmp = Path(tempfile.mkdtemp(prefix=f"ktcs-scale-virtual-{n}-"))
+    try:
+        write_line(n, tmp / "line")
+        lab = InProcessLab(tmp / "line" / LAB_FILE, seed=1, out=tmp / "out")
+        t0 = time.monotonic()
+        lab.run(lambda lab: lab.sleep(seconds))
+        return seconds / (time.monotonic() - t0)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def main() -> None:
@@ -228,7 +240,8 @@ def main() -> None:
         print(f"{n:>8} {r['devices']:>7} {r['processes']:>5} {r['up_s']:>10.1f}s "
               f"{r['ready_s']:>6.1f}s {r['rss_bytes'] / 1e6:>7.0f}MB {r['pss_bytes'] / 1e6:>7.0f}MB "
               f"{'n/a' if v is None else f'{v:.0f}x':>9}", flush=True)  # fmt: skip
-    print("virtual: `lab simulate` (issue 15 §2) is not built yet -- no figure")
+    print(f"virtual: {VIRTUAL_S:.0f} s of the lab in one process on the virtual clock (lab simulate), "
+          "speed-up against the wall, start-up included")  # fmt: skip
     for r in rows:
         kinds = ", ".join(
             f"{k} {c}x{mb:.0f}MB" for k, (c, mb) in sorted(r["rss_by_kind_mb"].items())
