@@ -264,15 +264,15 @@ def _up_in_process(args: argparse.Namespace) -> int:
     for line in clean_up_after(spec.name):
         print(line, file=sys.stderr)
     private_dir(lab_dir(spec.name))
-    token, token_file = server_token(lab_dir(spec.name) / "token")
-    lab = InProcessLab(spec, clock="scaled", speed=args.speed, console=True, token=token)
+    token_file = server_token(lab_dir(spec.name) / "token")[1]
+    lab = InProcessLab(spec, clock="scaled", speed=args.speed, console=True, token_file=token_file)
     colour = args.colour
 
     async def main(lab: InProcessLab) -> None:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, lab.stop_requested.set)
-        await lab.serve(token_file)
+        await lab.serve()
         links = lab.link_map()
         ctc = lab.ready.get(next((d.name for d in spec.of_kind("ctc")), ""), {})
         if args.json:

@@ -39,7 +39,7 @@ from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.runner import device_args, lab_command, start_in_order
 from ktcs_bench.lab.state import read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec, load_lab, resolve_lab_path
-from ktcs_bench.runtime import this_process
+from ktcs_bench.runtime import server_token, this_process
 from ktcs_bench.tap.runner import Tap
 from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.tap.wire import WireTap
@@ -70,7 +70,7 @@ class InProcessLab:
         out: Path | None = None,
         speed: float = 1.0,
         console: bool = False,
-        token: str | None = None,
+        token_file: Path | None = None,
     ) -> None:
         if clock not in CLOCKS:
             raise UsageError(f"clock must be one of {', '.join(CLOCKS)}, not {clock!r}")
@@ -92,8 +92,10 @@ class InProcessLab:
             )
         self.clock, self.seed, self.out, self.speed = clock, seed, out, speed
         self.console = console
-        # what the devices' ports require (the lab's token when it serves people: `serve`)
-        self.token = token or secrets.token_hex(32)
+        # what the devices' ports require: the lab's token when it serves people (`token_file`:
+        # its taps and control ports then listen on real sockets, see `serve`)
+        self.token_file = token_file
+        self.token = server_token(token_file)[0] if token_file else secrets.token_hex(32)
         self.net: MemoryNetwork | None = None
         self.objects: dict[str, Device] = {}  # the running device objects
         self.running: dict[str, list[asyncio.Task[None]]] = {}
@@ -106,7 +108,6 @@ class InProcessLab:
         self.control_address = ""
         self.served: dict[str, str] = {}  # device -> the real address of its control port
         self._servers: list[net.Server] = []
-        self._token_file: Path | None = None
         self._events: IO[str] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._t0 = 0.0
@@ -221,11 +222,12 @@ class InProcessLab:
             self.topology.type1_profile if link.type == "type1" else self.topology.type2_profile
         )
         return {"names": (link.a, link.b), "profile": profile, "name": link.name,
-                "seed": self.seed * 1000 + index, "control": None, "writers": writers,
-                "epoch": False, "token_file": None}  # fmt: skip
+                "seed": self.seed * 1000 + index, "writers": writers, "epoch": False,
+                "control": ("127.0.0.1", 0) if self.token_file else None,
+                "token_file": self.token_file}  # fmt: skip
 
     async def _open_tap(self, link: LinkSpec, tap: Tap) -> None:
-        await tap.open_here()
+        await tap.open_here(announce=self.token_file is not None)
         self.taps[link.name] = tap
 
     def _capture_path(self, link: LinkSpec) -> Path:
@@ -330,6 +332,9 @@ class InProcessLab:
             entry: dict[str, Any] = {"link": link.name, "type": link.type, "a": link.a, "b": link.b,
                                      "a_end": self.endpoints.get(link.a, {}).get(
                                          self.topology.peer_role(link, link.a), "")}  # fmt: skip
+            tap = self.taps.get(link.name)
+            if tap is not None and tap.control_address:
+                entry["tap"] = f"{tap.control_address[0]}:{tap.control_address[1]}"
             if self.out is not None and link.tap:
                 entry["capture"] = str(self._capture_path(link))
             out.append(entry)
@@ -357,13 +362,14 @@ class InProcessLab:
 
     # -- stop --------------------------------------------------------------------------------------
     async def down(self) -> None:
-        """Stop every device (IXLs first, as `lab down`), then the taps; write the summary."""
+        """Stop every device -- the IXLs first (as `lab down`), then the others in the reverse of
+        their start, so the rails and the CTC go last -- then the taps; write the summary."""
         if self._loop is None:
             return
         self._virtual, self._wall = self.now(), time.monotonic() - self._wall0
         summary = self.summary()
         ixls = [n for n in self.objects if self.topology.devices[n].kind == "ixl"]
-        for name in [*ixls, *[n for n in list(self.objects) if n not in ixls]]:
+        for name in [*ixls, *[n for n in reversed(self.objects) if n not in ixls]]:
             await self.kill(name)
         for tap in self.taps.values():
             await tap.close_here()
@@ -378,12 +384,12 @@ class InProcessLab:
         self._loop = None
 
     # -- served to people (lab up --in-process) ---------------------------------------------------
-    async def serve(self, token_file: Path) -> None:
+    async def serve(self) -> None:
         """Real sockets for people: the lab's control port and each device's (proxies to the
         objects), and the lab's state file, so `ktcs-bench lab status`, `ktcs-bench ctc ...`
         and the taps' words work as with a live lab. Needs a scaled clock."""
-        if self.clock != "scaled":
-            raise UsageError("a lab on the virtual clock serves no one: use the scaled clock")
+        if self.clock != "scaled" or self.token_file is None:
+            raise UsageError("a lab serves people on the scaled clock with its token file")
         server = await jsonlines.serve(
             "127.0.0.1", 0, lambda obj, peer: self.lab(obj), token=self.token, real=True
         )
@@ -392,7 +398,6 @@ class InProcessLab:
         self.control_address = f"{host}:{port}"
         for name in self.topology.devices:
             await self._serve_device(name)
-        self._token_file = token_file
         self.write_state()
 
     async def _serve_device(self, name: str) -> None:
@@ -412,7 +417,7 @@ class InProcessLab:
                              "control": self.served.get(name, "")}  # fmt: skip
         write_state(self.topology.name, {
             "lab": self.topology.name, "file": str(self.topology.file), **this_process(),
-            "control": self.control_address, "token_file": str(self._token_file),
+            "control": self.control_address, "token_file": str(self.token_file),
             "in_process": {"clock": self.clock, "speed": self.speed},
             "devices": devices, "links": self.link_map(),
         })  # fmt: skip

@@ -81,6 +81,8 @@ class Tap:
         self.timer = LoopTimer(self.core, lambda now, out: self._apply(out))
         self._tasks: set[asyncio.Task[Any]] = set()
         self._server: net.Server | None = None
+        self._real_control = False  # the control port on a real socket even on a memory network
+        self._announced = False
         self._closing = False
 
     # -- life cycle --------------------------------------------------------------------------
@@ -130,15 +132,22 @@ class Tap:
             self._error = self._error or exc
             self._ready.set()
 
-    async def open_here(self) -> None:
+    async def open_here(self, *, announce: bool = False) -> None:
         """Run the tap on the running loop, with no thread of its own (a lab in one process);
-        `close_here()` ends it."""
+        `close_here()` ends it. `announce`: its control port is a real socket (whatever network
+        the loop has) and a named tap announces itself, so `ktcs-bench tap ...` finds it."""
+        self._real_control = announce
         if not await self._open():
             assert self._error is not None
             raise self._error
+        if announce and self.name:
+            registry.announce(self.name, self.info())
+            self._announced = True
         self._ready.set()
 
     async def close_here(self) -> None:
+        if self._announced and self.name:
+            registry.withdraw(self.name)
         await self._shut(own_loop=False)
 
     async def _open(self) -> bool:
@@ -154,7 +163,7 @@ class Tap:
             await self._open_ends()
             if self._control_want is not None:
                 self._server = await jsonlines.serve(
-                    *self._control_want, self._handle, token=self._token
+                    *self._control_want, self._handle, token=self._token, real=self._real_control
                 )
                 self.control_address = net.server_address(self._server)
         except OSError as exc:

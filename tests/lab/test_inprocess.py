@@ -4,10 +4,13 @@ ends -- operated through `LabAccess` as a live lab is."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
+import time
 from collections.abc import Awaitable, Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +20,8 @@ from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.lab.inprocess import InProcessLab
 from ktcs_bench.station.loader import load_line
+
+from .conftest import lab_file
 
 LINE = load_line()
 STOP = LINE.most_restrictive_code.code
@@ -66,8 +71,16 @@ async def all_up(lab: LabAccess) -> bool:
     return True
 
 
-def run(main: Callable[[InProcessLab], Awaitable[Any]], **kwargs: Any) -> Any:
-    return InProcessLab("reference", **kwargs).run(main)
+@pytest.fixture(scope="module")
+def empty_line(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The reference lab without its timetable trains (nothing sets routes but the test)."""
+    return lab_file(tmp_path_factory.mktemp("vlab"), "vlab")
+
+
+def run(
+    main: Callable[[InProcessLab], Awaitable[Any]], lab: str | Path = "reference", **kwargs: Any
+) -> Any:
+    return InProcessLab(lab, **kwargs).run(main)
 
 
 def test_the_reference_lab_comes_up_in_center_mode_with_every_link_up(tmp_path: Path) -> None:
@@ -86,7 +99,9 @@ def test_the_reference_lab_comes_up_in_center_mode_with_every_link_up(tmp_path: 
     assert '"virtual_s"' in summary_json and '"speed_up"' in summary_json
 
 
-def test_a_route_set_at_the_ctc_clears_the_signal_and_steps_the_atc_codes() -> None:
+def test_a_route_set_at_the_ctc_clears_the_signal_and_steps_the_atc_codes(
+    empty_line: Path,
+) -> None:
     async def main(lab: InProcessLab) -> None:
         await until(lab, "lab up", lambda: all_up(lab))
         before = (await status(lab, "atc18"))["codes"]
@@ -106,7 +121,7 @@ def test_a_route_set_at_the_ctc_clears_the_signal_and_steps_the_atc_codes() -> N
         )  # fmt: skip
         assert after["TC1853A"][0] != STOP
 
-    run(main)
+    run(main, empty_line)
 
 
 async def _codes_if(lab: LabAccess, atc: str, ok: Callable[[dict[str, Any]], bool]) -> Any:
@@ -114,7 +129,9 @@ async def _codes_if(lab: LabAccess, atc: str, ok: Callable[[dict[str, Any]], boo
     return codes if codes and ok(codes) else None
 
 
-def test_a_type1_cut_gives_stop_everywhere_and_restore_resyncs(tmp_path: Path) -> None:
+def test_a_type1_cut_gives_stop_everywhere_and_restore_resyncs(
+    tmp_path: Path, empty_line: Path
+) -> None:
     async def main(lab: InProcessLab) -> None:
         await until(lab, "lab up", lambda: all_up(lab))
         answer = await lab.device(
@@ -142,13 +159,15 @@ def test_a_type1_cut_gives_stop_everywhere_and_restore_resyncs(tmp_path: Path) -
         await until(lab, "the ATC link resyncs", link_back)
         await until(lab, "signal 01 clears again", lambda: signal(22, False))
 
-    run(main, out=tmp_path)
+    run(main, empty_line, out=tmp_path)
     events = (tmp_path / "events.jsonl").read_text()
     assert '"kind":"tap","t":' in events and '"text":"cut"' in events
     assert '"text":"atc down' in events
 
 
-def test_an_ixl_restarted_in_process_resyncs_and_the_ctc_view_equals_it_again() -> None:
+def test_an_ixl_restarted_in_process_resyncs_and_the_ctc_view_equals_it_again(
+    empty_line: Path,
+) -> None:
     async def main(lab: InProcessLab) -> None:
         await until(lab, "lab up", lambda: all_up(lab))
         answer = await lab.device(
@@ -166,8 +185,36 @@ def test_an_ixl_restarted_in_process_resyncs_and_the_ctc_view_equals_it_again() 
         await until(lab, "station 20 back", lambda: _link_is(lab, 20, "up"))
         await until(lab, "CTC view equals the IXL's state", lambda: _ctc_equals_ixl(lab, 20))
         assert (await summary(lab, 20))["routes"] == []  # a restarted IXL has nothing locked
+        # a CTC restarted: every station reconnects and its view equals its IXL's again
+        assert await lab.lab({"cmd": "restart", "device": "ctc"}) == {"ok": True}
+        for st in (18, 20, 22):
+            await until(lab, f"station {st} back at the new CTC", partial(_link_is, lab, st, "up"))
+            await until(lab, f"CTC view of {st} equals its IXL", partial(_ctc_equals_ixl, lab, st))
 
-    run(main)
+    run(main, empty_line)
+
+
+def test_device_faults_through_the_devices_own_commands(empty_line: Path) -> None:
+    async def main(lab: InProcessLab) -> None:
+        await until(lab, "lab up", lambda: all_up(lab))
+        answer = await lab.device("io20", {"cmd": "fail_point", "point": "31", "kind": "detection"})
+        assert answer == {"ok": True}, answer
+
+        async def point(state: str) -> bool:
+            return bool((await status(lab, "ixl20"))["points"]["31"] == state)
+
+        await until(lab, "the IXL loses point 31's detection", lambda: point("none"))
+        assert (await lab.device("io20", {"cmd": "clear_faults"}))["ok"]
+        await until(lab, "detection back", lambda: point("normal"))
+        answer = await lab.device("tc", {"cmd": "fail", "tc": "TC2054", "kind": "failed_occupied"})
+        assert answer == {"ok": True}, answer
+
+        async def occupied() -> bool:
+            return "TC2054" in (await status(lab, "ixl20"))["occupied"]
+
+        await until(lab, "the failed track circuit reads occupied at the IXL", occupied)
+
+    run(main, empty_line)
 
 
 async def _routes(lab: LabAccess, st: int) -> bool:
@@ -239,3 +286,45 @@ def test_same_lab_seed_and_duration_give_byte_identical_events_and_captures(
     for f in files:
         assert (a / f).read_bytes() == (b / f).read_bytes(), f"{f} differs between two runs"
     assert len((a / "events.jsonl").read_bytes()) > 1000
+
+
+def test_lab_up_in_process_serves_status_ctc_and_taps_on_real_sockets(
+    tmp_path: Path, empty_line: Path
+) -> None:
+    """`lab up --in-process`: one process, a scaled clock, and the lab answers the same commands
+    on real sockets as a live lab (`lab status`, `ctc show`, `tap fault`), and `lab down` ends it."""
+    env = {**os.environ, "KTCS_BENCH_RUN_DIR": str(tmp_path / "run")}
+
+    def cli(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "ktcs_bench.cli.main", *args],
+                              capture_output=True, text=True, env=env, timeout=60)  # fmt: skip
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(empty_line),
+         "--in-process", "--speed", "5", "--json", "--interval", "3600"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        first = json.loads(proc.stdout.readline() or "{}")
+        assert first.get("lab") == "vlab" and first.get("console"), first
+        deadline = time.monotonic() + 60
+        while True:  # the stations come up (the lab's clock runs 5x the wall's)
+            run_ = cli("lab", "status", "vlab", "--json")
+            assert run_.returncode == 0, run_.stderr
+            stations = json.loads(run_.stdout)["stations"]
+            if stations and all(s["link"] == "up" and s["synced"] for s in stations.values()):
+                break
+            assert time.monotonic() < deadline, stations
+            time.sleep(0.5)
+        run_ = cli("ctc", "--lab", "vlab", "--json", "show", "20")
+        assert run_.returncode == 0 and json.loads(run_.stdout)["summary"]["link"] == "up", run_
+        run_ = cli("tap", "fault", "st20-atc", "cut")
+        assert run_.returncode == 0 and "cut" in run_.stdout, run_.stderr
+        run_ = cli("lab", "down", "vlab")
+        assert run_.returncode == 0, run_.stderr
+        assert proc.wait(30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
