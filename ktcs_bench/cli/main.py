@@ -63,7 +63,27 @@ def _add_colour_option(parser: argparse.ArgumentParser, top: bool) -> None:
                     _add_colour_option(child, top=False)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand; with `command` (the word after `ktcs-bench`), of that one
+    alone when it is a module here that registers it. A lab starts dozens of `ktcs-bench emulator`
+    processes: each then imports what a device needs, not every command's modules."""
+    if command is not None and not command.startswith("_") and command != "main":
+        parser = _parser([command])
+        if command in _commands(parser):
+            return parser
+    return _parser(None)
+
+
+def _commands(parser: argparse.ArgumentParser) -> set[str]:
+    return {
+        name
+        for action in parser._actions
+        if isinstance(action, argparse._SubParsersAction)
+        for name in action.choices
+    }
+
+
+def _parser(only: list[str] | None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ktcs-bench",
         description=DESCRIPTION,
@@ -77,6 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
     for info in sorted(pkgutil.iter_modules(cli_pkg.__path__), key=lambda m: m.name):
         if info.name.startswith("_") or info.name == "main":
             continue
+        if only is not None and info.name not in only:
+            continue
         module = importlib.import_module(f"ktcs_bench.cli.{info.name}")
         register = getattr(module, "register", None)
         if register is not None:
@@ -86,8 +108,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    # the top-level options take no value: the first other word names the command
+    parser = build_parser(next((w for w in words if not w.startswith("-")), None))
+    args = parser.parse_args(words)
     handler = getattr(args, "handler", None)
     if handler is None:
         parser.print_help()
