@@ -1,8 +1,10 @@
 """`lab up`: start a lab's devices as processes, put taps in its links, watch them, report status.
 
-Order of start: the track-circuit emulator (the rails), the CTC (the Type II server), the taps
-(a pty pair per Type I end; a TCP proxy per Type II link), then each station's ATC and trackside
-I/O, then its IXL. Every device is `ktcs-bench emulator KIND ...` -- the same command a user runs
+Order of start: the track-circuit emulator (the rails) and the CTC (the Type II server), the taps
+(a pty pair per Type I end; a TCP proxy per Type II link), then every station's ATC and trackside
+I/O, then the IXLs, then the trains. The devices of one step start together (a few at a time, as
+the machine has cores), none waiting for another's ready line: nothing one needs comes from
+another of its step. Every device is `ktcs-bench emulator KIND ...` -- the same command a user runs
 to put one device on another machine -- so the lab assumes nothing the devices do not.
 
 An external device (a real one, `external:` in the lab file) is not started: its link's tap opens
@@ -16,9 +18,10 @@ from __future__ import annotations
 import asyncio
 import logging
 import os
+from collections.abc import Awaitable, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 from urllib.parse import urlsplit
 
 from ktcs_bench.capture import open_writer
@@ -33,6 +36,10 @@ from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.transport import jsonlines
 
 log = logging.getLogger("ktcs_bench.lab")
+T = TypeVar("T")
+
+# devices a live lab starts at once: a start is mostly the interpreter's CPU (imports, line data)
+STARTS_AT_ONCE = max(4, 2 * (os.cpu_count() or 1))
 
 
 def device_args(
@@ -97,23 +104,46 @@ class LabStarter(Protocol):
 
 
 async def start_in_order(
-    lab: Lab, starter: LabStarter, endpoints: dict[str, dict[str, str]]
+    lab: Lab, starter: LabStarter, endpoints: dict[str, dict[str, str]], together: bool = False
 ) -> None:
     """Start a lab's devices in the order every lab starts them, filling in `endpoints` (device ->
-    role -> endpoint) on the way: the track circuits (the rails), the CTC (the Type II server),
-    the links (taps), each station's ATC and trackside I/O, its IXL, then the trains. An
-    external device is not started: a real CTC's address is the Type II target, a real Type I
-    peer's serial line is the IXL's (or its tap's) end."""
-    rails = None
-    for tc in lab.of_kind("trackcircuit"):
-        rails = (await starter._start(tc.name))["listen"]
+    role -> endpoint) on the way: the track circuits (the rails) and the CTC (the Type II server),
+    the links (taps), every station's ATC and trackside I/O, the IXLs (each followed by the peers
+    on its untapped ptys), then the trains. An external device is not started: a real CTC's
+    address is the Type II target, a real Type I peer's serial line is the IXL's (or its tap's)
+    end. `together`: the devices of one step start at once, not one after another."""
+
+    async def step(*starts: Coroutine[Any, Any, T]) -> list[T]:
+        if together:
+            return await _together(*starts)
+        try:
+            return [await s for s in starts]
+        finally:
+            for s in starts:
+                s.close()  # those not run after one failed (a no-op on those that ran)
+
+    async def ixl_and_peers(ixl: str) -> None:
+        ready = await starter._start(ixl)
+        peers = [peer for peer, lk in untapped.items() if lk.a == ixl]
+        for peer in peers:
+            role = lab.peer_role(untapped[peer], ixl)
+            endpoints.setdefault(peer, {})["ixl"] = ready["ptys"][role]
+        await step(*(starter._start(p) for p in peers))
+
     ctc_address = None
+    first = list(lab.of_kind("trackcircuit"))
     for ctc in lab.of_kind("ctc"):
         if ctc.external is not None and ctc.external.address is not None:
             ctc_address = ctc.external.address  # a real CTC, serving there
-            continue
-        host, _, port = (await starter._start(ctc.name))["listen"].rpartition(":")
-        ctc_address = (host, int(port))
+        else:
+            first.append(ctc)
+    rails = None
+    for d, ready in zip(first, await step(*(starter._start(d.name) for d in first)), strict=True):
+        if d.kind == "trackcircuit":
+            rails = ready["listen"]
+        else:
+            host, _, port = ready["listen"].rpartition(":")
+            ctc_address = (host, int(port))
     untapped: dict[str, LinkSpec] = {}
     for index, link in enumerate(lab.links):
         a, b = link.a, link.b
@@ -136,16 +166,19 @@ async def start_in_order(
                 endpoints.setdefault(d.name, {})["rails"] = f"tcp://{rails}"
     ours = [d.name for d in lab.devices.values() if d.external is None]
     order = [n for n in ours if lab.devices[n].kind in ("atc", "trackside")]
-    for name in [n for n in order if n not in untapped]:
-        await starter._start(name)
-    for ixl in lab.ours("ixl"):
-        ready = await starter._start(ixl.name)
-        for peer, lk in untapped.items():
-            if lk.a == ixl.name:
-                endpoints.setdefault(peer, {})["ixl"] = ready["ptys"][lab.peer_role(lk, ixl.name)]
-                await starter._start(peer)
-    for d in lab.of_kind("train"):
-        await starter._start(d.name)
+    await step(*(starter._start(n) for n in order if n not in untapped))
+    await step(*(ixl_and_peers(ixl.name) for ixl in lab.ours("ixl")))
+    await step(*(starter._start(d.name) for d in lab.of_kind("train")))
+
+
+async def _together(*starts: Awaitable[T]) -> list[T]:
+    """Run these starts at once; their results, in order. One that fails fails the whole, raised
+    once every start has ended, so no device is left half started when the lab stops."""
+    results = await asyncio.gather(*starts, return_exceptions=True)
+    for result in results:
+        if isinstance(result, BaseException):
+            raise result
+    return [r for r in results if not isinstance(r, BaseException)]
 
 
 class LabCommands(Protocol):
@@ -201,6 +234,7 @@ class LabRunner:
     stop_requested: asyncio.Event = field(default_factory=asyncio.Event)
     token: str = ""  # what every control port of this lab requires (runtime)
     token_file: Path | None = None
+    _starting: asyncio.Semaphore = field(default_factory=lambda: asyncio.Semaphore(STARTS_AT_ONCE))
 
     @property
     def dir(self) -> Path:
@@ -219,10 +253,11 @@ class LabRunner:
         child = self.children.get(name) or Child(name, [], self.dir / "logs" / f"{name}.log")
         child.argv = self._argv(name)
         self.children[name] = child
-        try:
-            ready = await asyncio.to_thread(child.start)
-        finally:
-            self._write_state()
+        async with self._starting:
+            try:
+                ready = await asyncio.to_thread(child.start)
+            finally:
+                self._write_state()
         self.crashed.pop(name, None)
         return ready
 
@@ -277,7 +312,7 @@ class LabRunner:
         private_dir(self.dir / "captures")
         self.token, self.token_file = server_token(self.dir / "token")
         self._write_state()  # from now on, whatever kills this lab, the next one can clean up
-        await start_in_order(self.lab, self, self.endpoints)
+        await start_in_order(self.lab, self, self.endpoints, together=True)
         await self._trains_to_ctc()
         await self._serve_control()
         self._write_state()
@@ -306,7 +341,12 @@ class LabRunner:
             "control": self.control_address,
             "token_file": str(self.token_file),
             "devices": {
-                n: {"pid": c.proc.pid if c.proc else None, "started": c.started, **c.ready}
+                # a device by pid and start time together (one starting has no start time yet)
+                n: {
+                    "pid": c.proc.pid if c.proc and c.started is not None else None,
+                    "started": c.started,
+                    **c.ready,
+                }
                 for n, c in self.children.items()
             },
             "links": self.link_map(),

@@ -150,10 +150,11 @@ def start_lab(
     ready: Callable[[RunningLab], Any] | None = None,
     trains: bool = False,
 ) -> Iterator[RunningLab]:
-    """Start a lab and wait until every station is synced at the CTC in center mode (and, with
-    `clear`, the empty line reported clear), or until `ready(lab)` holds when given (a lab whose
-    CTC is not its own). The lab is the reference lab renamed `name` (`lab_file`, with its
-    timetable trains if `trains`), or the lab file at `path` (whose lab must be called `name`)."""
+    """Start a lab and wait until every station is synced at the CTC in center mode with every
+    point detected (and, with `clear`, the empty line reported clear), or until `ready(lab)` holds
+    when given (a lab whose CTC is not its own). The lab is the reference lab renamed `name`
+    (`lab_file`, with its timetable trains if `trains`), or the lab file at `path` (whose lab must
+    be called `name`)."""
     run_dir = tmp / "run"
     RUN_DIRS.append(run_dir)
     if path is None:
@@ -174,14 +175,17 @@ def start_lab(
         import threading
 
         threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()  # type: ignore[union-attr]
+        # a station syncs at the CTC as soon as its IXL is up, before its field reports: the
+        # points read failed (undetected) until the trackside's first indications reach it
         wait_until(
-            "every station synced at the CTC, the empty line reported clear",
+            "every station synced at the CTC, every point detected, the empty line reported clear",
             (lambda: ready(lab))
             if ready is not None
             else lambda: all(
                 s["link"] == "up"
                 and s["synced"]
                 and s["mode"] == "center"
+                and "failed" not in s["points"].values()
                 and not (clear and s["occupied"])
                 for s in lab.ctc({"cmd": "status"})["status"]["stations"].values()
             ),
