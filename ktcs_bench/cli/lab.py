@@ -59,10 +59,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "OUT/summary.json. Same lab, seed and duration: byte-identical events and captures.",
     )  # fmt: skip
     sim.add_argument("lab", nargs="?", help="lab file or shipped lab name (default: reference)")
-    sim.add_argument("--for", dest="duration", type=duration, required=True,
-                     help="seconds of virtual time to run")  # fmt: skip
+    sim.add_argument("--for", dest="duration", type=duration,
+                     help="seconds of virtual time to run (not with --replay)")  # fmt: skip
     sim.add_argument("--seed", type=int, default=0, help="seed of the taps' fault injectors")
-    sim.add_argument("--out", required=True, help="folder for events, captures and summary")
+    sim.add_argument("--out", help="folder for events, captures and summary (optional with "
+                     "--replay)")  # fmt: skip
+    sim.add_argument("--replay", metavar="FILE",
+                     help="run a safety-search failure again (docs/system_safety.md): the file's "
+                     "lab, seed and steps, with the search's checks; exit 1 on a violation")  # fmt: skip
     sim.add_argument("--json", action="store_true", help="print the summary as JSON")
     for name, text in (("down", "stop a running lab"), ("status", "show a running lab's status"),
                        ("map", "show a running lab's link map")):  # fmt: skip
@@ -216,6 +220,10 @@ def _simulate(args: argparse.Namespace) -> int:
     from ktcs_bench.timed.vloop import VirtualDeadlock
 
     logging.basicConfig(level=logging.ERROR, stream=sys.stderr)
+    if args.replay is not None:
+        return _replay(args)
+    if args.duration is None or args.out is None:
+        raise UsageError("lab simulate: give --for DURATION and --out DIR (or --replay FILE)")
     lab = InProcessLab(args.lab, seed=args.seed, out=Path(args.out))
     watched = sys.stderr.isatty()
 
@@ -249,6 +257,28 @@ def _simulate(args: argparse.Namespace) -> int:
     for name, why in summary["crashed"].items():
         print(f"!! {name} crashed: {why}", file=sys.stderr)
     return 3 if summary["crashed"] else 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    """`lab simulate --replay FILE`: a saved failure of the safety search, run again."""
+    from pathlib import Path
+
+    from ktcs_bench.lab.inprocess import InProcessLab
+    from ktcs_bench.lab.safety import load_replay, replay_steps
+
+    replay = load_replay(Path(args.replay))
+    lab = InProcessLab(args.lab or replay.lab, seed=replay.seed,
+                       out=Path(args.out) if args.out else None)  # fmt: skip
+    line = lab.topology.load_line()
+    runs = lab.run(lambda access: replay_steps(access, replay, line))
+    found = 0
+    for index, run in enumerate(runs):
+        for v in run.violations:
+            found += 1
+            print(f"step {index} {json.dumps(dict(run.step))}: {v}")
+    print(f"replay {args.replay}: lab {lab.topology.name}, seed {replay.seed}, {len(runs)} steps, "
+          f"{found} violation(s)")  # fmt: skip
+    return 1 if found else 0
 
 
 def _up_in_process(args: argparse.Namespace) -> int:

@@ -51,6 +51,8 @@ def arguments(p: argparse.ArgumentParser) -> None:
         "--mode", choices=("center", "local"), help="ixl: start mode (default: the lab's)"
     )
     p.add_argument("--unpaced", action="store_true", help="Type I: no line-rate pacing")
+    p.add_argument("--restarted", action="store_true",
+                   help="ixl: restarted in a running lab (a crash recovery): start-up locking")  # fmt: skip
     p.add_argument("--train", help="train: the train id / scenario train to run")
     p.add_argument("--console", type=host_port(any_free=True), metavar="HOST:PORT",
                    help="ctc: serve the web console here")  # fmt: skip
@@ -158,7 +160,8 @@ def build_device(args: argparse.Namespace, lab: Any):  # type: ignore[no-untyped
         return IxlDevice(name, line, args.station, links, mode=mode, type1=type1,
                          type1_profile=lab.type1_profile, control=control, faults=faults,
                          ssl=tls_context(args, server=False),
-                         server_hostname=args.tls_server_name)  # fmt: skip
+                         server_hostname=args.tls_server_name,
+                         restarted=args.restarted)  # fmt: skip
     if kind == "atc":
         from ktcs_bench.emulator.atc import AtcDevice
 

@@ -40,11 +40,13 @@ class IxlDevice(Device):
         faults: frozenset[str] = frozenset(),
         ssl: Any = None,
         server_hostname: str | None = None,
+        restarted: bool = False,
     ) -> None:
         super().__init__(name, control)
         self.station = station
         view = line.view(station)
-        self.ixl = Interlocking(view, mode=mode, tc_sources=("atc",))
+        # restarted in a running lab (a crash recovery): start-up locking (ixl.interlocking)
+        self.ixl = Interlocking(view, mode=mode, tc_sources=("atc",), startup_locking=restarted)
         self.drive(self.ixl, lambda now, out: self.apply(out))
         self.ports: dict[str, CodePort] = {}
         for role in ("atc", "io"):
@@ -136,6 +138,7 @@ class IxlDevice(Device):
                 for n, rs in ixl.routes.items()
                 if rs.holds_anything
             },  # fmt: skip
+            "startup_held": sorted(ixl.startup_held),  # start-up locking (ixl.interlocking)
             "points": {n: ixl.detection(n) for n in ixl.points},
             "signals": {n: ixl.aspect(n) for n in ixl.signals},
             "occupied": [t for t in ixl.tc_names if ixl.occupied(t)],

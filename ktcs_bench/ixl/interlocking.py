@@ -13,6 +13,15 @@ Fail-safe defaults: links start down; a track circuit is occupied until its sour
 clear and whenever a link that reports it is down; a point has no detection until the trackside
 reports it and whenever the trackside link is down. A link that went down is believed again only
 for what it reports after it came back: nothing it said before the outage is reused.
+
+Start-up locking (`startup_locking=True`: an interlocking restarted in a running railway, after a
+crash): it knows nothing of the routes its predecessor had set, while a train may still be running
+on one of them, braking on the most restrictive code. So it starts with every track circuit and
+point of its station locked (no route over them, no point moved): when its first live occupancy
+shows the station and its plain line clear, the lock goes at once; otherwise it goes after the
+longest approach-locking time of the station's routes, as a cancelled route's would -- time for
+any train to have stopped. A cold start with the railway at rest (a lab's start: the trains stand
+where the lab puts them) has no start-up locking.
 """
 
 from __future__ import annotations
@@ -69,6 +78,7 @@ class Interlocking:
         auto_grant_s: float | None = None,
         tc_sources: Iterable[str] = ("atc",),
         log_limit: int = 10_000,
+        startup_locking: bool = False,
     ) -> None:
         self.view = view
         self.st = view.number
@@ -106,6 +116,13 @@ class Interlocking:
         self._log_limit = log_limit
         self._events: list[IxlEvent] = []
         self._results: list[ControlResult] = []
+        # start-up locking (see the module docstring): released at the first live occupancy if
+        # everything is clear, else on its timer, started then
+        self.startup_held: set[str] = (
+            set(self.tc_names) | set(self.points) if startup_locking else set()
+        )
+        self.startup_release_s = max((r.approach_release_s for r in st.routes), default=0.0)
+        self.startup_release_at: float | None = None
         self._evaluate(0.0)
         self._sent = {k: self.full_state(k) for k in OUTPUTS}
         self._events.clear()
@@ -188,6 +205,7 @@ class Interlocking:
         then, and the report that brings the link back runs it."""
         due = [self.modes.next_deadline()]
         live = self._reports_live()
+        due.append(self.startup_release_at if self.startup_held else None)
         for rs in self.routes.values():
             due += [rs.release_at, rs.overlap_at if live else None]
         return min((d for d in due if d is not None), default=None)
@@ -268,6 +286,10 @@ class Interlocking:
             return Reason.NONE
         return Reason.UNKNOWN_CODE  # pragma: no cover - every chart control is handled above
 
+    def startup_locked(self, element: str) -> bool:
+        """A track circuit or point still held by start-up locking."""
+        return element in self.startup_held
+
     def _holder_of(self, element: str, point: bool) -> RouteState | None:
         for rs in self.routes.values():
             if element in (rs.held_points if point else rs.held_tcs):
@@ -290,6 +312,9 @@ class Interlocking:
         elements = [(tc, False) for tc in r.all_track_circuits]
         elements += [(s.point, True) for s in r.all_points]
         for element, is_point in elements:
+            if element in self.startup_held:
+                self._event(now, "route", f"route {name} refused: {element} start-up locked")
+                return Reason.ROUTE_CONFLICTS
             holder = self._holder_of(element, point=is_point)
             if holder is None:
                 continue
@@ -355,7 +380,7 @@ class Interlocking:
 
     def _move_point(self, name: str, position: PointPosition, now: float) -> Reason:
         ps = self.points[name]
-        if self._holder_of(name, point=True) is not None:
+        if self._holder_of(name, point=True) is not None or name in self.startup_held:
             return Reason.POINT_LOCKED
         if any(self.occupied(tc) for tc in ps.point.track_circuits):
             return Reason.TRACK_OCCUPIED
@@ -428,6 +453,8 @@ class Interlocking:
         if self.modes.handle_timer(now):
             self._event(now, "mode", "center mode granted automatically")
         live = self._reports_live()
+        if self.startup_held and live:
+            self._startup_release(now)
         for rs in self.routes.values():
             if rs.release_at is not None:
                 if now >= rs.release_at:
@@ -446,6 +473,23 @@ class Interlocking:
         self._update_signals(now)
         if live:
             self._occupied_before = {tc: self.occupied(tc) for tc in self.tc_names}
+
+    def _startup_release(self, now: float) -> None:
+        """Start-up locking ends: the station seen clear, or its time run out."""
+        if not any(self.occupied(tc) for tc in self.tc_names):
+            why = "the station is clear"
+        elif self.startup_release_at is None:
+            self.startup_release_at = now + self.startup_release_s
+            self._event(now, "route", "start-up: a track circuit is occupied; every point and "
+                        f"track circuit stays locked for {self.startup_release_s:g} s")  # fmt: skip
+            return
+        elif now >= self.startup_release_at:
+            why = "timed release"
+        else:
+            return
+        self.startup_held.clear()
+        self.startup_release_at = None
+        self._event(now, "route", f"start-up locking released ({why})")
 
     def _retake_overlap(self, rs: RouteState, now: float) -> None:
         """The onward route let our overlap go (cancelled or released): lock it again if free."""
@@ -638,6 +682,7 @@ class Interlocking:
             n.cmr(st): int(self.modes.requested),
         }
         locked = {p for rs in self.routes.values() for p in rs.held_points}
+        locked |= self.startup_held & set(self.points)
         for name in self.points:
             det = self.detection(name)
             out[n.sni(st, name)] = int(det == "normal")

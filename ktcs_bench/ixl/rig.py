@@ -11,7 +11,7 @@ also handed to `on_ctc` as they come (a Type II link to a real CTC). No I/O, no 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 from ktcs_bench.codes import names as n
 from ktcs_bench.field.trackside import Trackside
@@ -22,12 +22,23 @@ from ktcs_bench.timed.virtual import VirtualClock
 
 
 class StationRig:
-    def __init__(self, view: StationView, *, mode: Mode = Mode.CENTER, now: float = 0.0) -> None:
+    def __init__(
+        self,
+        view: StationView,
+        *,
+        mode: Mode = Mode.CENTER,
+        now: float = 0.0,
+        occupied: Iterable[str] = (),
+        startup_locking: bool = False,
+    ) -> None:
+        """`occupied`: track circuits with a train in them when the interlocking starts;
+        `startup_locking`: it starts as one restarted in a running railway."""
         self.view = view
         self.now = now
-        self.ixl = Interlocking(view, mode=mode)
+        self.ixl = Interlocking(view, mode=mode, startup_locking=startup_locking)
         self.io = Trackside(view)
-        self.occupancy = {t.name: False for t in view.track_circuits}
+        self.occupancy = {t.name: t.name in set(occupied) for t in view.track_circuits}
+        self.io.set_occupancy(self.occupancy, now)
         self.ctc = self.ixl.full_state("ctc")  # the CTC's picture, kept by indication changes
         self.atc = self.ixl.full_state("atc")  # what the ATC is told
         self.events: list[IxlEvent] = []

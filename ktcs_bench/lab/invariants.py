@@ -76,6 +76,7 @@ class StationState:
     links: Mapping[str, bool] | None = None
     routes: Mapping[str, str] | None = None  # route -> status value (idle, setting, set, ...)
     held: Mapping[str, frozenset[str]] | None = None  # route -> track circuits and points held
+    startup_held: frozenset[str] = frozenset()  # held by the IXL's start-up locking
     detection: Mapping[str, str] | None = None  # point -> as the IXL reads it
     signals: Mapping[str, str] | None = None  # signal -> commanded aspect
     occupied: frozenset[str] | None = None  # as the IXL takes it
@@ -89,10 +90,12 @@ class StationState:
         return self.routes is not None
 
     def holders(self, element: str) -> list[str]:
-        """Routes in a protecting state holding `element` (a track circuit or a point)."""
+        """Routes in a protecting state holding `element` (a track circuit or a point), and
+        "start-up locking" while the IXL's start-up lock holds it."""
+        startup = ["start-up locking"] if element in self.startup_held else []
         if self.routes is None or self.held is None:
-            return []
-        return [
+            return startup
+        return startup + [
             r for r, els in self.held.items() if element in els and self.routes.get(r) in PROTECTING
         ]
 
@@ -303,7 +306,8 @@ def _ran_onto(
     for s in (prev, snap):
         view = s.stations.get(number)
         routes += [r for r in (view.holders(tc) if view else []) if r not in routes]
-    wants = {geo.required[(number, r)][p] for r in routes if p in geo.required[(number, r)]}
+    needs = [geo.required.get((number, r), {}) for r in routes]
+    wants = {need[p] for need in needs if p in need}
     if m.position is None or m.moving:
         return [Violation(3, "point_not_lying", f"{number}/{p}", snap.time,
                           f"train {train} ran onto point {p} of station {number} (in {tc}) "
@@ -436,6 +440,7 @@ async def snapshot(access: LabAccess, views: bool = True) -> LabSnapshot:
             links=None if ixl is None else dict(ixl.get("links", {})),
             routes=None if ixl is None else {r: _status_value(s) for r, s in ixl["routes"].items()},
             held=None if ixl is None else {r: frozenset(e) for r, e in ixl.get("held", {}).items()},
+            startup_held=frozenset() if ixl is None else frozenset(ixl.get("startup_held", [])),
             detection=None if ixl is None else dict(ixl.get("points", {})),
             signals=None if ixl is None else dict(ixl.get("signals", {})),
             occupied=None if ixl is None else frozenset(ixl.get("occupied", [])),

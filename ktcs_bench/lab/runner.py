@@ -79,6 +79,8 @@ def device_args(
             argv += ["--console", f"{d.host}:{port}"]
             argv += [arg for o in lab.console_origins for arg in ("--console-origin", o)]
             argv += [arg for lk in lab.links if lk.tap for arg in ("--tap", lk.name)]
+    if d.kind == "ixl" and before:  # restarted in a running lab: start-up locking
+        argv.append("--restarted")
     if d.kind == "train" and "train" in d.options:
         argv += ["--train", str(d.options["train"])]
     return argv

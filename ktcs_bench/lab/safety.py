@@ -10,6 +10,7 @@ its IXL and each IXL's occupancy the rails (invariant 4), or says that they neve
     {"do": "point", "station": 20, "point": "31", "position": "reverse", "run_s": 2}
     {"do": "signal", "station": 20, "signal": "01", "action": "stop", "run_s": 2}
     {"do": "mode", "station": 20, "mode": "local", "run_s": 2}
+    {"do": "ars", "station": 20, "on": false, "run_s": 2}
     {"do": "link", "link": "st20-atc", "fault": {"cmd": "cut"}, "run_s": 2}
     {"do": "point_fault", "station": 20, "point": "31", "run_s": 2}
     {"do": "tc_fault", "tc": "TC2055", "run_s": 2}
@@ -37,7 +38,7 @@ from ktcs_bench.station.model import Line
 
 LOOK_S = 1.0  # how often the lab is looked at while a step runs (lab seconds)
 SETTLE_LIMIT_S = 90.0  # how long a settled line may take to agree after its settle time
-DO = ("route", "point", "signal", "mode", "link", "point_fault", "tc_fault", "restart",
+DO = ("route", "point", "signal", "mode", "ars", "link", "point_fault", "tc_fault", "restart",
       "release_eb", "wait", "settle")  # fmt: skip
 
 
@@ -55,7 +56,7 @@ async def command(access: LabAccess, step: Mapping[str, Any]) -> dict[str, Any]:
     do = step.get("do")
     kinds = access.devices
     ctc = next((n for n, k in kinds.items() if k == "ctc"), "ctc")
-    if do in ("route", "point", "signal", "mode"):
+    if do in ("route", "point", "signal", "mode", "ars"):
         obj = {k: v for k, v in step.items() if k not in ("do", "run_s")}
         return await access.device(ctc, {"cmd": do, **obj})
     if do == "link":

@@ -468,3 +468,34 @@ def test_an_overlap_handed_on_is_locked_again_in_the_input_that_frees_it(line: L
     assert rig.ixl.route_status("1291") is RouteStatus.IDLE
     assert "32" in rig.ixl.routes["0112"].held_points
     assert rig.control("SNC1832").reason is Reason.POINT_LOCKED
+
+
+def test_an_interlocking_restarted_with_a_train_on_its_line_locks_the_station_for_a_while(
+    line: Line,
+) -> None:
+    """Start-up locking. A restarted IXL knows nothing of the routes its predecessor had set, and
+    a train may still be running on one, braking on the most restrictive code: the whole-system
+    search (docs/system_safety.md) found a train's head run past a starting signal into a track
+    circuit no route held any more, after its IXL restarted. So an IXL whose first live occupancy
+    shows a train holds every point and track circuit for the longest approach-locking time."""
+    rig = StationRig(line.view(20), occupied=("TC2047",), startup_locking=True)
+    cold = StationRig(line.view(20), occupied=("TC2047",))  # a lab's start: the railway at rest
+    assert not cold.ixl.startup_held and cold.control("RSC200111").accepted
+    assert rig.ixl.startup_held == set(rig.occupancy) | set(rig.ixl.points)
+    assert rig.control("SRC2031").reason is Reason.POINT_LOCKED
+    assert rig.control("RSC200111").reason is Reason.ROUTE_CONFLICTS
+    assert rig.control("RSC201191").reason is Reason.ROUTE_CONFLICTS
+    assert rig.ctc["SLI2031"] == 1 and rig.ixl.full_state("io")["PNC2031"] == 1
+    rig.advance(89.5)
+    assert rig.control("SRC2032").reason is Reason.POINT_LOCKED
+    rig.advance(1.0)  # 90 s, the longest approach-locking time of station 20's routes
+    assert not rig.ixl.startup_held and rig.ctc["SLI2031"] == 0
+    assert rig.control("RSC200111").accepted
+    assert any("start-up locking released (timed release)" in e.text for e in rig.events)
+
+
+def test_an_interlocking_that_restarts_with_its_line_clear_is_free_at_once(line: Line) -> None:
+    rig = StationRig(line.view(20), startup_locking=True)
+    assert not rig.ixl.startup_held and rig.ixl.next_deadline() is None
+    assert rig.control("SRC2031").accepted
+    assert any("start-up locking released (the station is clear)" in e.text for e in rig.events)

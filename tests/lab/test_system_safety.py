@@ -1,0 +1,296 @@
+"""Safety of the integrated system, proven by search (issue 15 part 3, SPEC §11).
+
+A hypothesis state machine over the whole lab in one process on the virtual clock
+(`InProcessLab`: the CTC, three IXLs, ATCs and tracksides, the track circuits and three trains
+running the `safety` timetable -- emulators/labs/safety.yaml). Its rules are what an operator and
+the world do to the lab: CTC route set and cancel, point and signal commands, mode changes, the
+trains' drivers releasing an emergency brake, and faults -- any link cut and restored, bit-error
+bursts, point detection lost, a track circuit failed occupied, an IXL or ATC restarted. Every step
+lets the lab run a few seconds of its clock, looked at every second: invariants 1-3 of
+`lab.invariants` after every look (trains apart, no head past a danger point, no point moving
+under a train or a locked route, none run onto lying wrong); a settle step clears every fault and
+waits until each CTC view equals its IXL and each IXL's occupancy the rails (invariant 4).
+
+A failure shrinks, and the shrunk sequence is saved as a replay file (seed + steps, in
+KTCS_SYSTEM_FAILURES, default `.system-safety/` in the repository) named in the failure message;
+`ktcs-bench lab simulate --replay FILE` runs it again. KTCS_SYSTEM_STEPS raises the number of steps
+(default 2,000 a run).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Coroutine
+from pathlib import Path
+from typing import Any, TypeVar
+
+from hypothesis import HealthCheck, settings
+from hypothesis import strategies as st
+from hypothesis.stateful import (
+    RuleBasedStateMachine,
+    initialize,
+    precondition,
+    rule,
+    run_state_machine_as_test,
+)
+
+from ktcs_bench.datafiles import data_dir
+from ktcs_bench.lab.inprocess import InProcessLab
+from ktcs_bench.lab.invariants import Geometry, SafetyChecker
+from ktcs_bench.lab.safety import Replay, StepRun, replay_steps, run_step, run_steps
+from ktcs_bench.station import load_line
+from ktcs_bench.transport import memory
+
+T = TypeVar("T")
+ROOT = Path(__file__).resolve().parents[2]
+LAB = data_dir("emulators") / "labs" / "safety.yaml"
+LAB_NAME = "safety"  # what a replay file names: the shipped lab, wherever the checkout is
+LINE = load_line()
+GEO = Geometry(LINE)
+FAILURES = Path(os.environ.get("KTCS_SYSTEM_FAILURES", ROOT / ".system-safety"))
+STEPS = int(os.environ.get("KTCS_SYSTEM_STEPS", "2000"))
+STEPS_PER_EXAMPLE = 200
+WARM_UP_S = 8.0  # the links come up, the CTC has every station
+RUN_S = (0.5, 1.0, 2.0, 4.0)
+COUNT = {"steps": 0, "looks": 0, "examples": 0}
+
+# The trains run on the main track (track 1) at every station, as their timetable says; a train of
+# the emulator follows its timetable's track, not the points. The operator sets routes on that
+# track only (either direction): a route into a loop would send the search's trains where the
+# emulated train cannot go (docs/system_safety.md).
+MAIN_ROUTES = [
+    (st.number, r.name, r.entry, r.exit)
+    for st in LINE.stations.values()
+    for r in st.routes
+    if all(GEO.tc[t].on_track("1") for t in r.all_track_circuits)
+    and all(st.signal(s).track in (None, "1") for s in (r.entry, r.exit))
+]
+POINTS = [(st.number, p.name) for st in LINE.stations.values() for p in st.points]
+SIGNALS = [(st.number, s.name) for st in LINE.stations.values() for s in st.lamp_signals]
+TCS = [t.name for t in LINE.all_track_circuits()]
+STATIONS = sorted(LINE.stations)
+
+
+class SystemMachine(RuleBasedStateMachine):
+    def __init__(self) -> None:
+        super().__init__()
+        self.lab: InProcessLab | None = None
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.steps: list[dict[str, Any]] = []
+        self.checker = SafetyChecker(LINE)
+
+    def run(self, coro: Coroutine[Any, Any, T]) -> T:
+        assert self.loop is not None
+        return self.loop.run_until_complete(coro)
+
+    @initialize(seed=st.integers(0, 2**16))
+    def up(self, seed: int) -> None:
+        COUNT["examples"] += 1
+        self.seed = seed
+        self.lab = InProcessLab(LAB, seed=seed)
+        self.loop = self.lab.new_loop()
+        self.run(self.lab.up())
+        self.run(self.lab.sleep(WARM_UP_S))
+        self.run(run_steps(self.lab, self.checker, []))
+
+    def teardown(self) -> None:
+        if self.lab is not None and self.loop is not None:
+            self.run(self.lab.down())
+            memory.detach(self.loop)
+            self.loop.close()
+
+    def step(self, step: dict[str, Any]) -> None:
+        assert self.lab is not None
+        self.steps.append(step)
+        COUNT["steps"] += 1
+        looks = self.checker.looks
+        done = self.run(run_step(self.lab, self.checker, step))
+        COUNT["looks"] += self.checker.looks - looks
+        if done.violations:
+            self.fail([str(v) for v in done.violations])
+
+    def fail(self, violations: list[str]) -> None:
+        replay = Replay(LAB_NAME, self.seed, WARM_UP_S, tuple(self.steps), tuple(violations))
+        text = json.dumps(replay.to_json(), sort_keys=True)
+        path = FAILURES / f"replay-{hashlib.sha256(text.encode()).hexdigest()[:12]}.json"
+        replay.write(path)
+        raise AssertionError(
+            f"{len(violations)} violation(s), the first: {violations[0]}\n"
+            f"replay: ktcs-bench lab simulate --replay {path}"
+        )
+
+    # ---------------------------------------------------------------- the operator
+
+    @rule(route=st.sampled_from(MAIN_ROUTES), cancel=st.booleans(), run_s=st.sampled_from(RUN_S))
+    def route(self, route: tuple[int, str, str, str], cancel: bool, run_s: float) -> None:
+        number, _, entry, exit_ = route
+        action = "cancel" if cancel else "set"
+        self.step({"do": "route", "station": number, "entry": entry, "exit": exit_,
+                   "action": action, "run_s": run_s})  # fmt: skip
+
+    @rule(station=st.sampled_from(STATIONS), run_s=st.sampled_from(RUN_S))
+    def routes_for_the_trains(self, station: int, run_s: float) -> None:
+        """The common case, as ARS would: home and starting route of the main track set."""
+        for entry, exit_ in (("01", "11"), ("11", "91")):
+            self.step({"do": "route", "station": station, "entry": entry, "exit": exit_,
+                       "action": "set", "run_s": 0.0})  # fmt: skip
+        self.step({"do": "wait", "run_s": run_s})
+
+    @rule(station=st.sampled_from(STATIONS), on=st.booleans(), run_s=st.sampled_from(RUN_S))
+    def ars(self, station: int, on: bool, run_s: float) -> None:
+        self.step({"do": "ars", "station": station, "on": on, "run_s": run_s})
+
+    @rule(point=st.sampled_from(POINTS), reverse=st.booleans(), run_s=st.sampled_from(RUN_S))
+    def point(self, point: tuple[int, str], reverse: bool, run_s: float) -> None:
+        position = "reverse" if reverse else "normal"
+        self.step({"do": "point", "station": point[0], "point": point[1], "position": position,
+                   "run_s": run_s})  # fmt: skip
+
+    @rule(signal=st.sampled_from(SIGNALS), stop=st.booleans(), run_s=st.sampled_from(RUN_S))
+    def signal(self, signal: tuple[int, str], stop: bool, run_s: float) -> None:
+        self.step({"do": "signal", "station": signal[0], "signal": signal[1],
+                   "action": "stop" if stop else "release", "run_s": run_s})  # fmt: skip
+
+    @rule(station=st.sampled_from(STATIONS), local=st.booleans(), run_s=st.sampled_from(RUN_S))
+    def mode(self, station: int, local: bool, run_s: float) -> None:
+        self.step({"do": "mode", "station": station, "mode": "local" if local else "center",
+                   "run_s": run_s})  # fmt: skip
+
+    # ---------------------------------------------------------------- the trains and time
+
+    @rule(train=st.sampled_from(["train2001", "train2003", "train2005"]),
+          run_s=st.sampled_from(RUN_S))  # fmt: skip
+    def release_eb(self, train: str, run_s: float) -> None:
+        self.step({"do": "release_eb", "train": train, "run_s": run_s})
+
+    @rule(run_s=st.sampled_from((5.0, 10.0, 20.0)))
+    def wait(self, run_s: float) -> None:
+        self.step({"do": "wait", "run_s": run_s})
+
+    # ---------------------------------------------------------------- faults
+
+    @rule(data=st.data(), run_s=st.sampled_from(RUN_S))
+    def link_fault(self, data: st.DataObject, run_s: float) -> None:
+        assert self.lab is not None
+        link = data.draw(st.sampled_from(sorted(self.lab.links)))
+        fault = data.draw(
+            st.sampled_from(
+                [
+                    {"cmd": "cut"},
+                    {"cmd": "restore"},
+                    {"cmd": "ber", "rate": 1e-3},
+                    {"cmd": "ber", "rate": 1e-2},
+                    {"cmd": "clear"},
+                ]  # fmt: skip
+            )
+        )
+        self.step({"do": "link", "link": link, "fault": fault, "run_s": run_s})
+
+    @rule(point=st.sampled_from(POINTS), run_s=st.sampled_from(RUN_S))
+    def point_detection_lost(self, point: tuple[int, str], run_s: float) -> None:
+        self.step({"do": "point_fault", "station": point[0], "point": point[1], "run_s": run_s})
+
+    @rule(tc=st.sampled_from(TCS), run_s=st.sampled_from(RUN_S))
+    def track_circuit_failed_occupied(self, tc: str, run_s: float) -> None:
+        self.step({"do": "tc_fault", "tc": tc, "run_s": run_s})
+
+    @rule(device=st.sampled_from([f"{k}{n}" for k in ("ixl", "atc") for n in STATIONS]),
+          run_s=st.sampled_from(RUN_S))  # fmt: skip
+    def restart(self, device: str, run_s: float) -> None:
+        self.step({"do": "restart", "device": device, "run_s": run_s})
+
+    @precondition(lambda self: len(self.steps) > 0)
+    @rule()
+    def settle(self) -> None:
+        """Every fault cleared, the line left to settle: then the views must agree."""
+        self.step({"do": "settle", "run_s": 10.0})
+
+
+def test_the_integrated_system_stays_safe_under_random_commands_trains_and_faults() -> None:
+    COUNT.update(steps=0, looks=0, examples=0)
+    examples = max(1, -(-STEPS // STEPS_PER_EXAMPLE))
+    run_state_machine_as_test(
+        SystemMachine,
+        settings=settings(
+            max_examples=examples,
+            stateful_step_count=STEPS_PER_EXAMPLE,
+            deadline=None,
+            suppress_health_check=list(HealthCheck),
+        ),
+    )
+    assert COUNT["steps"] >= STEPS, COUNT
+
+
+# A wrong-side failure (a track circuit failing clear under the train standing at station 18's
+# platform -- not among the search's faults) lets the interlocking set the home route into that
+# platform, and the train behind runs in on the standing one.
+FAILS_CLEAR = Replay(
+    LAB_NAME,
+    seed=1,
+    warm_up_s=WARM_UP_S,
+    steps=(
+        {"do": "tc_fault", "tc": "TC1855", "kind": "failed_clear", "run_s": 1.0},
+        {"do": "route", "station": 18, "entry": "01", "exit": "11", "action": "set"}
+        | {"run_s": 120.0},
+    ),
+)
+
+
+def test_the_checks_see_a_train_run_into_another_when_a_track_circuit_fails_clear() -> None:
+    """The search can fail: run as a replay file is, FAILS_CLEAR gives the violations of
+    invariants 1 and 2."""
+    lab = InProcessLab(LAB, seed=FAILS_CLEAR.seed)
+    runs = lab.run(lambda access: replay_steps(access, FAILS_CLEAR, LINE))
+    assert runs[1].answer["ok"], runs[1].answer
+    found = {(v.invariant, v.kind) for r in runs for v in r.violations}
+    assert (1, "shared_track_circuit") in found and (2, "train_rear") in found, found
+
+
+def test_lab_simulate_replays_a_saved_failure(tmp_path: Path) -> None:
+    """`ktcs-bench lab simulate --replay FILE` (a real process) runs the file's lab, seed and
+    steps with the search's checks, prints each violation with its step and exits 1; a broken
+    file is a usage error naming it (exit 2)."""
+    path = FAILS_CLEAR.write(tmp_path / "replay.json")
+    run = subprocess.run([sys.executable, "-m", "ktcs_bench.cli.main", "lab", "simulate",
+                          "--replay", str(path)], capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert run.returncode == 1, run.stdout + run.stderr
+    assert "invariant 1 (shared_track_circuit) at TC1855" in run.stdout, run.stdout
+    assert f"replay {path}: lab safety, seed 1, 2 steps" in run.stdout, run.stdout
+    (tmp_path / "bad.json").write_text('{"lab": "safety", "steps": [{"do": "fly"}]}')
+    run = subprocess.run([sys.executable, "-m", "ktcs_bench.cli.main", "lab", "simulate",
+                          "--replay", str(tmp_path / "bad.json")], capture_output=True, text=True,
+                         timeout=60)  # fmt: skip
+    assert run.returncode == 2 and "bad.json" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_an_ixl_restarted_under_a_departing_train_keeps_what_it_may_run_onto_locked() -> None:
+    """What the search found (docs/system_safety.md): train 2003 leaves station 18's platform on
+    routes 01-11 and 11-91; its IXL crashes and restarts as the train runs past starting signal
+    11. The new IXL knew nothing of the routes: the train's head ran into TC1857A (point 32) held
+    by no route. Restarted in a running lab, an IXL now starts with start-up locking, and the
+    checks see the train run on through locked ground."""
+    set_1191 = {"do": "route", "station": 18, "entry": "11", "exit": "91", "action": "set"}
+    steps = (
+        {"do": "ars", "station": 18, "on": False, "run_s": 0.0},
+        {**set_1191, "run_s": 17.5},  # the train leaves at 20 s: it is at the signal at 25.5 s
+        {"do": "restart", "device": "ixl18", "run_s": 30.0},
+    )
+    replay = Replay(LAB_NAME, seed=1, warm_up_s=WARM_UP_S, steps=steps)
+    lab = InProcessLab(LAB, seed=replay.seed)
+
+    async def run(access: InProcessLab) -> tuple[list[StepRun], dict[str, Any], float]:
+        runs = await replay_steps(access, replay, LINE)
+        ixl = (await access.device("ixl18", {"cmd": "status"}))["status"]
+        train = (await access.device("train2003", {"cmd": "status"}))["status"]
+        return runs, ixl, float(train["head"])
+
+    runs, ixl18, head = lab.run(run)
+    assert all(r.answer["ok"] for r in runs), [r.answer for r in runs]
+    assert [str(v) for r in runs for v in r.violations] == []
+    assert head > 1200, "the train ran on past the signal and through the station"
+    assert ixl18["startup_held"], "the restarted IXL still holds its station"
