@@ -166,6 +166,7 @@ class TrainDevice(Device):
                                  self._from_rails)  # fmt: skip
         self.last: Any = None
         self.release = False
+        self.origin: float | None = None  # the device clock's reading at the train's start
 
     @classmethod
     def from_args(
@@ -258,7 +259,8 @@ class TrainDevice(Device):
     async def tasks(self) -> list[asyncio.Task[None]]:
         if self.run_ is None:  # a train put on the line by the lab file stands there at once
             self.rails.send({"position": self._position()})
-        self.drive(self.endpoint, self._cycled, origin=self.loop.time())
+        self.origin = self.now()  # the train's own time counts from here (the timetable's 0)
+        self.drive(self.endpoint, self._cycled, origin=self.origin)
         self.poke()
         return [asyncio.ensure_future(self.rails.run())]
 
@@ -266,7 +268,7 @@ class TrainDevice(Device):
         s = self.endpoint.dynamics.state
         verdict = self.last.verdict if self.last is not None else None
         ep = self.endpoint
-        now = self.timer.now() if self.timer is not None else 0.0
+        now = 0.0 if self.origin is None else self.now() - self.origin
         return {
             **super().status(),
             "train": self.config.train_id,
