@@ -231,6 +231,16 @@ class WaysideAtc:
                     ahead += r.track_circuits + self._beyond(r, 0)
         return _Path(direction, ahead, None)
 
+    def _route_limit(self, tc: str) -> float | None:
+        """The lowest limit of a set route over track circuit `tc` (a diverging route's own
+        speed), None when no set route over it has one."""
+        limits = [
+            r.speed_limit_kmh
+            for r in self._routes
+            if r.speed_limit_kmh is not None and tc in r.track_circuits and self._set(r)
+        ]
+        return min(limits, default=None)
+
     def _limit(self, t: TrackCircuit, route_limit: float | None) -> float:
         limit = self.line.speed_limit_between(t.from_m, t.to_m)
         return min(limit, route_limit) if route_limit is not None else limit
@@ -248,8 +258,8 @@ class WaysideAtc:
             nxt = self.tc[name]
             if self._occ(name):
                 break
-            if i == 0:
-                next_limit = self._limit(nxt, None)
+            if i == 0:  # the speed at this circuit's exit is the next one's limit at most
+                next_limit = self._limit(nxt, self._route_limit(name))
                 stop_at_exit = False
             distance += nxt.length_m
         beyond_exit = distance - t.length_m

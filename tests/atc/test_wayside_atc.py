@@ -174,3 +174,19 @@ def test_rails_lost_every_track_circuit_occupied_and_most_restrictive(line: Line
     out = atc.set_occupancy(clear, 9.0)
     assert dict(out.ixl) == dict.fromkeys(atc.full_state(), 0)
     assert atc.track_codes()["TC2047"].target_speed_kmh > 0
+
+
+def test_a_diverging_route_limits_the_speed_at_the_exit_of_its_approach(line: Line) -> None:
+    """A code's speed is the speed at its track circuit's exit: on the approach to a route with
+    its own limit (01 -> 12 into the loop, 45 km/h), the train must be down to that limit where
+    it enters the route, not only once inside it."""
+    rig, atc = _wired(line, 18)
+    limit = line.view(18).station.route("0112").speed_limit_kmh
+    assert limit == 45
+    assert rig.control("RSC180112").accepted
+    rig.advance(10)
+    atc.receive(rig.atc, 10.0)
+    assert rig.atc["RLI180112"] == 1
+    codes = atc.track_codes()
+    assert 0 < codes["TC1851"].target_speed_kmh <= limit  # the approach: down to 45 at its exit
+    assert 0 < codes["TC1853A"].target_speed_kmh <= limit  # inside the route
