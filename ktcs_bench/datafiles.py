@@ -6,7 +6,9 @@ them as `ktcs_bench/_data/<name>` (hatchling force-include). Every loader asks h
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import Any
 
 from ktcs_bench.errors import ConfigError
 
@@ -96,3 +98,78 @@ def load_yaml(path: str | Path) -> object:
         raise ConfigError(p, place, f"invalid YAML: {exc.problem}") from None
     except yaml.YAMLError as exc:
         raise ConfigError(p, "", f"invalid YAML: {exc}") from None
+
+
+class YamlReader:
+    """Checks the parts of one parsed YAML file; each mistake is one ConfigError naming the file,
+    the place (a key path) and what is wrong. Shared by the loaders of scenario and procedure
+    files."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, place: str, problem: str) -> ConfigError:
+        return ConfigError(self.path, place, problem)
+
+    def mapping(self, obj: object, place: str) -> dict[str, Any]:
+        if not isinstance(obj, dict):
+            raise self.fail(place, f"expected a mapping, got {type(obj).__name__}")
+        return obj
+
+    def seq(self, obj: object, place: str) -> list[Any]:
+        if not isinstance(obj, list):
+            raise self.fail(place, f"expected a list, got {type(obj).__name__}")
+        return obj
+
+    def num(
+        self,
+        m: dict[str, Any],
+        key: str,
+        place: str,
+        default: float | None = None,
+        minimum: float | None = None,
+        infinite: bool = False,
+    ) -> float:
+        """A number at `m[key]`; never NaN, and infinite only where `infinite` says it means
+        "for ever" (a zone active until the end)."""
+        if key not in m:
+            if default is None:
+                raise self.fail(f"{place}.{key}", "missing")
+            return default
+        return self.value(m[key], f"{place}.{key}", minimum, infinite)
+
+    def value(
+        self, v: Any, place: str, minimum: float | None = None, infinite: bool = False
+    ) -> float:
+        """One number of the file (a list item, a field), checked as `num` checks."""
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.fail(place, f"expected a number, got {v!r}")
+        if math.isnan(v) or (math.isinf(v) and not infinite):
+            raise self.fail(place, f"expected a finite number, got {v!r}")
+        if minimum is not None and v < minimum:
+            raise self.fail(place, f"must be at least {minimum}, got {v}")
+        return float(v)
+
+    def text(self, m: dict[str, Any], key: str, place: str, default: str | None = None) -> str:
+        if key not in m:
+            if default is None:
+                raise self.fail(f"{place}.{key}", "missing")
+            return default
+        v = m[key]
+        if not isinstance(v, (str, int)) or isinstance(v, bool):
+            raise self.fail(f"{place}.{key}", f"expected text, got {v!r}")
+        return str(v)
+
+    def flag(self, m: dict[str, Any], key: str, place: str, default: bool) -> bool:
+        v = m.get(key, default)
+        if not isinstance(v, bool):
+            raise self.fail(f"{place}.{key}", f"expected true or false, got {v!r}")
+        return v
+
+    def known(self, m: dict[str, Any], keys: set[str], place: str) -> None:
+        extra = sorted(set(m) - keys)
+        if extra:
+            raise self.fail(
+                f"{place}.{extra[0]}" if place else str(extra[0]),
+                f"unknown key (known: {', '.join(sorted(keys))})",
+            )

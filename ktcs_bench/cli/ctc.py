@@ -11,6 +11,7 @@ import time
 from typing import Any
 
 from ktcs_bench.cli._common import host_port
+from ktcs_bench.ctc.log import parse_words
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.transport import jsonlines
 
@@ -54,43 +55,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--script", help="a file of commands, one a line (# comments)")
     p.add_argument("--json", action="store_true", help="results as JSON lines")
     p.set_defaults(handler=run)
-
-
-def parse(words: list[str]) -> dict[str, Any]:
-    """Operator words -> a control-port command. UsageError with a hint when malformed."""
-    if not words:
-        raise UsageError("empty command")
-    w = [x.lower() for x in words]
-    try:
-        if w[0] == "route" and w[1] in ("set", "cancel") and len(w) == 5:
-            return {"cmd": "route", "action": w[1], "station": int(w[2]), "entry": words[3],
-                    "exit": words[4]}  # fmt: skip
-        if w[0] == "point" and w[1] in ("normal", "reverse") and len(w) == 4:
-            return {"cmd": "point", "position": w[1], "station": int(w[2]), "point": words[3]}
-        if w[0] == "signal" and w[1] in ("stop", "release") and len(w) == 4:
-            return {"cmd": "signal", "action": w[1], "station": int(w[2]), "signal": words[3]}
-        if w[0] == "mode" and w[1] in ("center", "local") and len(w) == 3:
-            return {"cmd": "mode", "mode": w[1], "station": int(w[2])}
-        if w[0] == "control" and len(w) in (3, 4):
-            value = int(w[3], 0) if len(w) == 4 else 1
-            return {
-                "cmd": "control",
-                "station": int(w[1]),
-                "code": words[2].upper(),
-                "value": value,
-            }
-        if w[0] == "show" and len(w) == 2:
-            return {"cmd": "show", "station": int(w[1])}
-        if w[0] in ("status", "log") and len(w) == 1:
-            return {"cmd": w[0]}
-        if w[0] == "ars" and len(w) == 1:
-            return {"cmd": "ars"}
-        if w[0] == "ars" and w[1] in ("on", "off") and len(w) in (2, 3):
-            switch: dict[str, Any] = {"cmd": "ars", "on": w[1] == "on"}
-            return switch if len(w) == 2 else {**switch, "station": int(w[2])}
-    except (IndexError, ValueError):
-        pass
-    raise UsageError(f"cannot read {' '.join(words)!r}; type `help`")
 
 
 def _address(args: argparse.Namespace) -> tuple[str, int]:
@@ -147,7 +111,7 @@ async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -
         if words and words[0].lower() == "help":
             print(HELP_TEXT)
             return
-        obj = parse(words)
+        obj = parse_words(words)
         try:
             answer = await jsonlines.request(host, port, obj, timeout=30)
         except OSError as exc:

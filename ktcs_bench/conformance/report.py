@@ -4,14 +4,17 @@ colour on a terminal. Pure functions of a `SuiteResult` (threat reports: `threat
 from __future__ import annotations
 
 import json
-import xml.etree.ElementTree as ET
 from typing import Any
 
 from ktcs_bench.conformance.model import CaseResult, CaseVerdict
 from ktcs_bench.conformance.runner import SuiteResult
+from ktcs_bench.junit import JUnitCase, JUnitSuite
+from ktcs_bench.junit import junit_xml as write_junit
 
 _COLOUR = {CaseVerdict.PASS: "\x1b[32m", CaseVerdict.FAIL: "\x1b[31m", CaseVerdict.ERROR: "\x1b[35m",
            CaseVerdict.SKIP: "\x1b[33m"}  # fmt: skip
+_OUTCOME = {CaseVerdict.PASS: "pass", CaseVerdict.FAIL: "fail", CaseVerdict.ERROR: "error",
+            CaseVerdict.SKIP: "skip"}  # fmt: skip
 _RESET = "\x1b[0m"
 _BOLD = "\x1b[1m"
 
@@ -24,36 +27,28 @@ def _frames_text(result: CaseResult) -> str:
 
 def junit_xml(suite: SuiteResult) -> bytes:
     """One <testsuite> named after the role; one <testcase> per case, evidence in system-out."""
-    name = f"ktcs-bench conformance {suite.role} {suite.protocol}"
-    root = ET.Element("testsuites", name="ktcs-bench conformance")
-    ts = ET.SubElement(
-        root, "testsuite", name=name, tests=str(len(suite.results)),
-        failures=str(suite.count(CaseVerdict.FAIL)), errors=str(suite.count(CaseVerdict.ERROR)),
-        skipped=str(suite.count(CaseVerdict.SKIP)), time=f"{suite.duration:.3f}",
-    )  # fmt: skip
-    props = ET.SubElement(ts, "properties")
-    for key, value in {"role": suite.role, "target": suite.target, "profile": suite.profile,
-                       "timings": "auto" if suite.auto else "given",
-                       **suite.timing.describe(),
-                       **{f"measured.{k}": v for k, v in suite.measured.describe().items()},
-                       **({"stopped": suite.stopped} if suite.stopped else {})}.items():  # fmt: skip
-        ET.SubElement(props, "property", name=key, value=str(value))
+    props = {"role": suite.role, "target": suite.target, "profile": suite.profile,
+             "timings": "auto" if suite.auto else "given",
+             **suite.timing.describe(),
+             **{f"measured.{k}": v for k, v in suite.measured.describe().items()},
+             **({"stopped": suite.stopped} if suite.stopped else {})}  # fmt: skip
+    cases = []
     for r in suite.results:
-        tc = ET.SubElement(ts, "testcase", name=r.case.name,
-                           classname=f"conformance.{suite.protocol}.{suite.role}",
-                           time=f"{r.duration:.3f}")  # fmt: skip
-        if r.verdict is CaseVerdict.FAIL:
-            ET.SubElement(
-                tc, "failure", message=r.message, type="ConformanceFailure"
-            ).text = f"{r.case.title} ({r.case.rule})\n{r.message}"
-        elif r.verdict is CaseVerdict.ERROR:
-            ET.SubElement(tc, "error", message=r.message, type="SuiteError").text = r.message
-        elif r.verdict is CaseVerdict.SKIP:
-            ET.SubElement(tc, "skipped", message=r.message)
-        ET.SubElement(tc, "system-out").text = _frames_text(r)
-    ET.indent(root)
-    out: bytes = ET.tostring(root, encoding="utf-8", xml_declaration=True)
-    return out
+        failed = r.verdict is CaseVerdict.FAIL
+        cases.append(
+            JUnitCase(
+                r.case.name,
+                f"conformance.{suite.protocol}.{suite.role}",
+                r.duration,
+                _OUTCOME[r.verdict],
+                r.message,
+                f"{r.case.title} ({r.case.rule})\n{r.message}" if failed else r.message,
+                _frames_text(r),
+                "ConformanceFailure" if failed else "SuiteError",
+            )  # fmt: skip
+        )
+    name = f"ktcs-bench conformance {suite.role} {suite.protocol}"
+    return write_junit("ktcs-bench conformance", [JUnitSuite(name, cases, suite.duration, props)])
 
 
 def as_json(suite: SuiteResult, evidence: bool = True) -> dict[str, Any]:

@@ -8,6 +8,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ktcs_bench.ctc.model import signal_name
+from ktcs_bench.errors import UsageError
 
 KEEP = 10_000  # entries kept
 
@@ -32,6 +33,44 @@ def command_words(command: Mapping[str, Any]) -> str:
     if cmd == "control":
         return f"control {st} {command.get('code', '?')} {command.get('value', 1)}"
     return " ".join([cmd, *(f"{k}={v}" for k, v in command.items() if k != "cmd")])
+
+
+def parse_words(words: list[str]) -> dict[str, Any]:
+    """Operator words (as `ktcs-bench ctc` takes them: `route set 18 S1 S11`) -> the CTC control
+    port's command, the inverse of `command_words`. UsageError with a hint when malformed."""
+    if not words:
+        raise UsageError("empty command")
+    w = [x.lower() for x in words]
+    try:
+        if w[0] == "route" and w[1] in ("set", "cancel") and len(w) == 5:
+            return {"cmd": "route", "action": w[1], "station": int(w[2]), "entry": words[3],
+                    "exit": words[4]}  # fmt: skip
+        if w[0] == "point" and w[1] in ("normal", "reverse") and len(w) == 4:
+            return {"cmd": "point", "position": w[1], "station": int(w[2]), "point": words[3]}
+        if w[0] == "signal" and w[1] in ("stop", "release") and len(w) == 4:
+            return {"cmd": "signal", "action": w[1], "station": int(w[2]), "signal": words[3]}
+        if w[0] == "mode" and w[1] in ("center", "local") and len(w) == 3:
+            return {"cmd": "mode", "mode": w[1], "station": int(w[2])}
+        if w[0] == "control" and len(w) in (3, 4):
+            value = int(w[3], 0) if len(w) == 4 else 1
+            return {
+                "cmd": "control",
+                "station": int(w[1]),
+                "code": words[2].upper(),
+                "value": value,
+            }
+        if w[0] == "show" and len(w) == 2:
+            return {"cmd": "show", "station": int(w[1])}
+        if w[0] in ("status", "log") and len(w) == 1:
+            return {"cmd": w[0]}
+        if w[0] == "ars" and len(w) == 1:
+            return {"cmd": "ars"}
+        if w[0] == "ars" and w[1] in ("on", "off") and len(w) in (2, 3):
+            switch: dict[str, Any] = {"cmd": "ars", "on": w[1] == "on"}
+            return switch if len(w) == 2 else {**switch, "station": int(w[2])}
+    except (IndexError, ValueError):
+        pass
+    raise UsageError(f"cannot read {' '.join(words)!r}; type `help`")
 
 
 class CommandLog:

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.datafiles import load_yaml
-from ktcs_bench.errors import ConfigError, UsageError
+from ktcs_bench.datafiles import YamlReader, load_yaml
+from ktcs_bench.errors import UsageError
 from ktcs_bench.train.deceleration import GradientProfile
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import LineData, Station, TrainConfig
@@ -74,79 +74,9 @@ class Scenario:
     assertions: list[Assertion] = field(default_factory=list)
 
 
-class _Reader:
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def fail(self, place: str, problem: str) -> ConfigError:
-        return ConfigError(self.path, place, problem)
-
-    def mapping(self, obj: object, place: str) -> dict[str, Any]:
-        if not isinstance(obj, dict):
-            raise self.fail(place, f"expected a mapping, got {type(obj).__name__}")
-        return obj
-
-    def seq(self, obj: object, place: str) -> list[Any]:
-        if not isinstance(obj, list):
-            raise self.fail(place, f"expected a list, got {type(obj).__name__}")
-        return obj
-
-    def num(
-        self,
-        m: dict[str, Any],
-        key: str,
-        place: str,
-        default: float | None = None,
-        minimum: float | None = None,
-        infinite: bool = False,
-    ) -> float:
-        """A number at `m[key]`; never NaN, and infinite only where `infinite` says it means
-        "for ever" (a zone active until the end)."""
-        if key not in m:
-            if default is None:
-                raise self.fail(f"{place}.{key}", "missing")
-            return default
-        return self.value(m[key], f"{place}.{key}", minimum, infinite)
-
-    def value(
-        self, v: Any, place: str, minimum: float | None = None, infinite: bool = False
-    ) -> float:
-        """One number of the file (a list item, a field), checked as `num` checks."""
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(place, f"expected a number, got {v!r}")
-        if math.isnan(v) or (math.isinf(v) and not infinite):
-            raise self.fail(place, f"expected a finite number, got {v!r}")
-        if minimum is not None and v < minimum:
-            raise self.fail(place, f"must be at least {minimum}, got {v}")
-        return float(v)
-
-    def text(self, m: dict[str, Any], key: str, place: str, default: str | None = None) -> str:
-        if key not in m:
-            if default is None:
-                raise self.fail(f"{place}.{key}", "missing")
-            return default
-        v = m[key]
-        if not isinstance(v, (str, int)) or isinstance(v, bool):
-            raise self.fail(f"{place}.{key}", f"expected text, got {v!r}")
-        return str(v)
-
-    def flag(self, m: dict[str, Any], key: str, place: str, default: bool) -> bool:
-        v = m.get(key, default)
-        if not isinstance(v, bool):
-            raise self.fail(f"{place}.{key}", f"expected true or false, got {v!r}")
-        return v
-
-    def known(self, m: dict[str, Any], keys: set[str], place: str) -> None:
-        extra = sorted(set(m) - keys)
-        if extra:
-            raise self.fail(
-                f"{place}.{extra[0]}", f"unknown key (known: {', '.join(sorted(keys))})"
-            )
-
-
 def load_scenario(path: str | Path) -> Scenario:
     p = Path(path)
-    r = _Reader(p)
+    r = YamlReader(p)
     doc = r.mapping(load_yaml(p), "")
     r.known(
         doc,
@@ -344,7 +274,7 @@ _TRAIN_KEYS = {
 }
 
 
-def _train(r: _Reader, m: dict[str, Any], place: str) -> TrainConfig:
+def _train(r: YamlReader, m: dict[str, Any], place: str) -> TrainConfig:
     r.known(m, _TRAIN_KEYS, place)
     mode = r.text(m, "mode", place, default="atcs")
     if mode not in ("atcs", "ktcs"):

@@ -143,20 +143,9 @@ def _write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]])
             )
 
 
-def write_report(
-    result: RunResult, outcomes: list[Outcome], out_dir: Path, wall_s: float | None = None
-) -> dict[str, Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths: dict[str, Path] = {}
-    # speed–distance, one panel per train
-    sd = speed_distance_rows(result)
-    n = len(result.traces)
-    fig, axes = plt.subplots(n, 1, figsize=(11, 3.6 * n), squeeze=False)
+def plot_speed_distance(ax: Any, rows: list[dict[str, Any]], title: str) -> None:
+    """One train's speed–distance panel from its rows (`SPEED_DISTANCE_COLUMNS`): the actual
+    speed, and the supervision limits where they were sampled (none: only the actual speed)."""
     styles = {
         "mrsp": ("MRSP", "k", "--"),
         "ebi": ("EBI", "r", "-"),
@@ -164,38 +153,32 @@ def write_report(
         "warning": ("warning", "gold", "-"),
         "permitted": ("permitted", "g", "-"),
     }
-    for ax, tid in zip(axes[:, 0], result.traces, strict=True):
-        rows = [r for r in sd if r["train"] == tid]
-        samples = [r for r in rows if r["safe_front_m"] is not None]
-        for key, (label, colour, ls) in styles.items():
-            ax.plot(
-                [r["safe_front_m"] for r in samples],
-                [r[f"{key}_kmh"] for r in samples],
-                color=colour,
-                ls=ls,
-                lw=1.2,
-                label=label,
-            )
-        actual = [r["speed_kmh"] for r in rows]
-        ax.plot([r["front_m"] for r in rows], actual, color="b", lw=1.6, label="actual")
-        ax.set_title(f"{result.scenario.name}: train {tid} — speed vs distance")
-        ax.set_xlabel("front position (m)")
-        ax.set_ylabel("speed (km/h)")
-        top = max([max(actual, default=0.0)] + [r["mrsp_kmh"] for r in samples])
-        ax.set_ylim(0, top * 1.25 + 5)
-        ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8, ncol=3)
-    fig.tight_layout()
-    paths["speed_distance"] = out_dir / "speed_distance.png"
-    fig.savefig(paths["speed_distance"], dpi=110)
-    plt.close(fig)
-    paths["speed_distance_csv"] = out_dir / "speed_distance.csv"
-    _write_csv(paths["speed_distance_csv"], SPEED_DISTANCE_COLUMNS, sd)
-    # time–distance
-    td = time_distance_rows(result)
-    marks = mark_rows(result)
-    fig, ax = plt.subplots(figsize=(11, 5))
-    for tid in result.traces:
+    samples = [r for r in rows if r["safe_front_m"] is not None]
+    for key, (label, colour, ls) in styles.items() if samples else ():
+        ax.plot(
+            [r["safe_front_m"] for r in samples],
+            [r[f"{key}_kmh"] for r in samples],
+            color=colour,
+            ls=ls,
+            lw=1.2,
+            label=label,
+        )
+    actual = [r["speed_kmh"] for r in rows]
+    ax.plot([r["front_m"] for r in rows], actual, color="b", lw=1.6, label="actual")
+    ax.set_title(title)
+    ax.set_xlabel("front position (m)")
+    ax.set_ylabel("speed (km/h)")
+    top = max([max(actual, default=0.0)] + [r["mrsp_kmh"] for r in samples])
+    ax.set_ylim(0, top * 1.25 + 5)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8, ncol=3)
+
+
+def plot_time_distance(
+    ax: Any, td: list[dict[str, Any]], marks: list[dict[str, Any]], title: str
+) -> None:
+    """Every train's front and rear over time (`TIME_DISTANCE_COLUMNS`), the marks behind them."""
+    for tid in dict.fromkeys(r["train"] for r in td):
         rows = [r for r in td if r["train"] == tid]
         t = [r["t_s"] for r in rows]
         line = ax.plot(t, [r["front_m"] for r in rows], lw=1.4, label=f"{tid} front")
@@ -210,9 +193,39 @@ def write_report(
             ax.axhline(m["from_m"], color="grey", lw=0.6, ls=":")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("position (m)")
-    ax.set_title(f"{result.scenario.name}: time–distance")
+    ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=8)
+
+
+def write_report(
+    result: RunResult, outcomes: list[Outcome], out_dir: Path, wall_s: float | None = None
+) -> dict[str, Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths: dict[str, Path] = {}
+    # speed–distance, one panel per train
+    sd = speed_distance_rows(result)
+    n = len(result.traces)
+    fig, axes = plt.subplots(n, 1, figsize=(11, 3.6 * n), squeeze=False)
+    for ax, tid in zip(axes[:, 0], result.traces, strict=True):
+        rows = [r for r in sd if r["train"] == tid]
+        plot_speed_distance(ax, rows, f"{result.scenario.name}: train {tid} — speed vs distance")
+    fig.tight_layout()
+    paths["speed_distance"] = out_dir / "speed_distance.png"
+    fig.savefig(paths["speed_distance"], dpi=110)
+    plt.close(fig)
+    paths["speed_distance_csv"] = out_dir / "speed_distance.csv"
+    _write_csv(paths["speed_distance_csv"], SPEED_DISTANCE_COLUMNS, sd)
+    # time–distance
+    td = time_distance_rows(result)
+    marks = mark_rows(result)
+    fig, ax = plt.subplots(figsize=(11, 5))
+    plot_time_distance(ax, td, marks, f"{result.scenario.name}: time–distance")
     fig.tight_layout()
     paths["time_distance"] = out_dir / "time_distance.png"
     fig.savefig(paths["time_distance"], dpi=110)
