@@ -155,4 +155,10 @@ class IxlDevice(Device):
             self.apply(out)
             r = out.results[0]
             return {"ok": r.accepted, "reason": int(r.reason)}
+        if obj.get("cmd") == "local":  # the local operator: grant | refuse | take (CMR handshake)
+            try:
+                self.apply(self.ixl.local(str(obj.get("action")), self.now()))
+            except ValueError as exc:
+                return {"ok": False, "error": str(exc)}
+            return {"ok": True, "mode": self.ixl.modes.mode.value}
         return await super().command(obj)

@@ -17,6 +17,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Protocol
 
+from ktcs_bench.errors import PeerError
+
+
+class LabGone(PeerError):
+    """Raised by a LabAccess whose lab went away while it was driven: nothing can go on."""
+
 
 class LabAccess(Protocol):
     """A running lab, live or in one process. Times are the lab's clock, in seconds."""
