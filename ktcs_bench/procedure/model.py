@@ -1,0 +1,164 @@
+"""The procedure file (YAML), read and checked before anything runs; every mistake is one
+ConfigError naming the file, the step (or key) and what is wrong.
+
+    id: route-set-0111
+    title: A route set at the CTC clears its signal and steps the codes
+    verifies: ["SPEC §6.2 route setting", "seed 004 §3"]
+    tags: [route, ctc]
+    setup:
+      lab: reference              # a lab of emulators/labs/, or a lab file beside this one
+      trains:                     # trains the procedure places and moves itself
+        - {id: T1, head: TC1851, length_m: 40}
+      modes: {18: center}         # each station brought to this mode first
+      ars: false                  # automatic route setting (a CTC that has it)
+      restart: [train1]           # devices restarted first (a train device back at its start)
+    steps:
+      - ctc: route set 18 S1 S11
+      - expect: ctc 18 signal 01 is not R
+        within: 10s
+
+The step kinds are in `steps`, the expectation words in `expect`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ktcs_bench.datafiles import YamlReader, load_yaml
+from ktcs_bench.errors import ConfigError, UsageError
+from ktcs_bench.lab.topology import Lab, load_lab, resolve_lab_path
+from ktcs_bench.procedure.names import LabNames, StepError
+from ktcs_bench.procedure.steps import KINDS, Ghost, Step, parse_step
+
+MODES = ("center", "local")
+
+
+@dataclass(frozen=True)
+class Setup:
+    lab: Lab
+    trains: tuple[Ghost, ...] = ()
+    modes: dict[int, str] = field(default_factory=dict)
+    ars: bool | None = None  # None: as the lab has it
+    restart: tuple[str, ...] = ()  # devices restarted first (a train back at its start)
+
+
+@dataclass(frozen=True)
+class Procedure:
+    path: Path
+    id: str
+    title: str
+    verifies: tuple[str, ...]
+    tags: tuple[str, ...]
+    setup: Setup
+    steps: tuple[Step, ...]
+    names: LabNames
+
+    @property
+    def devices(self) -> set[str]:
+        """Every device the steps address or read."""
+        out: set[str] = set(self.setup.restart)
+        for s in self.steps:
+            exp = getattr(s, "expectation", None)
+            out.update(exp.devices if exp is not None else ())
+            for attr in ("device", "ctc", "name"):
+                value = getattr(s, attr, None)
+                if isinstance(value, str) and value in self.setup.lab.devices:
+                    out.add(value)
+        return out
+
+
+def _texts(r: YamlReader, doc: dict[str, Any], key: str) -> tuple[str, ...]:
+    value = doc.get(key, [])
+    if isinstance(value, (str, int)) and not isinstance(value, bool):
+        return (str(value),)
+    items = r.seq(value, key)
+    for i, v in enumerate(items):
+        if not isinstance(v, (str, int)) or isinstance(v, bool):
+            raise r.fail(f"{key}[{i}]", f"expected text, got {v!r}")
+    return tuple(str(v) for v in items)
+
+
+def _lab(r: YamlReader, path: Path, word: str) -> Lab:
+    beside = path.parent / word
+    candidate = beside if beside.suffix in (".yaml", ".yml") and beside.is_file() else None
+    try:
+        return load_lab(candidate or resolve_lab_path(word))
+    except ConfigError as exc:
+        raise r.fail("setup.lab", f"{word}: {exc}") from None
+    except UsageError as exc:
+        raise r.fail("setup.lab", str(exc)) from None
+
+
+def load_procedure(path: str | Path) -> Procedure:
+    p = Path(path)
+    r = YamlReader(p)
+    doc = r.mapping(load_yaml(p), "")
+    r.known(doc, {"id", "title", "verifies", "tags", "setup", "steps"}, "")
+    setup_m = r.mapping(doc.get("setup", {}), "setup")
+    r.known(setup_m, {"lab", "trains", "modes", "ars", "restart"}, "setup")
+    lab = _lab(r, p, r.text(setup_m, "lab", "setup", default="reference"))
+    try:
+        line = lab.load_line()
+    except ConfigError as exc:
+        raise r.fail("setup.lab", f"its line: {exc}") from None
+    names = LabNames(lab, line)
+    ghosts: list[Ghost] = []
+    for i, t in enumerate(r.seq(setup_m.get("trains", []), "setup.trains")):
+        place = f"setup.trains[{i}]"
+        tm = r.mapping(t, place)
+        r.known(tm, {"id", "head", "length_m", "track"}, place)
+        train = r.text(tm, "id", place)
+        if names.train_device(train) is not None or train in {g.train for g in ghosts}:
+            raise r.fail(f"{place}.id", f"train {train} is there already")
+        head_word = r.text(tm, "head", place)
+        try:
+            head = float(head_word)
+        except ValueError:
+            try:
+                tc = names.track_circuit(head_word)
+            except StepError as exc:
+                raise r.fail(f"{place}.head", str(exc)) from None
+            head = (tc.from_m + tc.to_m) / 2
+        length = r.num(tm, "length_m", place, default=40.0, minimum=1.0)
+        ghosts.append(Ghost(train, head, length, r.text(tm, "track", place, default="1")))
+        names.trains.add(train)
+    modes = {}
+    for key, mode in r.mapping(setup_m.get("modes", {}), "setup.modes").items():
+        try:
+            st = names.station(str(key))
+        except StepError as exc:
+            raise r.fail(f"setup.modes.{key}", str(exc)) from None
+        if mode not in MODES:
+            raise r.fail(f"setup.modes.{key}", f"center or local, not {mode!r}")
+        modes[st] = str(mode)
+    ars = setup_m.get("ars")
+    if ars is not None and not isinstance(ars, bool):
+        raise r.fail("setup.ars", f"expected true or false, got {ars!r}")
+    restart = []
+    for i, word in enumerate(r.seq(setup_m.get("restart", []), "setup.restart")):
+        try:
+            restart.append(names.device(str(word)))
+        except StepError as exc:
+            raise r.fail(f"setup.restart[{i}]", str(exc)) from None
+    steps = []
+    raw_steps = r.seq(doc.get("steps"), "steps")
+    if not raw_steps:
+        raise r.fail("steps", "a procedure has at least one step")
+    for i, raw in enumerate(raw_steps, start=1):
+        try:
+            steps.append(parse_step(i, raw, names))
+        except StepError as exc:
+            kind = next((k for k in raw if k in KINDS), None) if isinstance(raw, dict) else None
+            raise r.fail(f"step {i}" + (f" ({kind})" if kind else ""), str(exc)) from None
+    return Procedure(
+        path=p,
+        id=r.text(doc, "id", "", default=p.stem),
+        title=r.text(doc, "title", "", default=p.stem),
+        verifies=_texts(r, doc, "verifies"),
+        tags=_texts(r, doc, "tags"),
+        setup=Setup(lab, tuple(ghosts), modes, ars, tuple(restart)),
+        steps=tuple(steps),
+        names=names,
+    )

@@ -1,0 +1,277 @@
+"""Reports of a procedure run: JUnit XML (one testcase per procedure: the failed expectation and
+what was seen instead), JSON for machines, and one self-contained HTML page per run -- every
+step with its verdict and time, a timeline of indications, signals, codes and train positions,
+the trains' speed-distance plots, and each link's capture of the run attached as pcapng (data
+URIs: the page needs no server and no file beside it)."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from collections.abc import Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from ktcs_bench.capture import PcapngWriter
+from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml
+from ktcs_bench.procedure.runner import ProcedureResult
+
+_COLOUR = {"pass": "\x1b[32m", "fail": "\x1b[31m", "error": "\x1b[35m", "skipped": "\x1b[2m"}
+_RESET = "\x1b[0m"
+_OUTCOME = {"pass": "pass", "fail": "fail", "error": "error"}
+
+
+# -- text --------------------------------------------------------------------------------------------
+def result_text(result: ProcedureResult, colour: bool) -> str:
+    p = result.procedure
+
+    def paint(verdict: str, text: str) -> str:
+        return f"{_COLOUR.get(verdict, '')}{text}{_RESET}" if colour else text
+
+    head = paint(result.verdict, result.verdict.upper().ljust(5))
+    lines = [f"{head} {p.id}: {p.title}  ({result.duration:.1f} s, {result.mode})"]
+    if result.setup_error:
+        lines.append(f"      setup: {result.setup_error}")
+    for s in result.steps:
+        if s.verdict == "skipped":
+            continue
+        mark = paint(s.verdict, s.verdict.ljust(5))
+        line = f"  {s.index:3d} {mark} {s.start:7.1f} s  {s.title}"
+        if s.verdict != "pass":
+            line += f"\n            {s.message}" + (f"; seen: {s.seen}" if s.seen else "")
+        lines.append(line)
+    if result.interrupted:
+        lines.append("      interrupted")
+    if result.cleared:
+        lines.append(f"      cleared: {', '.join(result.cleared)}")
+    return "\n".join(lines)
+
+
+# -- JUnit and JSON ------------------------------------------------------------------------------------
+def _details(result: ProcedureResult) -> str:
+    s = result.failed_step
+    if s is None:
+        return result.message
+    return (f"step {s.index}: {s.title}\n{s.message}\nseen instead: {s.seen or 'nothing'}"
+            + (f"\nnote: {s.note}" if s.note else ""))  # fmt: skip
+
+
+def junit(results: Sequence[ProcedureResult]) -> bytes:
+    cases = []
+    for r in results:
+        p = r.procedure
+        outcome = _OUTCOME.get(r.verdict, "error")
+        if r.interrupted and outcome == "pass":
+            outcome = "fail"
+        steps = "\n".join(f"{s.index:3d} {s.verdict:7s} {s.start:8.1f} s  {s.title}"
+                          + (f"  -- {s.message}" if s.message else "") for s in r.steps)  # fmt: skip
+        cases.append(JUnitCase(
+            p.id, f"procedure.{'.'.join(p.tags[:1]) or 'procedure'}", r.duration, outcome,
+            r.message, _details(r), steps,
+            "ExpectationFailed" if outcome == "fail" else "ProcedureError",
+        ))  # fmt: skip
+    total = sum(r.duration for r in results)
+    modes = sorted({r.mode for r in results})
+    suite = JUnitSuite("ktcs-bench procedures", cases, total, {"mode": ", ".join(modes)})
+    return junit_xml("ktcs-bench procedures", [suite])
+
+
+def as_json(result: ProcedureResult) -> dict[str, Any]:
+    p = result.procedure
+    return {
+        "id": p.id, "title": p.title, "file": str(p.path), "verifies": list(p.verifies),
+        "tags": list(p.tags), "mode": result.mode, "verdict": result.verdict,
+        "message": result.message, "setup_error": result.setup_error,
+        "started": result.started, "duration_s": round(result.duration, 3),
+        "wall_s": round(result.wall_s, 3), "interrupted": result.interrupted,
+        "steps": [s.as_dict() for s in result.steps],
+        "timeline": [{"t_s": t, "what": k, "value": v} for t, k, v in result.timeline],
+        "trains": {tid: [{"t_s": t, "head_m": h, "tail_m": tl, "speed_kmh": v}
+                         for t, h, tl, v in series] for tid, series in result.trains.items()},
+        "captures": {k: len(v) for k, v in result.captures.items()},
+        "cleared": result.cleared,
+    }  # fmt: skip
+
+
+def json_text(results: Sequence[ProcedureResult]) -> str:
+    counts = {v: sum(1 for r in results if r.verdict == v) for v in ("pass", "fail", "error")}
+    return json.dumps({"summary": counts, "procedures": [as_json(r) for r in results]},
+                      ensure_ascii=False, indent=1)  # fmt: skip
+
+
+# -- HTML --------------------------------------------------------------------------------------------
+CSS = """
+body{font:14px/1.4 system-ui,sans-serif;margin:1.5em;color:#222}
+h1{font-size:1.4em}h2{font-size:1.15em;margin-top:1.6em}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:3px 7px;
+text-align:left;vertical-align:top}th{background:#f2f2f2}
+.pass{color:#fff;background:#2a8a3a}.fail{color:#fff;background:#c0392b}
+.error{color:#fff;background:#8e44ad}.skipped{color:#666;background:#eee}
+.v{font-weight:bold;padding:1px 6px;border-radius:3px}.meta td{border:none;padding:1px 8px}
+details{margin:.4em 0}code{background:#f5f5f5;padding:0 3px}
+"""
+ASPECT_COLOURS = {"R": "#d22", "Y": "#e8b100", "YG": "#9c3", "G": "#2a2", "unknown": "#999"}
+
+
+def _e(text: object) -> str:
+    return html.escape(str(text))
+
+
+def _png_uri(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+def _plots(result: ProcedureResult) -> str:
+    if not result.trains:
+        return "<p>No train ran in this procedure.</p>"
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ktcs_bench.scenario.report import LIMITS, plot_speed_distance, plot_time_distance
+
+    none = {"safe_front_m": None, **{f"{k}_kmh": None for k in LIMITS}}
+    out = []
+    n = len(result.trains)
+    fig, axes = plt.subplots(n, 1, figsize=(10, 3.2 * n), squeeze=False)
+    for ax, (tid, series) in zip(axes[:, 0], result.trains.items(), strict=True):
+        rows = [{"train": tid, "t_s": t, "front_m": h, "speed_kmh": v, **none}
+                for t, h, _tl, v in series]  # fmt: skip
+        plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
+    fig.tight_layout()
+    out.append(f'<img alt="speed-distance" src="{_png_uri(fig)}">')
+    plt.close(fig)
+    td = [{"train": tid, "t_s": t, "front_m": h, "rear_m": tl}
+          for tid, series in result.trains.items() for t, h, tl, _v in series]  # fmt: skip
+    fig, ax = plt.subplots(figsize=(10, 4))
+    plot_time_distance(ax, td, [], "train positions over time")
+    fig.tight_layout()
+    out.append(f'<img alt="time-distance" src="{_png_uri(fig)}">')
+    plt.close(fig)
+    return "\n".join(out)
+
+
+def _lanes(result: ProcedureResult) -> str:
+    """An SVG strip per signal (the CTC's indication), each aspect in its colour over time, and
+    the steps' start times marked."""
+    keys = sorted({k for _, k, _ in result.timeline if k.startswith("ctc ") and " signal " in k})
+    changes: dict[str, list[tuple[float, str]]] = {k: [] for k in keys}
+    for t, k, v in result.timeline:
+        if k in changes:
+            changes[k].append((t, v))
+    shown = [k for k in keys if len({v for _, v in changes[k]}) > 1] or keys[:6]
+    if not shown:
+        return ""
+    end = max(result.duration, 1.0)
+    left, width, lane = 120, 760, 16
+    height = lane * len(shown) + 24
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{left + width + 10}" '
+             f'height="{height}" font-size="11">']  # fmt: skip
+    for i, k in enumerate(shown):
+        y = i * lane + 4
+        parts.append(f'<text x="2" y="{y + 11}">{_e(k.removeprefix("ctc "))}</text>')
+        series = changes[k]
+        for j, (t, v) in enumerate(series):
+            t1 = series[j + 1][0] if j + 1 < len(series) else end
+            x0, x1 = left + width * t / end, left + width * t1 / end
+            colour = ASPECT_COLOURS.get(v, "#999")
+            parts.append(f'<rect x="{x0:.1f}" y="{y}" width="{max(x1 - x0, 0.5):.1f}" '
+                         f'height="{lane - 3}" fill="{colour}"><title>{_e(k)}: {_e(v)} from '
+                         f'{t:.1f} s</title></rect>')  # fmt: skip
+    for s in result.steps:
+        if s.verdict != "skipped":
+            x = left + width * s.start / end
+            parts.append(f'<line x1="{x:.1f}" y1="0" x2="{x:.1f}" y2="{height - 18}" '
+                         f'stroke="#555" stroke-dasharray="2,2"><title>step {s.index}: '
+                         f'{_e(s.title)}</title></line><text x="{x + 1:.1f}" y="{height - 6}">'
+                         f"{s.index}</text>")  # fmt: skip
+    parts.append("</svg>")
+    return "".join(parts)
+
+
+def _pcapng(result: ProcedureResult, link: str) -> bytes:
+    buf = io.BytesIO()
+    writer = PcapngWriter(buf, link=result.link_types.get(link, "type1"))
+    for rec in result.captures[link]:
+        writer.write(rec)
+    return buf.getvalue()
+
+
+def html_report(result: ProcedureResult) -> str:
+    p = result.procedure
+    started = datetime.fromtimestamp(result.started, UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    rows = []
+    for s in result.steps:
+        what = _e(s.message) + (f"<br>seen: <code>{_e(s.seen)}</code>" if s.seen else "")
+        note = f"<br><i>{_e(s.note)}</i>" if s.note else ""
+        rows.append(f'<tr><td>{s.index}</td><td><code>{_e(s.title)}</code>{note}</td>'
+                    f'<td><span class="v {s.verdict}">{s.verdict}</span></td>'
+                    f"<td>{s.start:.1f} s</td><td>{s.duration:.1f} s</td><td>{what}</td></tr>")  # fmt: skip
+    changes = "".join(f"<tr><td>{t:.1f}</td><td>{_e(k)}</td><td>{_e(v)}</td></tr>"
+                      for t, k, v in result.timeline)  # fmt: skip
+    caps = []
+    for link, records in sorted(result.captures.items()):
+        data = base64.b64encode(_pcapng(result, link)).decode()
+        caps.append(f'<li><a download="{_e(p.id)}-{_e(link)}.pcapng" '
+                    f'href="data:application/vnd.tcpdump.pcap;base64,{data}">{_e(link)}.pcapng</a>'
+                    f" ({len(records)} records)</li>")  # fmt: skip
+    setup = (f'<p class="v error">setup: {_e(result.setup_error)}</p>'
+             if result.setup_error else "")  # fmt: skip
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{_e(p.id)}: {_e(result.verdict)}</title>
+<style>{CSS}</style></head><body>
+<h1>{_e(p.id)}: {_e(p.title)} <span class="v {result.verdict}">{result.verdict.upper()}</span></h1>
+<table class="meta">
+<tr><td>verifies</td><td>{_e("; ".join(p.verifies) or "-")}</td></tr>
+<tr><td>tags</td><td>{_e(", ".join(p.tags) or "-")}</td></tr>
+<tr><td>file</td><td><code>{_e(p.path)}</code></td></tr>
+<tr><td>lab</td><td>{_e(p.setup.lab.name)} ({_e(result.mode)})</td></tr>
+<tr><td>started</td><td>{started}; {result.duration:.1f} s on the lab's clock, {result.wall_s:.1f} s
+of wall time</td></tr>
+<tr><td>result</td><td>{_e(result.message or "every step passed")}</td></tr>
+<tr><td>cleared</td><td>{_e(", ".join(result.cleared) or "nothing to clear")}</td></tr>
+</table>{setup}
+<h2>Steps</h2>
+<table><tr><th>#</th><th>step</th><th>verdict</th><th>at</th><th>took</th><th>what was seen</th></tr>
+{"".join(rows)}</table>
+<h2>Timeline</h2>
+<p>Signals as the CTC showed them (red R, yellow Y, yellow-green YG, green G); the dashed lines
+are the steps.</p>
+{_lanes(result)}
+<details><summary>Every change of indications, signals, codes and trains
+({len(result.timeline)})</summary>
+<table><tr><th>t (s)</th><th>what</th><th>value</th></tr>{changes}</table></details>
+<h2>Trains</h2>
+{_plots(result)}
+<h2>Captures of the run</h2>
+<ul>{"".join(caps) or "<li>none (no tapped link)</li>"}</ul>
+</body></html>
+"""
+
+
+def write_html(result: ProcedureResult, folder: Path) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{result.procedure.id}.html"
+    path.write_text(html_report(result), encoding="utf-8")
+    return path
+
+
+def write_reports(results: Sequence[ProcedureResult], folder: Path) -> list[Path]:
+    """One HTML page per procedure, an index, and the JSON of the run."""
+    paths = [write_html(r, folder) for r in results]
+    items = "".join(f'<li><span class="v {r.verdict}">{r.verdict}</span> '
+                    f'<a href="{_e(p.name)}">{_e(r.procedure.id)}</a>: {_e(r.procedure.title)}'
+                    f"{' -- ' + _e(r.message) if r.message else ''}</li>"
+                    for r, p in zip(results, paths, strict=True))  # fmt: skip
+    index = folder / "index.html"
+    index.write_text(f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>'
+                     f"procedures</title><style>{CSS}</style></head><body><h1>Procedures</h1>"
+                     f"<ul>{items}</ul></body></html>\n", encoding="utf-8")  # fmt: skip
+    (folder / "results.json").write_text(json_text(results) + "\n", encoding="utf-8")
+    return [index, *paths]
