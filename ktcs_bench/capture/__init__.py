@@ -81,6 +81,10 @@ class PcapngWriter:
         """The real address of Type II end `name` for the packets that follow."""
         self.encoder.set_endpoint(name, host, port)
 
+    def flush(self) -> None:
+        """Everything written so far onto the file (for a reader, mid-run)."""
+        self._stream.flush()
+
     def close(self) -> None:
         self._stream.flush()
         if self._close_stream:
@@ -98,6 +102,9 @@ class _Closing:
 
     def set_endpoint(self, name: str, host: str, port: int) -> None:
         self.writer.set_endpoint(name, host, port)
+
+    def flush(self) -> None:
+        self.writer.flush()
 
     def close(self) -> None:
         self.writer.close()

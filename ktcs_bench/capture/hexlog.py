@@ -112,6 +112,9 @@ class HexLogWriter:
     def set_endpoint(self, name: str, host: str, port: int) -> None:
         """A hex log names the ends by direction only: their addresses are not kept."""
 
+    def flush(self) -> None:
+        self._stream.flush()
+
     def close(self) -> None:
         if not self._header_done:
             self._stream.write(format_header(self._start, self._profile, self._link))

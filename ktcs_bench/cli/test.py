@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import importlib
+import logging
 import sys
 import tempfile
 from pathlib import Path
@@ -75,6 +76,9 @@ def _run_virtual(args: argparse.Namespace, procedures: list[Any]) -> tuple[list[
     from ktcs_bench.procedure.runner import run_procedure
 
     lab_class = _in_process()
+    from ktcs_bench.timed.vloop import VirtualDeadlock
+
+    logging.basicConfig(level=logging.ERROR, stream=sys.stderr)  # the report has their events
     results: list[Any] = []
     for proc in procedures:
         with tempfile.TemporaryDirectory(prefix="ktcs-procedure-") as tmp:
@@ -83,6 +87,8 @@ def _run_virtual(args: argparse.Namespace, procedures: list[Any]) -> tuple[list[
                 result = lab.run(lambda access, p=proc: run_procedure(p, access, "virtual"))
             except KeyboardInterrupt:  # the lab, and every fault in it, ends with this process
                 return results, True
+            except VirtualDeadlock as exc:
+                raise PeerError(f"{proc.id}: the lab stalled: {exc}") from None
         results.append(result)
         if not args.json:
             print(result_text(result, args.colour), flush=True)

@@ -108,6 +108,7 @@ class InProcessLab:
         self.control_address = ""
         self.served: dict[str, str] = {}  # device -> the real address of its control port
         self._servers: list[net.Server] = []
+        self._flushers: list[Callable[[], None]] = []  # the capture writers' (see `captures`)
         self._events: IO[str] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._t0 = 0.0
@@ -179,8 +180,11 @@ class InProcessLab:
         return await lab_command(self, obj)
 
     def captures(self) -> dict[str, Path]:
+        """The capture files as they stand now (what the taps wrote is flushed onto them)."""
         if self.out is None:
             return {}
+        for flush in self._flushers:
+            flush()
         return {lk.name: self._capture_path(lk) for lk in self.topology.links if lk.tap}
 
     # -- start ---------------------------------------------------------------------------------
@@ -216,8 +220,10 @@ class InProcessLab:
     def _tap_args(self, link: LinkSpec, index: int) -> dict[str, Any]:
         writers: list[CaptureWriter] = []
         if self.out is not None:
-            writers.append(open_writer(str(self._capture_path(link)), link=link.type,
-                                       flush_each=self.clock != "virtual"))  # fmt: skip
+            writer = open_writer(str(self._capture_path(link)), link=link.type,
+                                 flush_each=self.clock != "virtual")  # fmt: skip
+            self._flushers.append(writer.flush)
+            writers.append(writer)
         profile = (
             self.topology.type1_profile if link.type == "type1" else self.topology.type2_profile
         )

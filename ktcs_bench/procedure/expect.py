@@ -314,7 +314,7 @@ def _code(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str, 
     return read, rest, (atc,)
 
 
-TRAIN_FIELDS = ("head", "tail", "speed", "tc", "status")
+TRAIN_FIELDS = ("head", "tail", "speed", "tc", "status", "state", "stops", "next_stop")
 
 
 def _train(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str, ...]]:
@@ -330,8 +330,14 @@ def _train(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str,
             s = await obs.status(device)
             if s is None:
                 return None
-            head, tail, track = s.get("head"), s.get("tail"), "1"
+            head, tail, track = s.get("head"), s.get("tail"), s.get("track") or "1"
             speed, status = s.get("speed_kmh"), s.get("status")
+            if what == "state":
+                return s.get("state")
+            if what == "next_stop":
+                return s.get("next_stop")
+            if what == "stops":  # the stations it has stopped at
+                return [str(a.get("station")) for a in s.get("arrivals") or []]
         else:
             s = await obs.status(tc_dev)
             pos = None if s is None else s.get("trains", {}).get(train)
@@ -339,6 +345,8 @@ def _train(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str,
                 return None
             head, tail, track = pos
             speed, status = obs.ghost_speed(train) or 0.0, "placed"
+            if what in ("state", "next_stop", "stops"):
+                return None  # a train the procedure moves has no service of its own
         if what == "tc":
             if head is None:
                 return None

@@ -11,6 +11,7 @@ the ATC codes, train positions).
 from __future__ import annotations
 
 import asyncio
+import json
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -99,16 +100,22 @@ class ProcedureResult:
 
 class CaptureCursor:
     """New records of a link's capture file since the cursor was set: a hex log is read from
-    where it stood (whole lines only), a pcapng again from the start."""
+    where it stood (whole lines only), a pcapng again from the start. The lab is asked for the
+    file each time (`captures()` gives it as it stands now)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, access: LabAccess, link: str, path: Path) -> None:
+        self.access, self.link = access, link
         self.path = path
         self.offset = 0
         self.count = 0
         self.hex = not str(path).endswith(".pcapng")
         self.start: float | None = None
 
+    def _now(self) -> None:
+        self.path = self.access.captures().get(self.link, self.path)
+
     def set(self) -> None:
+        self._now()
         if self.hex:
             self.offset, _ = self._tail(0)
             if self.start is None:
@@ -141,6 +148,7 @@ class CaptureCursor:
             return []
 
     def new(self) -> list[CaptureRecord]:
+        self._now()
         if not self.hex:
             return self._all()[self.count :]
         _, text = self._tail(self.offset)
@@ -164,6 +172,13 @@ def decode_frames(records: list[CaptureRecord], profile_name: str) -> list[Frame
     return out
 
 
+def wire(answer: Any) -> dict[str, Any]:
+    """An answer as it crosses a control port (JSON): a lab in one process answers with the
+    objects themselves (int keys, tuples), a live one with their JSON -- judged alike."""
+    out = json.loads(json.dumps(answer))
+    return out if isinstance(out, dict) else {}
+
+
 class Snapshot:
     """One sample of the lab: each device's status read at most once (an `Observer`)."""
 
@@ -175,7 +190,7 @@ class Snapshot:
     async def status(self, device: str) -> dict[str, Any] | None:
         if device not in self._status:
             try:
-                answer = await self.run.access.device(device, {"cmd": "status"})
+                answer = wire(await self.run.access.device(device, {"cmd": "status"}))
             except LabGone:
                 raise
             except LAB_ERRORS:
@@ -191,7 +206,9 @@ class Snapshot:
         if station not in self._show:
             try:
                 ctc = self.run.names.device_of("ctc")
-                answer = await self.run.access.device(ctc, {"cmd": "show", "station": station})
+                answer = wire(
+                    await self.run.access.device(ctc, {"cmd": "show", "station": station})
+                )
             except LabGone:
                 raise
             except LAB_ERRORS:
@@ -201,7 +218,7 @@ class Snapshot:
 
     async def new_events(self, device: str) -> list[dict[str, Any]]:
         try:
-            answer = await self.run.access.device(device, {"cmd": "events", "last": 2000})
+            answer = wire(await self.run.access.device(device, {"cmd": "events", "last": 2000}))
         except LabGone:
             raise
         except LAB_ERRORS:
@@ -277,7 +294,7 @@ class ProcedureRun:
         """Before each action: expectations of events and frames look at what came after it."""
         for device in self.event_devices:
             try:
-                answer = await self.access.device(device, {"cmd": "events", "last": 2000})
+                answer = wire(await self.access.device(device, {"cmd": "events", "last": 2000}))
             except LabGone:
                 raise
             except LAB_ERRORS:
@@ -358,8 +375,9 @@ class ProcedureRun:
                     values[f"code {tc}"] = f"{code[0]} ({code[1]:g} km/h)"
             elif d.kind == "trackcircuit":
                 for train, (head, tail, _track) in s.get("trains", {}).items():
-                    g = self.ghosts.get(train)
-                    self._train(train, t, head, tail, g.speed_kmh if g else 0.0)
+                    g = self.ghosts.get(train)  # a train device reports itself (below)
+                    if g is not None:
+                        self._train(train, t, head, tail, g.speed_kmh)
             elif d.kind == "train" and s.get("head") is not None:
                 self._train(str(s.get("train", d.name)), t, s["head"], s["tail"],
                             float(s.get("speed_kmh") or 0.0))  # fmt: skip
@@ -384,10 +402,10 @@ class ProcedureRun:
         for link in self.access.links:
             path = self.access.captures().get(link)
             if path is not None:
-                self.run_cursors[link] = CaptureCursor(path)
+                self.run_cursors[link] = CaptureCursor(self.access, link, path)
                 self.run_cursors[link].set()
                 if link in self.frame_links:
-                    self.action_cursors[link] = CaptureCursor(path)
+                    self.action_cursors[link] = CaptureCursor(self.access, link, path)
         stations = sorted(proc.setup.lab.stations)
         for device in proc.setup.restart:
             answer = await self.access.lab({"cmd": "restart", "device": device})
@@ -407,7 +425,27 @@ class ProcedureRun:
             )
 
         await self._until(ready, "the lab ready")
-        # what an earlier run left: its routes are cancelled
+        for st in stations:  # as the lab starts them, unless the procedure says otherwise
+            await self._mode(st, proc.setup.modes.get(st, proc.setup.lab.ixl_mode))
+        if proc.setup.ars is not None:
+            for st in stations:
+                answer = await self.access.device(ctc, {"cmd": "ars", "station": st,
+                                                        "on": proc.setup.ars})  # fmt: skip
+                if not answer.get("ok"):
+                    raise _SetupError(f"ars {'on' if proc.setup.ars else 'off'} at station {st}: "
+                                      f"{answer.get('error') or answer}")  # fmt: skip
+        ars = proc.setup.ars if proc.setup.ars is not None else proc.setup.lab.ars is not None
+        if not ars:  # what an earlier run left set is cancelled (with ARS on, ARS decides)
+            await self._cancel_routes(stations)
+        for ghost in proc.setup.trains:
+            g = self.ghosts[ghost.train] = Ghost(ghost.train, ghost.head, ghost.length, ghost.track)
+            await self.place(g)
+        await self.mark()
+        await self.action_done()
+
+    async def _cancel_routes(self, stations: list[int]) -> None:
+        names = self.names
+        ctc = names.device_of("ctc")
         s = ((await self.snapshot.status(ctc)) or {}).get("stations", {})
         for st in stations:
             for route_name in s.get(str(st), {}).get("routes", []):
@@ -424,20 +462,6 @@ class ProcedureRun:
         longest = max((r.approach_release_s for st in stations
                        for r in names.line.station(st).routes), default=0.0)  # fmt: skip
         await self._until(no_routes, "the routes left set cancelled", SETUP_S + longest)
-        for st in stations:  # as the lab starts them, unless the procedure says otherwise
-            await self._mode(st, proc.setup.modes.get(st, proc.setup.lab.ixl_mode))
-        if proc.setup.ars is not None:
-            for st in stations:
-                answer = await self.access.device(ctc, {"cmd": "ars", "station": st,
-                                                        "on": proc.setup.ars})  # fmt: skip
-                if not answer.get("ok"):
-                    raise _SetupError(f"ars {'on' if proc.setup.ars else 'off'} at station {st}: "
-                                      f"{answer.get('error') or answer}")  # fmt: skip
-        for ghost in proc.setup.trains:
-            g = self.ghosts[ghost.train] = Ghost(ghost.train, ghost.head, ghost.length, ghost.track)
-            await self.place(g)
-        await self.mark()
-        await self.action_done()
 
     async def _mode(self, st: int, mode: str) -> None:
         ctc, ixl = self.names.device_of("ctc"), self.names.device_of("ixl", st)

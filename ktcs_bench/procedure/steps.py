@@ -7,8 +7,8 @@ carried out through the run's context, giving a verdict:
                                          control CODE [VALUE]
     - train: T1 place TC1851           a train the procedure moves itself (no process): place AT
     - train: T1 run to 1300 at 30        [length M] [track N], run to AT [at KMH], remove; AT is a
-    - train: T2 dispatch                 chainage in m or a track circuit (its middle); a train
-                                         device takes its commands (dispatch, hold, release_eb)
+    - train: 1001 release_eb             chainage in m or a track circuit (its middle); a train
+                                         device takes its commands (release_eb)
     - fault: link st18-atc cut         a tap's words (cut, restore, ber 1e-3, drop-frame, ...)
     - fault: point 18 31 detection     point detection lost (or jammed); relay TC KIND (a track
     - fault: tc TC1855 failed_occupied   relay), tc TC KIND (the track circuit itself); kill
@@ -43,7 +43,7 @@ DEFAULT_RUN_KMH = 30.0
 POINT_FAULTS = ("detection", "jammed")
 RELAY_FAULTS = ("failed_occupied", "failed_clear")
 TC_FAULTS = ("failed_occupied", "failed_clear", "no_code")
-TRAIN_DEVICE_VERBS = ("dispatch", "hold", "release_eb")
+TRAIN_DEVICE_VERBS = ("release_eb",)  # what a train device takes (a driver's EB release)
 LOCAL_ACTIONS = ("grant", "refuse", "take")
 
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|sec|min|m)?\s*$")

@@ -26,7 +26,15 @@ LIVE = ("route_set.yaml", "route_conflict_refused.yaml", "type1_comm_error.yaml"
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab]:
-    with start_lab(tmp_path_factory.mktemp("proclab"), "proclab") as running:
+    """The procedures' quiet lab (no train, no ARS), renamed, in real processes."""
+    tmp = tmp_path_factory.mktemp("proclab")
+    text = (SHIPPED / "labs" / "quiet.yaml").read_text(encoding="utf-8")
+    line = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
+    text = text.replace("lab: quiet", "lab: proclab").replace(
+        "../../lines/reference.yaml", str(line)
+    )
+    (tmp / "proclab.yaml").write_text(text, encoding="utf-8")
+    with start_lab(tmp, "proclab", path=tmp / "proclab.yaml") as running:
         yield running
 
 
@@ -67,7 +75,7 @@ id: must-fail
 title: expects a signal to clear with no route set
 verifies: [the reports say what failed]
 tags: [negative]
-setup: {lab: reference}
+setup: {lab: 'QUIET'}
 steps:
   - fault: link st18-io ber 1e-4
   - expect: ctc 18 route 0111 is unset
@@ -81,7 +89,9 @@ def test_a_procedure_that_must_fail_fails_and_every_report_says_why(
     lab: RunningLab, tmp_path: Path
 ) -> None:
     path = tmp_path / "must_fail.yaml"
-    path.write_text(FAILING, encoding="utf-8")
+    path.write_text(
+        FAILING.replace("QUIET", str(SHIPPED / "labs" / "quiet.yaml")), encoding="utf-8"
+    )
     junit, report = tmp_path / "junit.xml", tmp_path / "report"
     done = test_run(lab, str(path), "--junit", str(junit), "--report", str(report), "--json")
     assert done.returncode == 1, done.stdout + done.stderr
@@ -103,7 +113,7 @@ id: interrupted
 title: cut a link, then wait long
 verifies: [Ctrl-C clears the faults]
 tags: [negative]
-setup: {lab: reference}
+setup: {lab: 'QUIET'}
 steps:
   - fault: link st20-io cut
   - wait: 600s
@@ -114,7 +124,9 @@ def test_ctrl_c_ends_the_run_with_130_and_clears_its_faults(
     lab: RunningLab, tmp_path: Path
 ) -> None:
     path = tmp_path / "interrupted.yaml"
-    path.write_text(INTERRUPTED, encoding="utf-8")
+    path.write_text(
+        INTERRUPTED.replace("QUIET", str(SHIPPED / "labs" / "quiet.yaml")), encoding="utf-8"
+    )
     proc = subprocess.Popen(
         [sys.executable, "-m", "ktcs_bench.cli.main", "test", "run", "--live", "proclab",
          "--no-colour", str(path), "--junit", str(tmp_path / "j.xml")],
