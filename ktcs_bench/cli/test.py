@@ -18,7 +18,8 @@ from ktcs_bench.errors import PeerError, UsageError
 EPILOG = """\
 examples:
   ktcs-bench test run emulators/procedures/*.yaml                 # in one process, virtual time
-  ktcs-bench lab up &  ktcs-bench test run --live emulators/procedures/route_set.yaml
+  ktcs-bench lab up emulators/procedures/labs/quiet.yaml &     # the procedures' lab, live ...
+  ktcs-bench test run --live emulators/procedures/route_set.yaml  # ... and a procedure on it
   ktcs-bench test run --live mylab P.yaml --junit out.xml --report out/ # a running lab `mylab`
 
 A procedure is a YAML file: metadata (id, title, verifies, tags), a setup (lab, trains, modes,
