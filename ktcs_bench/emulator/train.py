@@ -300,6 +300,7 @@ class TrainDevice(Device):
                 self.code.target_point,
             ],  # fmt: skip
             "status": None if verdict is None else str(verdict.status),
+            "emergency_brakes": ep.eb_count,
             "target_point": None if self.last is None else self.last.target_point,
         }
 
