@@ -157,15 +157,27 @@ def _plots(result: ProcedureResult) -> str:
     return "\n".join(out)
 
 
+def _lane_colour(key: str, value: str) -> str:
+    if key.startswith("code "):  # the code number: 0 (stop) red, the higher the greener
+        try:
+            code = int(value.split()[0])
+        except (ValueError, IndexError):
+            return "#999"
+        return "#d22" if code == 0 else f"hsl({min(40 + 14 * code, 130)},70%,42%)"
+    return ASPECT_COLOURS.get(value, "#999")
+
+
 def _lanes(result: ProcedureResult) -> str:
-    """An SVG strip per signal (the CTC's indication), each aspect in its colour over time, and
-    the steps' start times marked."""
-    keys = sorted({k for _, k, _ in result.timeline if k.startswith("ctc ") and " signal " in k})
-    changes: dict[str, list[tuple[float, str]]] = {k: [] for k in keys}
+    """An SVG strip per signal (the CTC's indication) and per ATC code that changed during the
+    run, each value in its colour over time, and the steps' start times marked."""
+    changes: dict[str, list[tuple[float, str]]] = {}
     for t, k, v in result.timeline:
-        if k in changes:
-            changes[k].append((t, v))
-    shown = [k for k in keys if len({v for _, v in changes[k]}) > 1] or keys[:6]
+        if (k.startswith("ctc ") and " signal " in k) or k.startswith("code "):
+            changes.setdefault(k, []).append((t, v))
+    moved = [k for k, series in changes.items() if len({v for _, v in series}) > 1]
+    signals = sorted(k for k in moved if k.startswith("ctc "))
+    codes = sorted((k for k in moved if k.startswith("code ")), key=lambda k: k.split()[1])
+    shown = signals + codes or sorted(changes)[:6]
     if not shown:
         return ""
     end = max(result.duration, 1.0)
@@ -180,10 +192,9 @@ def _lanes(result: ProcedureResult) -> str:
         for j, (t, v) in enumerate(series):
             t1 = series[j + 1][0] if j + 1 < len(series) else end
             x0, x1 = left + width * t / end, left + width * t1 / end
-            colour = ASPECT_COLOURS.get(v, "#999")
             parts.append(f'<rect x="{x0:.1f}" y="{y}" width="{max(x1 - x0, 0.5):.1f}" '
-                         f'height="{lane - 3}" fill="{colour}"><title>{_e(k)}: {_e(v)} from '
-                         f'{t:.1f} s</title></rect>')  # fmt: skip
+                         f'height="{lane - 3}" fill="{_lane_colour(k, v)}"><title>{_e(k)}: '
+                         f"{_e(v)} from {t:.1f} s</title></rect>")  # fmt: skip
     for s in result.steps:
         if s.verdict != "skipped":
             x = left + width * s.start / end
@@ -241,8 +252,9 @@ of wall time</td></tr>
 <table><tr><th>#</th><th>step</th><th>verdict</th><th>at</th><th>took</th><th>what was seen</th></tr>
 {"".join(rows)}</table>
 <h2>Timeline</h2>
-<p>Signals as the CTC showed them (red R, yellow Y, yellow-green YG, green G); the dashed lines
-are the steps.</p>
+<p>The signals as the CTC showed them (red R, yellow Y, yellow-green YG, green G) and the ATC's
+code on each track circuit whose code changed (red: stop, greener: faster); the dashed lines are
+the steps. Hover for the values.</p>
 {_lanes(result)}
 <details><summary>Every change of indications, signals, codes and trains
 ({len(result.timeline)})</summary>

@@ -427,7 +427,7 @@ class ProcedureRun:
         await self._until(ready, "the lab ready")
         for st in stations:  # as the lab starts them, unless the procedure says otherwise
             await self._mode(st, proc.setup.modes.get(st, proc.setup.lab.ixl_mode))
-        if proc.setup.ars is not None:
+        if proc.setup.ars or (proc.setup.ars is False and proc.setup.lab.ars is not None):
             for st in stations:
                 answer = await self.access.device(ctc, {"cmd": "ars", "station": st,
                                                         "on": proc.setup.ars})  # fmt: skip

@@ -276,6 +276,8 @@ def _seen_text(seen: Any) -> str:
                          for f in seen[:3])  # fmt: skip
     if seen is None or seen == []:
         return "nothing" if seen == [] else "no answer"
+    if isinstance(seen, float):
+        return f"{seen:.2f}".rstrip("0").rstrip(".")
     return str(seen)
 
 
