@@ -314,7 +314,8 @@ def _code(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str, 
     return read, rest, (atc,)
 
 
-TRAIN_FIELDS = ("head", "tail", "speed", "tc", "status", "state", "stops", "next_stop")
+TRAIN_FIELDS = ("head", "tail", "speed", "tc", "status", "state", "stops", "next_stop",
+                "emergency_brakes")  # fmt: skip
 
 
 def _train(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str, ...]]:
@@ -336,6 +337,8 @@ def _train(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str,
                 return s.get("state")
             if what == "next_stop":
                 return s.get("next_stop")
+            if what == "emergency_brakes":  # how often its ATP braked to a stop
+                return s.get("emergency_brakes")
             if what == "stops":  # the stations it has stopped at
                 return [str(a.get("station")) for a in s.get("arrivals") or []]
         else:
@@ -345,8 +348,8 @@ def _train(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str,
                 return None
             head, tail, track = pos
             speed, status = obs.ghost_speed(train) or 0.0, "placed"
-            if what in ("state", "next_stop", "stops"):
-                return None  # a train the procedure moves has no service of its own
+            if what in ("state", "next_stop", "stops", "emergency_brakes"):
+                return None  # a train the procedure moves has no service or ATP of its own
         if what == "tc":
             if head is None:
                 return None
