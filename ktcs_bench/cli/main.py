@@ -35,6 +35,7 @@ examples:
   ktcs-bench emulator atc --station 18 --link ixl=pty   # one device alone, for a real peer
   ktcs-bench conformance --role atc --target /dev/ttyUSB0
   ktcs-bench scenario run emulators/scenarios/seed001_follower.yaml
+  ktcs-bench test run emulators/procedures/*.yaml --junit junit.xml --report out/
   ktcs-bench dissector --install                     # Wireshark shows ktcs1/ktcs2 in captures
 
 colour: on a terminal, unless NO_COLOR is set; --colour / --no-colour (any command) decide.
