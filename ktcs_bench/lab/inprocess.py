@@ -158,7 +158,7 @@ class InProcessLab:
             return {"ok": False, "error": f"{name} is not running ({self._why_not(name)})"}
         if not isinstance(obj, dict) or not isinstance(obj.get("cmd"), str):
             return {"ok": False, "error": 'a command is a JSON object {"cmd": ...}'}
-        return await device._handle(dict(obj), _NO_PEER)
+        return _as_on_the_wire(await device._handle(dict(obj), _NO_PEER))
 
     async def link(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:
         spec = self._link(name)
@@ -170,14 +170,14 @@ class InProcessLab:
         answer = tap.execute(obj)
         if answer.get("ok") and obj.get("cmd") != "status":
             self._note_lab(spec.name, "tap", str(answer.get("command", obj.get("cmd"))))
-        return answer
+        return _as_on_the_wire(answer)
 
     async def lab(self, obj: dict[str, Any]) -> dict[str, Any]:
         """The lab's commands as on a live lab's control port (`runner.lab_command`); `down`
         asks whoever runs the lab to stop it (`stop_requested`)."""
         if not isinstance(obj, dict):
             return {"ok": False, "error": 'a command is a JSON object {"cmd": ...}'}
-        return await lab_command(self, obj)
+        return _as_on_the_wire(await lab_command(self, obj))
 
     def captures(self) -> dict[str, Path]:
         """The capture files as they stand now (what the taps wrote is flushed onto them)."""
@@ -443,11 +443,11 @@ class InProcessLab:
             self._events.write(json.dumps(event, sort_keys=True, separators=(",", ":")) + "\n")
 
     def _on_note(self, device: Device, event: dict[str, Any]) -> None:
-        self._log({"t": event["time"], "device": device.name, "kind": event["kind"],
+        self._log({"t": round(event["time"], 6), "device": device.name, "kind": event["kind"],
                    "text": event["text"]})  # fmt: skip
 
     def _note_lab(self, name: str, kind: str, text: str) -> None:
-        self._log({"t": self.now(), "device": name, "kind": kind, "text": text})
+        self._log({"t": round(self.now(), 6), "device": name, "kind": kind, "text": text})
 
     def _link_event(self, name: str, role: str, port: str, event: LinkEvent) -> None:
         if isinstance(event, LinkUp):
@@ -490,6 +490,13 @@ class InProcessLab:
 
     def _why_not(self, name: str) -> str:
         return f"crashed: {self.crashed[name]}" if name in self.crashed else "stopped"
+
+
+def _as_on_the_wire(answer: dict[str, Any]) -> dict[str, Any]:
+    """An answer as a control port's client reads it (JSON: lists, not tuples; string keys), so
+    a procedure sees the same answer from a lab in one process as from a live one."""
+    out: dict[str, Any] = json.loads(json.dumps(answer, default=str))
+    return out
 
 
 def _ports(device: Device) -> dict[str, CodePort]:
