@@ -192,6 +192,7 @@ class InProcessLab:
         """Start every device and tap in the live order (see `lab.runner`)."""
         loop = self._loop = asyncio.get_running_loop()
         self.net = memory.attach(loop)
+        self.net.token = self.token
         self._t0, self._wall0 = loop.time(), time.monotonic()
         if self.out is not None:
             (self.out / "captures").mkdir(parents=True, exist_ok=True)

@@ -21,7 +21,7 @@ from typing import Any
 
 from ktcs_bench.errors import PeerError
 from ktcs_bench.runtime import client_token, token_matches
-from ktcs_bench.transport import net
+from ktcs_bench.transport import memory, net
 from ktcs_bench.transport.tcp import open_tcp
 
 log = logging.getLogger("ktcs_bench.control")
@@ -137,9 +137,11 @@ async def request(
     host: str, port: int, obj: dict[str, Any], timeout: float = 10.0, token: str | None = None
 ) -> dict[str, Any]:
     """One command to a control port, one answer back. The token presented is `token`, else the
-    one `runtime.client_token` finds for the address; a refusal is a PeerError."""
+    one `runtime.client_token` finds for the address (on a lab's memory network, the lab's); a
+    refusal is a PeerError."""
     if token is None:
-        token = client_token((host, port))
+        lab = memory.network_of(asyncio.get_running_loop())  # a lab in one process: its token
+        token = lab.token if lab is not None else client_token((host, port))
     async with asyncio.timeout(timeout):
         peer = await connect(host, port)
         try:

@@ -240,6 +240,7 @@ class MemoryNetwork:
         self._connections: list[MemoryTransport] = []
         self._handlers: dict[str, set[asyncio.Task[Any]]] = {}
         self.serial: dict[str, SerialEnd] = {}
+        self.token: str | None = None  # the token of the lab on this network (its ports')
 
     def _port(self) -> int:
         while True:
