@@ -195,8 +195,11 @@ class InProcessLab:
         self.net.token = self.token
         self._t0, self._wall0 = loop.time(), time.monotonic()
         if self.out is not None:
-            (self.out / "captures").mkdir(parents=True, exist_ok=True)
-            self._events = (self.out / "events.jsonl").open("w", encoding="utf-8")
+            try:
+                (self.out / "captures").mkdir(parents=True, exist_ok=True)
+                self._events = (self.out / "events.jsonl").open("w", encoding="utf-8")
+            except OSError as exc:
+                raise UsageError(f"cannot write the run's output to {self.out}: {exc}") from None
         await start_in_order(self.topology, self, self.endpoints)
         await self._trains_to_ctc()
 
