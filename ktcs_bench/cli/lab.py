@@ -226,11 +226,15 @@ def _simulate(args: argparse.Namespace) -> int:
         raise UsageError("lab simulate: give --for DURATION and --out DIR (or --replay FILE)")
     lab = InProcessLab(args.lab, seed=args.seed, out=Path(args.out))
     watched = sys.stderr.isatty()
+    # Ctrl-C ends the run at the next step, cleanly: what ran is written (the virtual loop never
+    # waits on its wake-up pipe, so the interrupt is a flag, not an asyncio signal handler)
+    interrupted: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append(1))
 
     async def main(lab: InProcessLab) -> None:
         step = max(1.0, args.duration / 50)
         done = 0.0
-        while done < args.duration:
+        while done < args.duration and not interrupted:
             await lab.sleep(min(step, args.duration - done))
             done = min(args.duration, done + step)
             if watched:
@@ -245,6 +249,8 @@ def _simulate(args: argparse.Namespace) -> int:
     except VirtualDeadlock as exc:
         print(f"ktcs-bench: the lab stalled: {exc}", file=sys.stderr)
         return 3
+    finally:
+        signal.signal(signal.SIGINT, previous)
     summary = json.loads((Path(args.out) / "summary.json").read_text(encoding="utf-8"))
     if args.json:
         print(json.dumps(summary))
@@ -256,6 +262,9 @@ def _simulate(args: argparse.Namespace) -> int:
             print(f"  {name}: {json.dumps(train)}")
     for name, why in summary["crashed"].items():
         print(f"!! {name} crashed: {why}", file=sys.stderr)
+    if interrupted:
+        print(f"interrupted after {summary['virtual_s']:g} s of virtual time", file=sys.stderr)
+        return 130
     return 3 if summary["crashed"] else 0
 
 
