@@ -53,11 +53,16 @@ class LoopTimer(Generic[Out]):
             self._handle = self.loop.call_at(deadline + self.origin, self._on_handle)
             self._at = deadline
 
-    def fire(self) -> None:
-        """Call the core's timer now, whatever its deadline (then re-arm)."""
+    def fire(self, due: float | None = None) -> None:
+        """Call the core's timer now, whatever its deadline (then re-arm). `due`: the deadline
+        the handle was armed for -- the core's time has reached it, even where the loop's time
+        less `origin` rounds a hair below it (so the core is never called with nothing due, again
+        and again, at one instant of a virtual clock)."""
         if self._stopped:
             return
         now = self.now()
+        if due is not None and now < due:
+            now = due
         self.sink(now, self.core.handle_timer(now))
         self.poke()
 
@@ -73,6 +78,7 @@ class LoopTimer(Generic[Out]):
         self._at = None
 
     def _on_handle(self) -> None:
+        due = self._at
         self._handle = None
         self._at = None
-        self.fire()
+        self.fire(due)

@@ -99,3 +99,39 @@ def test_the_scaled_loop_runs_its_clock_faster_than_the_wall() -> None:
 def test_a_speed_of_zero_is_refused() -> None:
     with pytest.raises(ValueError, match="speed"):
         ScaledTimeLoop(speed=0)
+
+
+def test_a_core_with_an_origin_is_called_once_per_deadline_whatever_the_rounding() -> None:
+    """The handle armed for deadline d fires at loop time d + origin; (d + origin) - origin can
+    come out a hair below d in floating point (3.0000000000000004 + 0.1 - 0.1 == 3.0), and a core
+    called then has nothing due, so the loop -- whose virtual clock does not move by itself -- would
+    call it again and again at the same instant. The driver gives the core the deadline it fired
+    for: one call per deadline."""
+
+    class Cycle:
+        def __init__(self) -> None:
+            self.cycles, self.calls = 0, 0
+
+        def next_deadline(self) -> float:
+            return 0.1 + self.cycles * 0.1  # as a train's cycle: first + cycles x period
+
+        def handle_timer(self, now: float) -> None:
+            self.calls += 1
+            if now >= self.next_deadline():
+                self.cycles += 1
+            elif self.calls > self.cycles + 10:  # spinning at one instant: end the run, fail
+                asyncio.get_running_loop().stop()
+
+    core = Cycle()
+
+    async def main() -> None:
+        timer = LoopTimer(core, lambda now, out: None, origin=0.1)
+        timer.poke()
+        await asyncio.sleep(10.05)
+        timer.cancel()
+
+    run(main)
+    assert (
+        core.cycles == 99
+    )  # deadlines 0.1 .. 9.9 on the core's clock (origin 0.1: 10.0 on the loop's)
+    assert core.calls == core.cycles, f"{core.calls - core.cycles} calls found nothing due"
