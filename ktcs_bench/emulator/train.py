@@ -275,6 +275,8 @@ class TrainDevice(Device):
             **self._position(),
             "time_s": round(now, 1),
             "state": ep.service_state(now) if self.on_line else "waiting",
+            "held": ep.held,
+            "stop_at": ep.commanded_stop,
             "enters_s": None if self.run_ is None else self.run_.enter_s,
             "next_stop": None if ep.next_stop is None else ep.next_stop.name,
             "arrivals": [
@@ -304,10 +306,31 @@ class TrainDevice(Device):
             "target_point": None if self.last is None else self.last.target_point,
         }
 
+    def _order(self, obj: dict[str, Any]) -> dict[str, Any]:
+        """The operator's orders to the ATO: hold, dispatch [now], run_to AT (m on the line)."""
+        now = 0.0 if self.origin is None else self.now() - self.origin
+        ep, cmd = self.endpoint, obj["cmd"]
+        try:
+            if cmd == "hold":
+                text = ep.hold(now)
+            elif cmd == "dispatch":
+                text = ep.dispatch(now, at_once=obj.get("now") is True)
+            else:
+                at = obj.get("at")
+                if not isinstance(at, (int, float)) or isinstance(at, bool):
+                    return {"ok": False, "error": f"run_to: 'at' is a place in m, not {at!r}"}
+                text = ep.run_to(now, float(at))
+        except UsageError as exc:
+            return {"ok": False, "error": str(exc)}
+        self.note(cmd, text)
+        return {"ok": True, "result": text}
+
     async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
         if obj.get("cmd") == "release_eb":
             self.release = True
             return {"ok": True}
+        if obj.get("cmd") in ("hold", "dispatch", "run_to"):
+            return self._order(obj)
         if obj.get("cmd") == "speed_distance":  # for the CTC console's speed-distance panel
             sd = endpoint_speed_distance(self.config.train_id, self.endpoint)
             return {"ok": True, "data": sd.to_json()}

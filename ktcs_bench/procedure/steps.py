@@ -8,7 +8,8 @@ carried out through the run's context, giving a verdict:
     - train: T1 place TC1851           a train the procedure moves itself (no process): place AT
     - train: T1 run to 1300 at 30        [length M] [track N], run to AT [at KMH], remove; AT is a
     - train: 1001 release_eb             chainage in m or a track circuit (its middle); a train
-                                         device takes its commands (release_eb)
+    - train: 1001 run to 5200              device takes its commands: hold, dispatch [now], run
+                                         to AT (its ATO stops there), release_eb
     - fault: link st18-atc cut         a tap's words (cut, restore, ber 1e-3, drop-frame, ...)
     - fault: point 18 31 detection     point detection lost (or jammed); relay TC KIND (a track
     - fault: tc TC1855 failed_occupied   relay), tc TC KIND (the track circuit itself); kill
@@ -43,7 +44,8 @@ DEFAULT_RUN_KMH = 30.0
 POINT_FAULTS = ("detection", "jammed")
 RELAY_FAULTS = ("failed_occupied", "failed_clear")
 TC_FAULTS = ("failed_occupied", "failed_clear", "no_code")
-TRAIN_DEVICE_VERBS = ("release_eb",)  # what a train device takes (a driver's EB release)
+TRAIN_DEVICE_VERBS = ("hold", "dispatch [now]", "run to AT", "release_eb")
+"""What a train device takes: the operator's orders to its ATO, the driver's EB release."""
 LOCAL_ACTIONS = ("grant", "refuse", "take")
 
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|sec|min|m)?\s*$")
@@ -178,11 +180,12 @@ class TrainStep(Step):
     kmh: float = DEFAULT_RUN_KMH
     length: float | None = None
     track: str | None = None
-    device: str | None = None  # a train device: the verb is its command
+    device: str | None = None  # a train device: `command` is its command
+    command: dict[str, Any] = field(default_factory=dict)
 
     async def run(self, ctx: Context) -> Outcome:
         if self.device is not None:
-            answer = await ctx.access.device(self.device, {"cmd": self.verb})
+            answer = await ctx.access.device(self.device, self.command)
             await ctx.action_done()
             ok = bool(answer.get("ok"))
             return Outcome("pass" if ok else "error", _answer_text(answer))
@@ -335,10 +338,8 @@ def _train_step(names: LabNames, base: dict[str, Any], text: str) -> TrainStep:
     train = names.train(w[0])
     device = names.train_device(train)
     if device is not None:
-        if verb not in TRAIN_DEVICE_VERBS or rest:
-            raise StepError(f"train {train} runs as device {device}: "
-                            f"{', '.join(TRAIN_DEVICE_VERBS)}")  # fmt: skip
-        return TrainStep(**base, train=train, verb=verb, device=device)
+        return TrainStep(**base, train=train, verb=verb, device=device,
+                         command=_device_order(names, train, device, verb, rest))  # fmt: skip
     if verb == "remove" and not rest:
         return TrainStep(**base, train=train, verb=verb)
     if verb == "place" and rest:
@@ -364,6 +365,23 @@ def _train_step(names: LabNames, base: dict[str, Any], text: str) -> TrainStep:
         return step
     raise StepError(f"train {train}: cannot read {' '.join(w[1:])!r} "
                     "(place AT [length M] [track N], run to AT [at KMH], remove)")  # fmt: skip
+
+
+def _device_order(
+    names: LabNames, train: str, device: str, verb: str, rest: list[str]
+) -> dict[str, Any]:
+    """The command a train device takes for `train ID VERB REST...`."""
+    if verb in ("hold", "release_eb") and not rest:
+        return {"cmd": verb}
+    if verb == "dispatch" and rest in ([], ["now"]):
+        return {"cmd": verb, "now": bool(rest)}
+    if verb == "run" and len(rest) == 2 and rest[0] == "to":
+        return {"cmd": "run_to", "at": _place(names, rest[1])}
+    if verb == "run" and rest[:1] == ["to"] and len(rest) > 2:
+        raise StepError(f"train {train} runs as device {device}: its ATO sets the speed "
+                        "(run to AT, without at KMH)")  # fmt: skip
+    raise StepError(f"train {train} runs as device {device}: "
+                    f"{', '.join(TRAIN_DEVICE_VERBS)}, not {' '.join([verb, *rest])!r}")  # fmt: skip
 
 
 def _positive(word: str, what: str) -> float:

@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ktcs_bench.errors import UsageError
 from ktcs_bench.train.ato import AtoController, AtoInputs, AtoState, AtoStateMachine
 from ktcs_bench.train.curves import (
     CurveSet,
@@ -51,7 +52,7 @@ from ktcs_bench.train.deceleration import (
 )
 from ktcs_bench.train.dynamics import Command, TrainDynamics, TrainParams, TrainState
 from ktcs_bench.train.mrsp import Restriction, SpeedProfile, build_mrsp
-from ktcs_bench.train.position import Position, PositionEstimator
+from ktcs_bench.train.position import Position, PositionEstimator, TachoScale
 from ktcs_bench.train.supervision import (
     EBI,
     PERMITTED,
@@ -159,7 +160,8 @@ class Departure:
 SERVICE_STATES = ("running", "stopping", "dwelling", "held", "finished", "left")
 """What a train is doing (`TrainEndpoint.service_state`): moving on its codes, braking for a stop,
 standing its dwell at a platform, standing for a code (at a signal, or at a platform with its
-dwell over), its service over at its last stop, gone off the end of the line."""
+dwell over) or under the operator's hold, its service over at its last stop, gone off the end of
+the line."""
 STOP_TOLERANCE = 0.5
 """A platform stop is good within ± this of the mark, m (its doors line up with the platform)."""
 BERTH_WINDOW = 1.0
@@ -310,6 +312,11 @@ class TrainEndpoint:
         self._berth: Station | None = None  # the platform it stands at, until it departs
         self._to_go = math.inf  # the ATO's distance to go to its next stop, m
         self.left = False
+        # the operator's orders (`hold`, `dispatch`, `run_to`): "here" stand where it stands (or
+        # brake to a stop), "platform" stand at its next platform stop; a commanded stop point
+        self._hold: str | None = None
+        self._stop_at: float | None = None
+        self.tacho = TachoScale(list(line.tags))
 
     # ------------------------------------------------------------------ the cycle
 
@@ -379,6 +386,7 @@ class TrainEndpoint:
         x0 = s.position
         self.dynamics.step(dt, cmd, grad)
         self.position, missed = self.estimator.advance(x0, s.position)
+        self.tacho.update(self.position)
         for tag in missed:
             self.supervisor.trip(f"missed tag {tag}")
             events.append(TrainEvent(now, cfg.train_id, "missed_tag", f"tag {tag} not read"))
@@ -565,11 +573,15 @@ class TrainEndpoint:
             return 0.0, p.service_decel
         if self._berth is not None and (code is None or code.speed <= 0.0):
             return 0.0, p.service_decel  # at a platform it leaves only on a proceed code
+        if self._stopped_at_order(now, events) or self._hold == "here":
+            return 0.0, p.service_decel
         v_target = self.ato_ctl.target_speed(code_speed, cfg.recovery)
         v_target = min(v_target, verdict.permitted - kmh(1.0))
         stops = [self.target_point - 0.5 - self.position.uncertainty]
         if station is not None:
             stops.append(station.stop_mark)
+        if self._stop_at is not None:  # in the estimate's frame, by the calibrated tacho
+            stops.append(self._stop_at + self.position.head - self.tacho.head(self.position))
         dtg = self._to_go = min(stops) - self.position.head
         if station is None and cfg.leaves_line and s.speed <= 0.0 and dtg < LEAVE_WITHIN:
             if not self.left:
@@ -591,8 +603,93 @@ class TrainEndpoint:
                                      f"{arrival.error:+.2f} m from the mark"))  # fmt: skip
         self._dwell_until = max(now + station.dwell, station.depart)
         self._berth = station
+        if self._hold == "platform":  # the hold takes effect: it stands here past its dwell
+            self._hold = "here"
         self._next_station += 1
         self.ato_sm.berthed = False
+
+    # ------------------------------------------------------------------ the operator's orders
+
+    def _stopped_at_order(self, now: float, events: list[TrainEvent]) -> bool:
+        """Standing at its commanded stop point: the order is done, it waits for dispatch."""
+        x = self._stop_at
+        if x is None or self.dynamics.state.speed > 0.0:
+            return False
+        if abs(self.tacho.head(self.position) - x) > STOP_TOLERANCE:
+            return False
+        self._stop_at, self._hold = None, "here"
+        head = self.dynamics.state.position
+        events.append(TrainEvent(now, self.cfg.train_id, "stopped",
+                                 f"at the commanded stop {x:g} m: front at {head:.2f} m, "
+                                 f"{head - x:+.2f} m; waits for dispatch"))  # fmt: skip
+        return True
+
+    def _ato_only(self, what: str) -> None:
+        if not self.cfg.ato:
+            raise UsageError(f"train {self.cfg.train_id} is driven by hand: {what} is for the ATO")
+
+    def hold(self, now: float) -> str:
+        """The operator holds the train (an ATS platform hold): standing, it does not leave where
+        it stands; running, it runs on to its next platform stop and stands there past its dwell
+        (never stranded between stations); with no platform stop ahead, the ATO brings it to a
+        service-brake stop. Until `dispatch`. Returns what it will do."""
+        self._ato_only("hold")
+        nxt = self.next_stop
+        if self.dynamics.state.speed <= 0.0 or nxt is None or self._berth is not None:
+            self._hold = "here"
+            if self.dynamics.state.speed > 0.0:
+                return "held: no platform stop ahead, a service-brake stop"
+            return "held where it stands"
+        self._hold = "platform"
+        return f"held at its next platform stop, {nxt.name} ({nxt.stop_mark:g} m)"
+
+    def dispatch(self, now: float, at_once: bool = False) -> str:
+        """Cancel a hold and a commanded stop: the train goes on with its service when its dwell
+        is over and no sooner than its timetable -- at once with `at_once` -- and only when the
+        code lets it (the ATP is never overridden: on a stop code it stands)."""
+        self._ato_only("dispatch")
+        self._hold, self._stop_at = None, None
+        if at_once:
+            self._dwell_until = min(self._dwell_until, now)
+        wait = self._dwell_until - now
+        code = self._code if self.cfg.mode == "ktcs" else None
+        if code is not None and code.speed <= 0.0 and self.dynamics.state.speed <= 0.0:
+            return "dispatched: the code is stop, it leaves when the code lets it"
+        if wait > 0.0:
+            return f"dispatched: leaves in {wait:.0f} s (its dwell or its timetable)"
+        return "dispatched"
+
+    def run_to(self, now: float, x: float) -> str:
+        """The ATO runs to stop point `x` (m on its line, ahead of the front, where the service
+        brake can still stop it) and stands there, its front within ±`STOP_TOLERANCE`, until
+        `dispatch`; platform stops on the way are made as usual. A hold is lifted (this is a
+        movement order). The codes still govern: it stops short of a stop code's point."""
+        self._ato_only("run to")
+        s = self.dynamics.state
+        head = self.tacho.head(self.position)
+        reach = s.speed * s.speed / (2.0 * self.cfg.params.service_decel)
+        if not math.isfinite(x) or not head + reach < x <= self.line.length:
+            raise UsageError(
+                f"train {self.cfg.train_id}: cannot run to {x:g} m: a stop point ahead of its "
+                f"front ({head:.1f} m{f', {reach:.0f} m to stop' if reach else ''}) and on "
+                f"the line (to {self.line.length:g} m)"
+            )
+        self._hold, self._stop_at = None, x
+        return f"runs to {x:g} m and stands there"
+
+    @property
+    def held(self) -> bool:
+        """The operator's hold is on (standing, or to take effect at its next platform stop)."""
+        return self._hold is not None
+
+    @property
+    def commanded_stop(self) -> float | None:
+        """Where the operator's order stops it: the run-to point, or the platform a hold stands
+        it at (m); None: none (or it stands where it is)."""
+        if self._stop_at is not None:
+            return self._stop_at
+        nxt = self.next_stop
+        return nxt.stop_mark if self._hold == "platform" and nxt is not None else None
 
     @property
     def next_stop(self) -> Station | None:
@@ -614,6 +711,8 @@ class TrainEndpoint:
         nxt = self.next_stop
         if nxt is not None and abs(self.position.head - nxt.stop_mark) <= BERTH_WINDOW:
             return "stopping"  # at the mark: berthed at the ATO's next cycle
+        if self._hold == "here":
+            return "held"
         if self._berth is not None and now < self._dwell_until:
             return "dwelling"
         return "held"

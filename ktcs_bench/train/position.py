@@ -89,3 +89,45 @@ class PositionEstimator:
         head = self.base + self.offset
         unc = self.read_window + self.tacho_error * self.offset
         return Position(self.lrti, self.offset, head, head - self.length, unc)
+
+
+CALIBRATION_SPAN = 50.0
+"""Tags at least this far apart calibrate the tachometer, m (a shorter span, e.g. between the
+precision-stop markers, measures its scale too coarsely to carry it on)."""
+
+
+@dataclass
+class TachoScale:
+    """The tachometer's scale measured between successive tags (the wheel calibration an onboard
+    makes at each balise): the tacho's travel from one tag to the next over their distance on the
+    line. `head(pos)` is the position with the travel since the last tag divided by it -- for a
+    stop at a place with no tag just before it (a commanded stop point), where the tacho's bias
+    would otherwise put the front off by up to its error times the distance from the last tag.
+
+    Fed each cycle's `Position`; the travel in the cycle that reads a tag is taken as the cycle
+    before's (the speed hardly changes in 100 ms). A span counts from a tag read on the move (at
+    the start the offset is where the train was put, not what the tacho measured)."""
+
+    tags: list[float]
+    scale: float = 1.0
+    _prev: Position | None = None
+    _step: float = 0.0
+    _read: bool = False
+
+    def update(self, pos: Position) -> None:
+        prev, self._prev = self._prev, pos
+        if prev is None:
+            return
+        if pos.lrti == prev.lrti:
+            self._step = pos.offset - prev.offset
+            return
+        if pos.lrti == prev.lrti + 1 and self._read and self._step > 0.0:
+            span = self.tags[pos.lrti - 1] - self.tags[prev.lrti - 1]
+            measured = prev.offset + self._step - pos.offset
+            if span >= CALIBRATION_SPAN and measured > 0.0:
+                self.scale = measured / span
+        self._step, self._read = 0.0, pos.lrti > prev.lrti
+
+    def head(self, pos: Position) -> float:
+        """The front with the tacho's travel since the last tag corrected by its scale, m."""
+        return pos.head - pos.offset + pos.offset / self.scale

@@ -20,6 +20,7 @@ import pytest
 
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.emulator.train import TimetableRun, timetable_run
+from ktcs_bench.errors import UsageError
 from ktcs_bench.station import load_line
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import load_timetable
@@ -76,6 +77,15 @@ def run_train(
 ) -> tuple[TrainEndpoint, list[tuple[float, str]], TimetableRun, Wayside]:
     """Run timetable train `train_id` alone; the starting signal of each station turns to
     proceed at `release[station]` (absent: never). Returns the endpoint and its state changes."""
+    ep, clock, states, run, wayside = start_train(train_id, release)
+    clock.run_until(until)
+    return ep, states, run, wayside
+
+
+def start_train(
+    train_id: str, release: dict[str, float]
+) -> tuple[TrainEndpoint, VirtualClock, list[tuple[float, str]], TimetableRun, Wayside]:
+    """`run_train`'s train on its clock, not run yet."""
     line = load_line()
     entry = load_timetable(TIMETABLE, line).train(train_id)
     run = timetable_run(entry, line, 0.5)
@@ -102,8 +112,7 @@ def run_train(
     for at in starting.values():
         wayside.signals[at] = True
     clock.add(ep, record)
-    clock.run_until(until)
-    return ep, states, run, wayside
+    return ep, clock, states, run, wayside
 
 
 def test_the_ato_stops_at_each_platform_within_half_a_metre_dwells_and_departs_on_time() -> None:
@@ -233,3 +242,67 @@ def test_a_train_that_leaves_the_lab_runs_to_the_end_of_the_line_and_goes_off_th
     device.endpoint = ep
     where = device._position()
     assert where["tail"] > line.end_m and "track" not in where
+
+
+# -- the operator's orders: hold, dispatch, run to -------------------------------------------------
+
+
+def test_a_hold_stands_a_running_train_at_its_next_platform_past_its_departure_until_dispatch() -> (
+    None
+):
+    """Held on the approach (an ATS platform hold): it runs on to platform 18 and stops at the
+    mark, but stands there past its dwell with the signal clear, until dispatched; then it
+    leaves at once."""
+    ep, clock, states, _, _ = start_train("1001", {"18": 0.0})
+    clock.run_until(5.0)
+    assert ep.state.speed > 0.0
+    assert "next platform stop, 18" in ep.hold(clock.now)
+    assert ep.held and ep.commanded_stop == 1080.0
+    clock.run_until(250.0)
+    (arrival,) = ep.arrivals
+    assert abs(arrival.error) <= STOP_TOLERANCE and arrival.time + 30.0 < 200.0
+    assert ep.departures == [] and ep.service_state(clock.now) == "held"
+    assert ep.held and ep.commanded_stop is None
+    ep.dispatch(clock.now)
+    clock.run_until(260.0)
+    assert not ep.held
+    assert [d.station for d in ep.departures] == ["18"]
+    assert 250.0 <= ep.departures[0].time <= 252.0
+    assert ep.eb_count == 0
+
+
+def test_run_to_stops_the_front_within_half_a_metre_of_the_place_and_waits_for_dispatch() -> None:
+    """From platform 18 to 1590 m (90 m past a tag: the tacho's 1 % alone would put it 0.9 m
+    off): the ATO stops within ±0.5 m of it on the true position, stands held, leaves on
+    dispatch."""
+    ep, clock, _, _, _ = start_train("1001", {"18": 0.0})
+    while not ep.arrivals:
+        clock.run_until(clock.now + 1.0)
+    assert ep.service_state(clock.now) == "dwelling"
+    assert "1590" in ep.run_to(clock.now, 1590.0)  # leaves after its dwell, for 1590
+    assert ep.commanded_stop == 1590.0
+    clock.run_until(300.0)
+    assert ep.state.speed == 0.0 and ep.service_state(clock.now) == "held"
+    assert abs(ep.state.position - 1590.0) <= STOP_TOLERANCE, ep.state.position
+    assert abs(ep.position.head - 1590.0) > STOP_TOLERANCE  # the raw tacho is off by its bias
+    assert ep.commanded_stop is None and ep.held
+    clock.run_until(330.0)
+    assert abs(ep.state.position - 1590.0) <= STOP_TOLERANCE  # still there: it waits
+    ep.dispatch(clock.now)
+    clock.run_until(340.0)
+    assert ep.state.position > 1600.0 and ep.eb_count == 0
+
+
+def test_a_dispatch_on_a_stop_code_does_not_move_the_train() -> None:
+    """Its dwell at 18 over, the starting signal at stop: `dispatch now` lifts nothing the ATP
+    holds -- it stands at the mark; an order that cannot be carried out is refused."""
+    ep, clock, _, _, _ = start_train("1001", {})
+    clock.run_until(200.0)
+    assert [a.station for a in ep.arrivals] == ["18"]
+    head = ep.state.position
+    assert "code is stop" in ep.dispatch(clock.now, at_once=True)
+    clock.run_until(260.0)
+    assert ep.departures == [] and ep.state.position == head and ep.state.odometer > 0.0
+    assert ep.service_state(clock.now) == "held"
+    with pytest.raises(UsageError, match="cannot run to 900 m"):
+        ep.run_to(clock.now, 900.0)  # behind its front
