@@ -40,6 +40,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -132,6 +133,8 @@ def live(n: int, timeout: float) -> dict[str, Any]:
         if not first:
             raise SystemExit(f"lab up failed: {(tmp / 'lab.stderr').read_text()[-2000:]}")
         t_up = time.monotonic() - t0
+        # drain its status lines: one blocked on a full pipe would not stop on SIGTERM
+        threading.Thread(target=proc.stdout.read, daemon=True).start()
         state = json.loads((run_dir / "labs" / f"line{n}" / "lab.json").read_text())
         token = read_token(Path(state["token_file"]))
         stations = sorted(
