@@ -1,8 +1,9 @@
 """The line's track diagram as SVG, laid out from station and line data (no hand-drawn picture).
 
 Owns geometry only: where each track circuit, point, signal and station label goes, with ids and
-`data-*` attributes the page's script uses to colour them from the live state. It knows nothing of
-codes, sockets or the browser.
+`data-*` attributes the page's script uses to colour them from the live state, and where a train
+stands on the drawing (`Layout.place`: the console sends the page each train's place, the page
+draws it in the diagram's `trains` layer). It knows nothing of codes, sockets or the browser.
 
 Layout: chainage runs left to right on a piecewise-linear, non-uniform scale (plain-line track
 circuits get a fixed width, station areas are stretched) so that a 13 km line with 1 km stations
@@ -39,12 +40,38 @@ class Segment:
     leg: str | None = None  # "normal" (straight on past the point) or "reverse" (diverging)
 
 
+@dataclass(frozen=True)
+class TrainPlace:
+    """A train on the drawing: its front's and rear's x and the y of the track it is on, px."""
+
+    head_x: float
+    tail_x: float
+    y: float
+
+    def to_json(self) -> dict[str, float]:
+        return {"head_x": round(self.head_x, 1), "tail_x": round(self.tail_x, 1), "y": self.y}
+
+
 @dataclass
 class Layout:
     width: float
     height: float
     segments: list[Segment] = field(default_factory=list)
     svg: str = ""
+    scale: Scale | None = None
+    y0: float = TOP_PX
+    stations: list[tuple[float, float, dict[str, float]]] = field(default_factory=list)
+    """Each station's extent (m) and the y of each of its tracks."""
+
+    def place(self, head_m: float, tail_m: float, track: str | None = None) -> TrainPlace:
+        """Where a train with its front at `head_m` and rear at `tail_m` is drawn: on the lane
+        of `track` in the station its front is in (the main line elsewhere, or with no track)."""
+        assert self.scale is not None
+        y = self.y0
+        for lo, hi, lanes in self.stations:
+            if track is not None and lo <= head_m <= hi and track in lanes:
+                y = lanes[track]
+        return TrainPlace(self.scale.x(head_m), self.scale.x(tail_m), y)
 
 
 def lane_order(station: Station) -> dict[str, int]:
@@ -153,7 +180,13 @@ def build(line: Line) -> Layout:
     def y(lane: int) -> float:
         return y0 + lane * LANE_PX
 
-    layout = Layout(scale.width, height)
+    layout = Layout(scale.width, height, scale=scale, y0=y0)
+    for st in line.stations.values():
+        if st.track_circuits:
+            lo = min(t.from_m for t in st.track_circuits)
+            hi = max(t.to_m for t in st.track_circuits)
+            ys = {track: y(lane) for track, lane in lanes_of[st.number].items()}
+            layout.stations.append((lo, hi, ys))
     segs = layout.segments
     point_of_tc: dict[str, tuple[int, str, float]] = {}
     for st in line.stations.values():
@@ -270,6 +303,7 @@ def build(line: Line) -> Layout:
         lanes = lanes_of[st.number]
         for sg in st.signals:
             parts.append(_signal_svg(st, sg, scale, y(lanes.get(sg.track or "", 0))))
+    parts.append('<g id="trains" class="trains"></g>')  # the page draws the trains here
     parts.append("</svg>")
     layout.svg = "".join(parts)
     return layout

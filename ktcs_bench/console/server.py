@@ -4,7 +4,9 @@
 CTC's model draws (`ctc.model.CtcModel.picture`) whenever the CTC's state changes, and hands the
 operator's clicks to the CTC's desk (`ctc.desk.Desk.operate`, the same path `ktcs-bench ctc`
 takes), whose results come back to the page and the log. Side panels: a link monitor over tap
-control ports (Fig. 7 console text) and a speed–distance view of a train (`trains.TrainSource`).
+control ports (Fig. 7 console text) and a speed–distance view of a train (`trains.TrainSource`);
+the trains stand on the diagram where their source says, each labelled with its number at its
+front (a `trains` message to the pages every `TRAIN_PERIOD_S`, placed by `diagram.Layout.place`).
 Given the CTC's automatic route setting (`ars`, an `ArsSwitch`), each station card shows whether
 ARS is on there and switches it (a click goes the same way as the operator's other requests).
 
@@ -47,7 +49,7 @@ from ktcs_bench.codec.render import to_text
 from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.console.diagram import build
-from ktcs_bench.console.trains import EndpointTrains, TrainSource
+from ktcs_bench.console.trains import EndpointTrains, TrainPosition, TrainSource
 from ktcs_bench.ctc.desk import Desk
 from ktcs_bench.ctc.model import Action
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
@@ -61,7 +63,7 @@ log = logging.getLogger("ktcs_bench.console")
 
 STATIC = Path(__file__).resolve().parent / "static"
 POLL_S = 0.5  # state re-check besides the CTC's events (link state, missed callbacks)
-TRAIN_PERIOD_S = 0.5  # speed–distance refresh for a client watching a train
+TRAIN_PERIOD_S = 0.5  # speed–distance refresh for a client watching a train, and the trains' places
 LOG_KEEP = 300  # log entries kept for pages that connect later
 FRAMES_KEEP = 60  # decoded frames kept per tap
 TAP_RETRY_S = 2.0
@@ -151,6 +153,8 @@ class ConsoleServer:
         self._last_state = ""
         self._flush_scheduled = False
         self._poller: asyncio.Task[None] | None = None
+        self._train_poller: asyncio.Task[None] | None = None
+        self._last_trains = ""
         self._chained: Any = None
         self._hook: Any = None
 
@@ -177,6 +181,8 @@ class ConsoleServer:
         self._hook = hook
         self.ctc.on_event = hook
         self._poller = asyncio.get_running_loop().create_task(self._poll())
+        if self.trains is not None:
+            self._train_poller = asyncio.get_running_loop().create_task(self._poll_trains())
         log.info("CTC console at %s", self.url)
 
     @property
@@ -193,7 +199,8 @@ class ConsoleServer:
     async def close(self) -> None:
         if self.ctc.on_event is self._hook:
             self.ctc.on_event = self._chained
-        tasks = [t for t in (self._poller, *(f.task for f in self.taps)) if t is not None]
+        pollers = (self._poller, self._train_poller)
+        tasks = [t for t in (*pollers, *(f.task for f in self.taps)) if t is not None]
         tasks += [c.train_task for c in self._clients if c.train_task is not None]
         for t in tasks:
             t.cancel()
@@ -366,6 +373,8 @@ class ConsoleServer:
         }
         await ws.send_str(json.dumps(hello))
         await ws.send_str(self._state_text())
+        if self._last_trains:
+            await ws.send_str(self._last_trains)
         try:
             async for raw in ws:
                 if raw.type != WSMsgType.TEXT:
@@ -491,6 +500,31 @@ class ConsoleServer:
             out.append({"time": _clock(t), "direction": direction, "ok": ok,
                         "text": to_text(rec, profile, chart, label=label)})  # fmt: skip
         return out
+
+    # ------------------------------------------------------------------ trains on the diagram
+
+    def _trains_text(self, positions: Iterable[TrainPosition]) -> str:
+        trains = [
+            {**p.to_json(), **self.layout.place(p.head_m, p.tail_m, p.track).to_json()}
+            for p in positions
+        ]
+        return json.dumps({"type": "trains", "trains": trains})
+
+    async def _poll_trains(self) -> None:
+        """Every TRAIN_PERIOD_S while a page watches: where each train stands, to every page
+        (when it changed)."""
+        assert self.trains is not None
+        while True:
+            if self._clients:
+                try:
+                    text = self._trains_text(await self.trains.positions())
+                except Exception:  # a provider failing must not take the console down
+                    log.exception("train positions provider failed")
+                else:
+                    if text != self._last_trains:
+                        self._last_trains = text
+                        self._broadcast_text(text)
+            await asyncio.sleep(TRAIN_PERIOD_S)
 
     # ------------------------------------------------------------------ speed–distance
 

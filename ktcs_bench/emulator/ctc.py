@@ -24,13 +24,14 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from ktcs_bench.console.server import ConsoleServer
+from ktcs_bench.console.trains import TrainPosition, position_from_status
 from ktcs_bench.ctc.ars import Ars, RouteRequest
 from ktcs_bench.ctc.desk import Desk, Outcome
 from ktcs_bench.ctc.model import CtcModel, signal_name
 from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.device import Device
-from ktcs_bench.errors import UsageError
+from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable
 from ktcs_bench.train.speed_distance import SpeedDistance
@@ -78,6 +79,22 @@ class RemoteTrains:
 
     def train_ids(self) -> list[str]:
         return sorted(self._addresses)
+
+    async def positions(self) -> list[TrainPosition]:
+        """Each train's status, asked of all at once; a train that does not answer is left out."""
+
+        async def one(train: str, address: tuple[str, int]) -> TrainPosition | None:
+            try:
+                answer = await jsonlines.request(*address, {"cmd": "status"}, timeout=2.0)
+            except (OSError, TimeoutError, ValueError, PeerError):
+                return None
+            status = answer.get("status")
+            if not answer.get("ok") or not isinstance(status, dict):
+                return None
+            return position_from_status(train, status)
+
+        found = await asyncio.gather(*(one(t, a) for t, a in sorted(self._addresses.items())))
+        return [p for p in found if p is not None]
 
     async def speed_distance(self, train: str) -> SpeedDistance | None:
         address = self._addresses.get(train)

@@ -12,6 +12,7 @@ from typing import Any
 from playwright.sync_api import expect
 
 from ktcs_bench.ixl.modes import Mode
+from ktcs_bench.train.endpoint import CycleInputs
 from tests.console.conftest import ARTIFACTS, Bench
 
 
@@ -199,6 +200,40 @@ def test_speed_distance_panel_draws_the_trains_curves(page: Any, bench: Bench) -
     shot = ARTIFACTS / "panels.png"
     page.screenshot(path=str(shot), full_page=True)
     print(f"\nconsole screenshot: {shot}")
+
+
+def test_the_diagram_labels_each_train_at_its_front_and_moves_it_as_it_runs(
+    page: Any, bench: Bench
+) -> None:
+    label = '#diagram g.train[data-train="T1"] text.train-label'
+    expect(page.locator(label)).to_have_text("T1")
+
+    def front_x() -> float:
+        ep = bench.train
+        head = ep.state.position
+        return bench.console.layout.place(head, head - ep.cfg.params.length).head_x
+
+    def label_at(x: float) -> None:
+        page.wait_for_function(
+            "([sel, x]) => Math.abs(Number(document.querySelector(sel).getAttribute('x')) - x)"
+            " < 0.2",
+            arg=[label, x],
+        )
+
+    before = bench.do(front_x)
+    label_at(before)
+    # the train runs on for 5 s: its label follows its front along the line
+    ep = bench.train
+
+    def run() -> float:
+        for i in range(50):
+            ep.step(100.0 + i * 0.1, CycleInputs(authority_end=2500.0))
+        return front_x()
+
+    after = bench.do(run)
+    assert after > before + 10.0
+    label_at(after)
+    expect(page.locator('#diagram g.train[data-train="T1"] line.train-body')).to_have_count(1)
 
 
 def test_console_without_taps_or_trains_says_so(browser_context: Any, bench: Bench) -> None:

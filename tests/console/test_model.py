@@ -6,17 +6,20 @@ from __future__ import annotations
 import asyncio
 import math
 import re
+from pathlib import Path
 
 import pytest
 
 from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.console.diagram import Scale, build, lane_order
-from ktcs_bench.console.trains import EndpointTrains
+from ktcs_bench.console.trains import EndpointTrains, TrainPosition
 from ktcs_bench.ctc.model import CtcModel
 from ktcs_bench.errors import UsageError
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station.loader import load_line
+from ktcs_bench.train.dynamics import TrainParams
+from ktcs_bench.train.endpoint import TrainConfig
 from tests.console.conftest import make_train
 
 LINE = load_line()
@@ -124,3 +127,47 @@ def test_speed_distance_provider_gives_ordered_curves_around_the_train() -> None
     # the stop target at 2500 m brings the permitted speed to 0 before it
     at_target = [p for x, p in zip(sd.x, c["permitted"], strict=True) if x >= 2500.0]
     assert at_target and all(p == 0.0 for p in at_target)
+
+
+def test_train_places_come_from_each_train_process_over_its_control_port(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The CTC's `RemoteTrains` (the trains the lab registered with `add_train`) asks each
+    train process's control port for its status over TCP: a train on the line is placed on the
+    diagram by its front, rear and track; one not on the line yet, or not answering, is not."""
+    from ktcs_bench.emulator.ctc import RemoteTrains
+    from ktcs_bench.emulator.train import TrainDevice
+    from ktcs_bench.runtime import TOKEN_ENV, server_token
+    from ktcs_bench.transport.endpoints import parse_endpoint
+
+    line = load_line()
+    token, file = server_token(tmp_path / "token")  # the lab's token: the devices require it
+    monkeypatch.setenv(TOKEN_ENV, str(file))
+
+    async def run() -> list[TrainPosition]:
+        devices = {}
+        source = RemoteTrains()
+        for train, start in (("T1", 420.0), ("T2", 2500.0), ("T3", 4000.0)):
+            cfg = TrainConfig(train, TrainParams(length=100.0), start=start, mode="ktcs", ato=True)
+            dev = devices[train] = TrainDevice(
+                train, line, cfg, parse_endpoint("tcp://127.0.0.1:9")
+            )
+            dev.token = token
+            await dev.start()
+            host, _, port = dev.ready_info["control"].rpartition(":")
+            source.add(train, host, int(port))
+            dev.endpoint.handle_timer(0.1)  # its first cycle: it is on the line
+        devices["T2"].endpoint.cycles = 0  # T2 has not come onto the line yet (waiting)
+        await devices["T3"].close()  # T3's process is gone: its port answers no more
+        try:
+            return await source.positions()
+        finally:
+            for dev in devices.values():
+                await dev.close()
+
+    (t1,) = asyncio.run(run())
+    assert (t1.train, t1.head_m, t1.tail_m, t1.speed_kmh, t1.state) == ("T1", 420.0, 320.0, 0.0,
+                                                                         "held")  # fmt: skip
+    layout = build(line)
+    place = layout.place(t1.head_m, t1.tail_m, t1.track)
+    assert place.head_x == layout.scale.x(420.0) > place.tail_x and place.y == layout.y0

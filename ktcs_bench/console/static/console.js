@@ -1,5 +1,5 @@
 // ktcs-bench CTC console: draws the CTC's state on the diagram, sends the operator's requests.
-// Plain JS, no build step. Server messages: hello, state, log, result, frames, speed.
+// Plain JS, no build step. Server messages: hello, state, trains, log, result, frames, speed.
 "use strict";
 
 const ui = {
@@ -100,6 +100,7 @@ async function loadDiagram() {
   document.querySelectorAll("#diagram .point").forEach((el) =>
     el.addEventListener("click", () => onPoint(el)));
   if (ui.lastState) applyState(ui.lastState);
+  if (ui.lastTrains) applyTrains(ui.lastTrains);
 }
 
 // ---------------------------------------------------------------- state onto the diagram
@@ -198,6 +199,43 @@ function applyArs(ars) {
     b.textContent = on ? "ARS on" : "ARS off";
     b.className = "ars " + (on ? "on" : "off");
   }
+}
+
+// ---------------------------------------------------------------- trains on the diagram
+
+// each train where the console placed it (its rear to its front on its track), its number at
+// its front; a train no longer reported is taken off
+function applyTrains(trains) {
+  ui.lastTrains = trains;
+  const layer = document.getElementById("trains");
+  if (!layer) return;
+  const seen = new Set();
+  for (const t of trains) {
+    seen.add(t.train);
+    let g = layer.querySelector(`g.train[data-train="${CSS.escape(t.train)}"]`);
+    if (!g) {
+      g = svgEl("g", { class: "train", "data-train": t.train });
+      g.appendChild(svgEl("line", { class: "train-body" }));
+      g.appendChild(svgEl("circle", { class: "train-head", r: 4 }));
+      g.appendChild(svgEl("text", { class: "train-label" }, t.train));
+      layer.appendChild(g);
+    }
+    const [body, head, label] = g.childNodes;
+    for (const [k, v] of Object.entries({ x1: t.tail_x, y1: t.y, x2: t.head_x, y2: t.y }))
+      body.setAttribute(k, v);
+    head.setAttribute("cx", t.head_x);
+    head.setAttribute("cy", t.y);
+    label.setAttribute("x", t.head_x);
+    label.setAttribute("y", t.y - 20);
+    g.dataset.headM = t.head_m;
+    g.dataset.state = t.state || "";
+    const title = `train ${t.train}: front ${t.head_m.toFixed(0)} m, ` +
+      `${t.speed_kmh.toFixed(0)} km/h` + (t.state ? `, ${t.state}` : "");
+    let tip = g.querySelector("title");
+    if (!tip) { tip = svgEl("title", {}); g.appendChild(tip); }
+    tip.textContent = title;
+  }
+  layer.querySelectorAll("g.train").forEach((g) => { if (!seen.has(g.dataset.train)) g.remove(); });
 }
 
 // ---------------------------------------------------------------- log
@@ -328,6 +366,8 @@ function connect() {
     } else if (msg.type === "state") {
       applyState(msg.stations);
       applyArs(msg.ars);
+    } else if (msg.type === "trains") {
+      applyTrains(msg.trains);
     } else if (msg.type === "log") {
       addLog(msg.entry);
     } else if (msg.type === "result") {
