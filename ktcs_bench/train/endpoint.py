@@ -574,6 +574,7 @@ class TrainEndpoint:
         if self._berth is not None and (code is None or code.speed <= 0.0):
             return 0.0, p.service_decel  # at a platform it leaves only on a proceed code
         if self._stopped_at_order(now, events) or self._hold == "here":
+            self._to_go = 0.0  # a service-brake stop: stopping until it stands
             return 0.0, p.service_decel
         v_target = self.ato_ctl.target_speed(code_speed, cfg.recovery)
         v_target = min(v_target, verdict.permitted - kmh(1.0))
