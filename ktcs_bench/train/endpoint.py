@@ -32,7 +32,14 @@ from typing import NamedTuple
 import numpy as np
 
 from ktcs_bench.errors import UsageError
-from ktcs_bench.train.ato import AtoController, AtoInputs, AtoState, AtoStateMachine
+from ktcs_bench.train.ato import (
+    AtoController,
+    AtoInputs,
+    AtoState,
+    AtoStateMachine,
+    planned_decel,
+    sbi_margin,
+)
 from ktcs_bench.train.curves import (
     CurveSet,
     CurveTimes,
@@ -49,6 +56,7 @@ from ktcs_bench.train.deceleration import (
     RotatingMass,
     SafeDeceleration,
     StepFunction,
+    gradient_acceleration,
 )
 from ktcs_bench.train.dynamics import Command, TrainDynamics, TrainParams, TrainState
 from ktcs_bench.train.mrsp import Restriction, SpeedProfile, build_mrsp
@@ -72,6 +80,8 @@ MAX_MA = 3000.0
 """cMAX_MA: the longest authority a train asks for, m."""
 CODE_GRIDS = 8
 """kTCS code gradients whose curve grid is kept."""
+ATO_REACTION = 1.0
+"""The ATO starts braking for a speed target this long (s, at its speed) before its plan says."""
 
 
 @dataclass(frozen=True)
@@ -112,6 +122,19 @@ class TrackCode:
     def stop_point(self) -> float:
         """The nearest place the code says stop: its target point, or its exit for a 0 code."""
         return min(self.target_point, self.end) if self.speed <= 0.0 else self.target_point
+
+
+class _AtoPlan(NamedTuple):
+    """The ATO's braking plan of one cycle (`TrainEndpoint._ato_plan`)."""
+
+    speed: float
+    """The highest speed from which it meets every speed target ahead on its plan, m/s."""
+    stop_margin: float
+    """How far short of the stop it aims, m (beyond the usual half metre)."""
+    stop_decel: float
+    """The deceleration it plans the stop with, m/s²."""
+    slope: float
+    """What the gradient under the train adds to its deceleration, m/s²."""
 
 
 class _Layer(NamedTuple):
@@ -578,7 +601,9 @@ class TrainEndpoint:
             return 0.0, p.service_decel
         v_target = self.ato_ctl.target_speed(code_speed, cfg.recovery)
         v_target = min(v_target, verdict.permitted - kmh(1.0))
-        stops = [self.target_point - 0.5 - self.position.uncertainty]
+        plan = self._ato_plan(code)
+        v_target = min(v_target, plan.speed)
+        stops = [self.target_point - 0.5 - self.position.uncertainty - plan.stop_margin]
         if station is not None:
             stops.append(station.stop_mark)
         if self._stop_at is not None:  # in the estimate's frame, by the calibrated tacho
@@ -589,7 +614,57 @@ class TrainEndpoint:
                 self.left = True
                 events.append(TrainEvent(now, cfg.train_id, "left", "off the end of the line"))
             return 0.0, p.service_decel
-        return self.ato_ctl.command(s.speed, max(v_target, 0.0), dtg, dt)
+        return self.ato_ctl.command(
+            s.speed, max(v_target, 0.0), dtg, dt, plan.slope, plan.stop_decel
+        )
+
+    def _ato_plan(self, code: TrackCode | None) -> _AtoPlan:
+        """How the ATO brakes for the targets the ATP supervises, so that a train it drives is
+        never beyond the SBI curve (it may pass the permitted and warning curves a little).
+
+        Each target ahead -- the stop, the code's speed at its circuit's exit, a lower MRSP --
+        is met on a planned deceleration the train's service brake can give net of the most
+        adverse gradient before it (`planned_decel`; the code's gradient, which the ATP brakes
+        on, counts), ending `sbi_margin` short of it (the SBI leads the EBD by T_bec + T_bs2 at
+        the train's speed) and starting a reaction second early. The brake demand carries the
+        gradient under the train (the code's, else the line's) so that the deceleration the
+        plan needs is the one the train gets.
+        """
+        x = self.position.max_safe_front
+        v = self.dynamics.state.speed
+        code_g = code.gradient if code is not None else math.inf
+        rotating, fixed = self.decel.rotating, self.times.fixed
+        brake = min(self.decel.brake.values)
+        service = self.cfg.params.service_decel
+        lead = self.supervisor.look_ahead(SBI)
+        nominal = self.ato_ctl.stop_decel
+        here = min(code_g, self.decel.gradient.at(x))
+        plan = _AtoPlan(
+            speed=math.inf,
+            stop_margin=0.0,
+            stop_decel=nominal,
+            slope=gradient_acceleration(here, rotating),
+        )
+        for t in self.limits.targets:
+            if t.location <= x:
+                continue
+            g = min(code_g, self.decel.gradient.min_between(x, t.location))
+            a_g = gradient_acceleration(g, rotating)
+            a_safe = brake + a_g
+            a_plan = planned_decel(nominal, service + a_g, a_safe)
+            if a_plan >= a_safe:  # no safe braking on this descent: the ATP's business
+                continue
+            margin = sbi_margin(lead, a_plan, a_safe, t.speed, t.foot_speed(fixed))
+            if t.kind is TargetKind.STOP:
+                if t.location == self.target_point:  # the stop the ATO brakes for
+                    plan = plan._replace(stop_margin=margin, stop_decel=a_plan)
+                continue
+            # looking ahead V·lead, the SBI reads V_target + dV_sbi beyond the target already
+            room = max(t.location - margin - x - v * (ATO_REACTION + lead), 0.0)
+            reach = math.sqrt(t.speed * t.speed + 2.0 * a_plan * room)
+            if reach < plan.speed:
+                plan = plan._replace(speed=reach)
+        return plan
 
     def _berthed(self, now: float, station: Station, events: list[TrainEvent]) -> None:
         """Standing at `station`'s mark: an arrival (unless it has not moved since it was put

@@ -233,6 +233,12 @@ class Supervisor:
         """The curve's time offset after the EBI (§3.13.9.3)."""
         return self._leads[curve]
 
+    def look_ahead(self, curve: int) -> float:
+        """Seconds at its speed a braking train looks ahead onto the EBD for `curve`: T_bec
+        plus the curve's lead (a train at V is beyond the curve at x when V exceeds the EBD at
+        x + V·look_ahead)."""
+        return self._t_bec + self._leads[curve]
+
     def _limit_speed(
         self, lim: SupervisionLimits, x: float, v: float, curve: int, a: float
     ) -> bool:
