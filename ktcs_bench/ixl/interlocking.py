@@ -20,8 +20,10 @@ on one of them, braking on the most restrictive code. So it starts with every tr
 point of its station locked (no route over them, no point moved): when its first live occupancy
 shows the station and its plain line clear, the lock goes at once; otherwise it goes after the
 longest approach-locking time of the station's routes, as a cancelled route's would -- time for
-any train to have stopped. A cold start with the railway at rest (a lab's start: the trains stand
-where the lab puts them) has no start-up locking.
+any train to have stopped. Nor does it demand any point position until it has read where the
+point lies (it then demands that one): a restarted interlocking that demanded its default would
+throw every reverse point back to normal, under a train or a locked route. A cold start with the
+railway at rest (a lab's start: the trains stand where the lab puts them) has neither.
 """
 
 from __future__ import annotations
@@ -123,6 +125,9 @@ class Interlocking:
         )
         self.startup_release_s = max((r.approach_release_s for r in st.routes), default=0.0)
         self.startup_release_at: float | None = None
+        if startup_locking:
+            for ps in self.points.values():
+                ps.demanded = None
         self._evaluate(0.0)
         self._sent = {k: self.full_state(k) for k in OUTPUTS}
         self._events.clear()
@@ -453,6 +458,10 @@ class Interlocking:
         if self.modes.handle_timer(now):
             self._event(now, "mode", "center mode granted automatically")
         live = self._reports_live()
+        for name, ps in self.points.items():
+            if ps.demanded is None and (det := self.detection(name)) in ("normal", "reverse"):
+                ps.demanded = "normal" if det == "normal" else "reverse"
+                self._event(now, "point", f"point {name}: demand taken as detected, {det}")
         if self.startup_held and live:
             self._startup_release(now)
         for rs in self.routes.values():

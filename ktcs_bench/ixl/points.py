@@ -35,7 +35,9 @@ def detection_from_bits(bits: dict[str, int]) -> Detection:
 @dataclass
 class PointState:
     point: Point
-    demanded: PointPosition = "normal"
+    # None: nothing demanded yet -- a restarted interlocking takes the position the point is
+    # detected in, rather than throwing it to a default under a train (see ixl.interlocking)
+    demanded: PointPosition | None = "normal"
     bits: dict[str, int] = field(default_factory=dict)  # last reported by the trackside
 
     @property

@@ -89,10 +89,11 @@ class StationState:
     def ixl_known(self) -> bool:
         return self.routes is not None
 
-    def holders(self, element: str) -> list[str]:
+    def holders(self, element: str, startup_lock: bool = True) -> list[str]:
         """Routes in a protecting state holding `element` (a track circuit or a point), and
-        "start-up locking" while the IXL's start-up lock holds it."""
-        startup = ["start-up locking"] if element in self.startup_held else []
+        "start-up locking" while the IXL's start-up lock holds it (unless `startup_lock` is
+        False: the lock is no route, and a throw the IXL before it began may finish under it)."""
+        startup = ["start-up locking"] if startup_lock and element in self.startup_held else []
         if self.routes is None or self.held is None:
             return startup
         return startup + [
@@ -278,11 +279,11 @@ def point_safety(prev: LabSnapshot | None, snap: LabSnapshot, geo: Geometry) -> 
                     out.append(Violation(3, "point_moved_under_train", f"{number}/{p}", snap.time,
                                          f"point {p} of station {number} moving to {m.target} "
                                          f"with train {on[tc]} in {tc}"))  # fmt: skip
-            for r in st.holders(p):
+            for r in st.holders(p, startup_lock=False):
+                status = st.routes.get(r) if st.routes else None
                 out.append(Violation(3, "point_moved_locked", f"{number}/{p}", snap.time,
                                      f"point {p} of station {number} moving to {m.target} "
-                                     f"while route {r} ({st.routes[r] if st.routes else '?'}) "
-                                     f"holds it"))  # fmt: skip
+                                     f"while route {r} ({status}) holds it"))  # fmt: skip
     if prev is None:
         return out
     for name, now in sorted(snap.trains.items()):

@@ -499,3 +499,23 @@ def test_an_interlocking_that_restarts_with_its_line_clear_is_free_at_once(line:
     assert not rig.ixl.startup_held and rig.ixl.next_deadline() is None
     assert rig.control("SRC2031").accepted
     assert any("start-up locking released (the station is clear)" in e.text for e in rig.events)
+
+
+def test_a_restarted_interlocking_demands_each_point_where_it_lies(line: Line) -> None:
+    """Seen while reading a failure of the whole-system search: a restarted IXL demanded every
+    point normal (its default), so a point lying reverse was thrown back at once -- under a
+    train standing on it, or a route its predecessor had locked. Restarted, it demands nothing
+    until it reads where a point lies, then demands that."""
+    ixl = Interlocking(line.view(20), mode=Mode.CENTER, startup_locking=True)
+    io = ixl.full_state("io")
+    assert (io["PNC2031"], io["PRC2031"]) == (0, 0)  # no demand: the machine stays put
+    ixl.link_state("io", True, 0.0)
+    bits = {
+        f"{b}20{p.name}": 0 for p in line.station(20).points for b in ("SNI", "SRN", "SRI", "SNR")
+    }
+    bits |= {f"SNI20{p.name}": 1 for p in line.station(20).points} | {"SNI2031": 0, "SRI2031": 1}
+    out = ixl.receive("io", bits, 1.0)
+    assert ("PRC2031", 1) in out.io and ("PNC2031", 1) not in out.io
+    assert ("PNC2032", 1) in out.io  # the others lie normal: demanded normal
+    cold = Interlocking(line.view(20), mode=Mode.CENTER)  # a lab's start: normal, as ever
+    assert cold.full_state("io")["PNC2031"] == 1

@@ -239,3 +239,18 @@ def test_a_replay_file_round_trips_and_a_bad_one_is_a_clear_error(tmp_path: Path
             load_replay(tmp_path / "bad.json")
     with pytest.raises(ConfigError, match="cannot read"):
         load_replay(tmp_path / "absent.json")
+
+
+def test_the_start_up_lock_protects_the_ground_it_holds_but_is_no_route() -> None:
+    """A restarted IXL's start-up lock (ixl.interlocking) holds ground a train may run onto
+    (invariant 2); it is no route over a point, and a throw its predecessor began may finish
+    under it (invariant 3 still forbids any throw under a train)."""
+    st = replace(station(machines={"31": moving("reverse")}), startup_held=frozenset({"31"}))
+    assert point_safety(None, snap(0, {}, st), GEO) == []
+    assert kinds(point_safety(None, snap(0, {"A": (6050, 5950)}, st), GEO)) == [
+        "point_moved_under_train"
+    ]
+    st = replace(station(), startup_held=frozenset({"TC2053A"}))
+    assert (
+        danger_points(snap(0, {"A": (5990, 5890)}, st), snap(1, {"A": (6010, 5910)}, st), GEO) == []
+    )
