@@ -210,7 +210,8 @@ class Interlocking:
         then, and the report that brings the link back runs it."""
         due = [self.modes.next_deadline()]
         live = self._reports_live()
-        due.append(self.startup_release_at if self.startup_held else None)
+        # like an overlap timer, the start-up lock's waits while occupancy cannot be read
+        due.append(self.startup_release_at if self.startup_held and live else None)
         for rs in self.routes.values():
             due += [rs.release_at, rs.overlap_at if live else None]
         return min((d for d in due if d is not None), default=None)

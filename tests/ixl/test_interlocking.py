@@ -519,3 +519,16 @@ def test_a_restarted_interlocking_demands_each_point_where_it_lies(line: Line) -
     assert ("PNC2032", 1) in out.io  # the others lie normal: demanded normal
     cold = Interlocking(line.view(20), mode=Mode.CENTER)  # a lab's start: normal, as ever
     assert cold.full_state("io")["PNC2031"] == 1
+
+
+def test_the_start_up_lock_timer_waits_while_occupancy_cannot_be_read(line: Line) -> None:
+    """Its time past while the ATC link is down, the start-up lock is no deadline (a driver
+    would re-run the timer at the same instant without end); the report that brings the link
+    back releases it."""
+    rig = StationRig(line.view(20), occupied=("TC2047",), startup_locking=True)
+    rig.set_link("atc", False)
+    rig.advance(120.0)
+    deadline = rig.ixl.next_deadline()
+    assert rig.ixl.startup_held and (deadline is None or deadline > rig.now)
+    rig.set_link("atc", True)
+    assert not rig.ixl.startup_held
