@@ -5,13 +5,45 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Callable
 from typing import Any
 
 from ktcs_bench.errors import UsageError
 from ktcs_bench.transport.endpoints import parse_host_port
 
-__all__ = ["host_port", "positive"]
+__all__ = ["duration", "host_port", "positive", "seconds"]
+
+_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?|\.\d+)\s*(ms|s|sec|min|m|h)?\s*$")
+_UNIT = {"ms": 0.001, "s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0}
+
+
+def seconds(value: object) -> float:
+    """A duration as a person writes it -- `90`, `1.5`, `500ms`, `5s`, `2min`, `15m`, `1h` (a
+    bare number is seconds) -- in seconds: positive and finite, else ValueError saying so. The one
+    reading of a duration, for the command line and the procedure files alike."""
+    result = math.nan
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        result = float(value)
+    elif isinstance(value, str):
+        try:
+            result = float(value)  # a bare number is seconds ("nan", "inf": refused below)
+        except ValueError:
+            if (m := _DURATION.match(value)) is not None:
+                result = float(m.group(1)) * _UNIT[m.group(2) or "s"]
+    if not (math.isfinite(result) and result > 0):
+        raise ValueError(
+            f"a duration is a positive number of seconds (or 500ms, 5s, 2min, 1h), not {value!r}"
+        )
+    return result
+
+
+def duration(text: str) -> float:
+    """The argparse type of every option that takes a duration (`seconds`)."""
+    try:
+        return seconds(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def positive(kind: type[int] | type[float], minimum: float = 1) -> Callable[[str], Any]:

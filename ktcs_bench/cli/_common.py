@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 from collections.abc import Callable
 from typing import Any, TextIO
 
+from ktcs_bench.argtypes import duration as duration
 from ktcs_bench.argtypes import host_port as host_port
 from ktcs_bench.argtypes import positive as positive
 from ktcs_bench.errors import UsageError
@@ -24,19 +24,6 @@ def use_colour(stream: TextIO, flag: bool | None = None) -> bool:
     if flag is not None:
         return flag
     return stream.isatty() and not os.environ.get("NO_COLOR")
-
-
-def duration(text: str) -> float:
-    """The argparse type of every option that takes seconds: a positive, finite number."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(
-            f"a duration is a positive number of seconds, not {text!r}"
-        )
-    return value
 
 
 def port(any_free: bool = False) -> Callable[[str], int]:

@@ -27,10 +27,10 @@ Any step may carry `note:`, a sentence for the report. Times are on the lab's cl
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from ktcs_bench.argtypes import seconds
 from ktcs_bench.ctc.log import parse_words
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.access import LabAccess
@@ -48,22 +48,13 @@ TRAIN_DEVICE_VERBS = ("hold", "dispatch [now]", "run to AT", "release_eb")
 """What a train device takes: the operator's orders to its ATO, the driver's EB release."""
 LOCAL_ACTIONS = ("grant", "refuse", "take")
 
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|sec|min|m)?\s*$")
-
 
 def parse_duration(value: object) -> float:
-    """`5s`, `500ms`, `2min`, `1.5`, 7 -> seconds (> 0)."""
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        seconds = float(value)
-    else:
-        m = _DURATION.match(str(value))
-        if m is None:
-            raise StepError(f"{value!r} is not a duration (5s, 500ms, 2min)")
-        unit = m.group(2) or "s"
-        seconds = float(m.group(1)) * {"ms": 0.001, "s": 1, "sec": 1, "min": 60, "m": 60}[unit]
-    if not seconds > 0:
-        raise StepError(f"a duration must be more than 0, not {value!r}")
-    return seconds
+    """`5s`, `500ms`, `2min`, `1.5`, 7 -> seconds (> 0): `argtypes.seconds`, as a StepError."""
+    try:
+        return seconds(value)
+    except ValueError as exc:
+        raise StepError(str(exc)) from None
 
 
 @dataclass

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from ktcs_bench.argtypes import seconds
 from ktcs_bench.cli._common import duration
 from ktcs_bench.cli.main import build_parser
 from ktcs_bench.datafiles import data_dir, load_yaml, yaml_parser_in_c
@@ -259,7 +260,10 @@ def test_a_negative_duration_is_refused_by_every_option_that_takes_one(
 ) -> None:
     result = cli(*option, "-1", env=run_env, timeout=30)
     assert_refused(
-        result, "argument --", option[-1], "a duration is a positive number of seconds, not '-1'"
+        result,
+        "argument --",
+        option[-1],
+        "a duration is a positive number of seconds (or 500ms, 5s, 2min, 1h), not '-1'",
     )
 
 
@@ -269,7 +273,10 @@ def test_delta_r_takes_only_a_positive_finite_number_of_seconds(
 ) -> None:
     result = cli(*DURATION_OPTIONS[5], value, env=run_env, timeout=30)
     assert DURATION_OPTIONS[5][-1] == "--delta-r"
-    assert_refused(result, f"--delta-r: a duration is a positive number of seconds, not {value!r}")
+    assert_refused(
+        result,
+        f"--delta-r: a duration is a positive number of seconds (or 500ms, 5s, 2min, 1h), not {value!r}",
+    )
 
 
 def _options(parser: argparse.ArgumentParser) -> list[argparse.Action]:
@@ -339,3 +346,12 @@ def test_lab_file_sections_and_settings_of_the_wrong_shape_are_refused(
     lab = shipped_lab(tmp_path, {old: new})
     result = cli("lab", "up", str(lab), "--for", "5", env=run_env)
     assert_refused(result, f"{lab}: {message}")
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [("90", 90.0), ("1.5", 1.5), ("500ms", 0.5), ("5s", 5.0), ("2min", 120.0), ("15m", 900.0),
+     ("1h", 3600.0), ("1e3", 1000.0), (7, 7.0)],
+)  # fmt: skip
+def test_a_duration_is_read_one_way_with_its_unit(text: object, expected: float) -> None:
+    assert seconds(text) == expected
