@@ -432,9 +432,14 @@ class Interlocking:
         return any(self.occupied(tc) for tc in self.view.owned_half(iv))
 
     def _infer_direction(self, iv: Interval, now: float) -> None:
-        """A train entered the interval while no route of ours leads into it: it comes to us."""
+        """A train entered the interval while no route of ours leads into it, or at its far end
+        (our half of it clear) while one does: it comes to us. A departure route of ours into
+        the interval then shows no proceed (its direction is gone), and our ATC codes our half
+        for the train that comes -- not for the one we meant to send, which a train coming
+        towards us would read as a proceed past our home signal."""
+        ours_clear = not any(self.occupied(tc) for tc in self.view.owned_half(iv))
         for rs in self.routes.values():
-            if rs.holds_anything and self.view.interval_of_exit(rs.route) is iv:
+            if rs.holds_anything and self.view.interval_of_exit(rs.route) is iv and not ours_clear:
                 return
         toward = iv.toward(self.st)
         if self.direction[iv.name] != toward:

@@ -6,6 +6,7 @@ import pytest
 
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.binding import ControlLink
+from ktcs_bench.codes import names as n
 from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ixl import Interlocking, Mode, Reason, RouteStatus
 from ktcs_bench.ixl.rig import StationRig
@@ -532,3 +533,27 @@ def test_the_start_up_lock_timer_waits_while_occupancy_cannot_be_read(line: Line
     assert rig.ixl.startup_held and (deadline is None or deadline > rig.now)
     rig.set_link("atc", True)
     assert not rig.ixl.startup_held
+
+
+def test_a_train_entering_the_interval_at_its_far_end_turns_it_towards_us(rig: StationRig) -> None:
+    """Found by the whole-system search: route 21-92 (down, into interval 1820) stood set at
+    station 20 while station 18 sent a train up into 1820 (the two ends do not coordinate the
+    interval's direction); station 20's ATC coded its half of 1820 for the down train it meant to
+    send, and the up train read that as a proceed past home signal 01 at stop. A train entering
+    the interval while our half of it is clear comes to us: the direction turns, and the
+    departure route into it shows no proceed."""
+    assert rig.control("RSC202192").accepted
+    rig.advance(5)
+    assert rig.ixl.direction["1820"] == "down" and rig.ixl.aspect("21") != "R"
+    rig.take(rig.ixl.receive("atc", {n.izc("1820"): 1}, rig.now))  # in at 18's end: ours clear
+    assert rig.ixl.direction["1820"] == "up"
+    assert rig.atc[n.tdu("1820")] == 1 and rig.atc[n.tdd("1820")] == 0
+    assert rig.ixl.aspect("21") == "R"
+
+
+def test_our_own_train_in_our_half_keeps_the_interval_ours(rig: StationRig) -> None:
+    assert rig.control("RSC202192").accepted
+    rig.advance(5)
+    rig.occupy("TC2047")  # our departing train, in our half of the interval
+    rig.take(rig.ixl.receive("atc", {n.izc("1820"): 1}, rig.now))
+    assert rig.ixl.direction["1820"] == "down"
