@@ -474,5 +474,7 @@ def test_interlocking_invariants_hold_over_random_sequences() -> None:
         settings=settings(max_examples=300, stateful_step_count=50, deadline=None),
     )
     assert STEPS["count"] >= 10_000, STEPS["count"]
-    # the release rules were exercised both ways, not only checked on nothing
-    assert RELEASED["passage"] >= 50 and RELEASED["timed"] >= 10, RELEASED
+    # the release rules were exercised both ways, not only checked on nothing (over runs with
+    # random seeds: passage 116-405 and timed 6-122 releases; a timed release needs a train to
+    # stop in a route and its timer to run out, the rarer draw)
+    assert RELEASED["passage"] >= 50 and RELEASED["timed"] >= 3, RELEASED
