@@ -53,6 +53,19 @@ def request(
     return json.loads(line)  # type: ignore[no-any-return]
 
 
+def stop_group(proc: subprocess.Popen[Any], grace: float) -> None:
+    """End a process started in its own session, and all it started: SIGTERM to its group, then
+    SIGKILL if it has not ended within `grace` seconds."""
+    if proc.poll() is not None:
+        return
+    os.killpg(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(grace)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
 def wait_until(what: str, predicate: Callable[[], Any], timeout: float = 30.0) -> Any:
     end = time.monotonic() + timeout
     last: Any = None
@@ -198,13 +211,7 @@ def start_lab(
                 (run_dir / "labs" / name / "lab.json").read_text())["devices"].values()]  # fmt: skip
         except (OSError, ValueError, KeyError):
             pids = []
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGTERM)
-            try:
-                proc.wait(30)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
+        stop_group(proc, 30)
         stderr.close()
         for pid in pids:  # nothing the lab started may outlive it
             if pid:

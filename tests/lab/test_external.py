@@ -23,7 +23,7 @@ from ktcs_bench.errors import ConfigError
 from ktcs_bench.lab.topology import load_lab
 from ktcs_bench.runtime import private_dir, read_token
 
-from .conftest import RunningLab, request, start_lab, wait_until
+from .conftest import RunningLab, request, start_lab, stop_group, wait_until
 
 LINE = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
 
@@ -66,13 +66,7 @@ def stand_in(run_dir: Path, *args: str) -> Iterator[dict[str, Any]]:
         ready["proc"] = proc
         yield ready
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGTERM)
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
+        stop_group(proc, 10)
         if proc.stdout is not None:
             proc.stdout.close()
 
