@@ -19,17 +19,22 @@ from ktcs_bench.station.generate import (
     LINE_FILE,
     MAX_STATIONS,
     TIMETABLE_FILE,
+    run_through_s,
 )
 
 EPILOG = f"""\
 examples:
   ktcs-bench line generate --stations 10 --out /tmp/line10
   ktcs-bench lab up /tmp/line10/lab.yaml            # the generated line live
+  ktcs-bench lab simulate /tmp/line10/lab.yaml --for 3600 --out /tmp/run10
+                                                    # ... in one process, in virtual time
   ktcs-bench chart check --charts /tmp/line10/code_charts --line /tmp/line10/line.yaml
 
 writes DIR/{LINE_FILE}, DIR/stations/stNN.yaml, DIR/{LAB_FILE}, DIR/{TIMETABLE_FILE} and
-DIR/{CHARTS_DIR}/. Stations are numbered 12, 14, ... (1 to {MAX_STATIONS} stations) and follow the
-reference stations 18, 20, 22 in turn. The same N always gives the same files, byte for byte.
+DIR/{CHARTS_DIR}/. The lab runs the timetable's two trains (a train device each; the CTC's
+automatic route setting sets their routes). Stations are numbered 12, 14, ... (1 to
+{MAX_STATIONS} stations) and follow the reference stations 18, 20, 22 in turn. The same N always
+gives the same files, byte for byte.
 """
 
 
@@ -78,8 +83,12 @@ def _generate(args: argparse.Namespace) -> int:
     print(f"  {LINE_FILE}: line {line.name}, {len(numbers)} station(s) {span}, "
           f"{(line.end_m - line.start_m) / 1000:g} km")  # fmt: skip
     print(f"  stations/: {len(numbers)} station file(s)")
-    print(f"  {LAB_FILE}: lab {lab.name}, {len(lab.devices)} devices, {len(lab.links)} links")
-    print(f"  {TIMETABLE_FILE}: 2 trains end to end")
+    trains = [d for d in lab.devices.values() if d.kind == "train"]
+    print(f"  {LAB_FILE}: lab {lab.name}, {len(lab.devices)} devices ({len(trains)} trains, "
+          f"routes set by ARS), {len(lab.links)} links")  # fmt: skip
+    print(f"  {TIMETABLE_FILE}: {len(trains)} trains end to end")
     print(f"  {CHARTS_DIR}/: {len(charts)} code charts")
     print(f"run it: ktcs-bench lab up {out / LAB_FILE}")
+    print(f"   or in one process, in virtual time: ktcs-bench lab simulate {out / LAB_FILE} "
+          f"--for {run_through_s(args.stations)} --out RUN")  # fmt: skip
     return 0

@@ -51,6 +51,14 @@ def test_generated_line_loads_and_its_lab_names_every_station(n: int, tmp_path: 
         assert all(lk.tap for lk in lab.links)
     assert [d.kind for d in lab.devices.values()].count("ctc") == 1
     assert [d.kind for d in lab.devices.values()].count("trackcircuit") == 1
+    # the timetable's trains run in it: the lab names the timetable, a train device runs each
+    # of its trains, and the CTC's ARS sets their routes at every station
+    assert lab.timetable_file == (tmp_path / "timetable.yaml").resolve()
+    timetable = lab.load_timetable()
+    assert timetable is not None
+    trains = {d.options["train"] for d in lab.devices.values() if d.kind == "train"}
+    assert trains == {t.id for t in timetable.trains} == {"T1", "T2"}
+    assert lab.ars is not None and lab.ars.start_on == tuple(numbers)
 
 
 @pytest.mark.parametrize("n", SIZES)
