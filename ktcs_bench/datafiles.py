@@ -10,7 +10,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.errors import ConfigError
+from ktcs_bench.errors import ConfigError, excerpt, kind_of
 
 _PACKAGE = Path(__file__).resolve().parent
 
@@ -23,15 +23,122 @@ def data_dir(name: str) -> Path:
     raise ConfigError(name, "", "shipped data folder not found (broken installation?)")
 
 
+MAX_YAML_BYTES = 16 * 1024 * 1024
+"""The largest data file read (the shipped ones are under 100 kB; a generated line a few MB)."""
+MAX_ALIAS_NODES = 10_000
+"""How many values aliases (`*name`, `<<: *name`) may repeat in one file, all uses together --
+a use repeats the whole of what its anchor holds, aliases within it included (nested anchors
+nine deep, nine uses each, are a 'billion laughs' bomb: 2.5 GB once written out)."""
+MAX_DEPTH = 100
+"""How deep collections may nest (the shipped files nest under ten)."""
+
+
+class _Refused(Exception):
+    """The loader refuses a document it can parse (too deep, aliases repeating too much): a
+    problem at a line and column, raised before anything is built from it."""
+
+    def __init__(self, mark: Any, problem: str) -> None:
+        super().__init__(problem)
+        self.place = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        self.problem = problem
+
+
+def _check_nodes(root: Any) -> None:
+    """Walk the composed node graph of one document (an alias is its anchor's node again, so a
+    bomb is still small here) and refuse it if it nests deeper than MAX_DEPTH, if an alias sits
+    inside its own anchor, or if its aliases repeat more than MAX_ALIAS_NODES values. Iterative,
+    and each node's expanded size is counted once: the walk costs what the file's text does."""
+    import yaml
+
+    size: dict[int, int] = {}  # a finished node -> how many values it stands for, written out
+    open_: set[int] = set()  # the nodes on the path from the root
+    repeated = 0
+
+    def children(node: Any) -> list[Any]:
+        if isinstance(node, yaml.SequenceNode):
+            return list(node.value)
+        if isinstance(node, yaml.MappingNode):
+            return [part for pair in node.value for part in pair]
+        return []
+
+    # each frame: [node, its children, the next child's index, the size counted so far]
+    stack: list[list[Any]] = [[root, children(root), 0, 1]]
+    open_.add(id(root))
+    while stack:
+        frame = stack[-1]
+        node, kids, i = frame[0], frame[1], frame[2]
+        if i == len(kids):
+            stack.pop()
+            open_.discard(id(node))
+            size[id(node)] = frame[3]
+            if stack:
+                stack[-1][3] += frame[3]
+            continue
+        frame[2] = i + 1
+        kid = kids[i]
+        done = size.get(id(kid))
+        if done is None and type(kid) is yaml.ScalarNode:  # most nodes: no frame for them
+            size[id(kid)] = 1
+            frame[3] += 1
+        elif done is not None:  # an alias of a finished anchor (or a merge of one)
+            repeated += done
+            frame[3] += done
+            if repeated > MAX_ALIAS_NODES:
+                raise _Refused(
+                    node.start_mark,
+                    f"aliases repeat more than {MAX_ALIAS_NODES} values in all (a YAML bomb?)",
+                )
+        elif id(kid) in open_:
+            raise _Refused(node.start_mark, "an alias inside its own anchor (a value that holds "
+                                            "itself)")  # fmt: skip
+        elif len(stack) >= MAX_DEPTH:
+            raise _Refused(kid.start_mark, f"nested deeper than {MAX_DEPTH} levels")
+        else:
+            open_.add(id(kid))
+            stack.append([kid, children(kid), 0, 1])
+
+
 def _unique_key_loader(fast: bool = True) -> type:
     """A safe loader whose mappings refuse a key given twice (PyYAML keeps the last silently):
     on libyaml's parser (`yaml.CSafeLoader`, ten times faster) when PyYAML was built with it and
-    `fast`, else on the pure-Python one. The key check is the same Python code on both."""
+    `fast`, else on the pure-Python one. The key check is the same Python code on both.
+
+    Before anything is constructed, the composed document is checked (`_check_nodes`): not
+    too deep, no alias bomb. libyaml composes in C; the pure-Python composer recurses, so it
+    counts its depth as it goes (libyaml stops at 1000 levels by itself)."""
     import yaml
 
     base = yaml.CSafeLoader if fast and yaml.__with_libyaml__ else yaml.SafeLoader
 
     class UniqueKeyLoader(base):  # type: ignore[valid-type,misc]
+        _depth = 0
+
+        def compose_node(self, parent: yaml.Node | None, index: object) -> yaml.Node:
+            if self._depth >= MAX_DEPTH:
+                raise _Refused(self.peek_event().start_mark,
+                               f"nested deeper than {MAX_DEPTH} levels")  # fmt: skip
+            self._depth += 1
+            try:
+                node: yaml.Node = super().compose_node(parent, index)
+            finally:
+                self._depth -= 1
+            return node
+
+        def get_single_node(self) -> yaml.Node | None:
+            node: yaml.Node | None = super().get_single_node()
+            if node is not None:
+                _check_nodes(node)
+            return node
+
+        def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
+            try:
+                value: int = super().construct_yaml_int(node)
+            except ValueError:  # past Python's 4300 digits
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"a number of {len(node.value)} digits", node.start_mark
+                ) from None
+            return value
+
         def construct_mapping(
             self, node: yaml.MappingNode, deep: bool = False
         ) -> dict[object, object]:
@@ -47,12 +154,13 @@ def _unique_key_loader(fast: bool = True) -> type:
                 if earlier is not key_node:
                     raise yaml.constructor.ConstructorError(
                         None, None,
-                        f"duplicate key {key!r} (first on line {earlier.start_mark.line + 1})",
+                        f"duplicate key {excerpt(key)} (first on line {earlier.start_mark.line + 1})",
                         key_node.start_mark,
                     )  # fmt: skip
             result: dict[object, object] = super().construct_mapping(node, deep)
             return result
 
+    UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", UniqueKeyLoader.construct_yaml_int)
     return UniqueKeyLoader
 
 
@@ -73,25 +181,50 @@ def yaml_parser_in_c() -> bool:
     return issubclass(yaml_loader(), yaml.CSafeLoader)
 
 
+def read_text(path: str | Path) -> str:
+    """A data file's text: at most MAX_YAML_BYTES, UTF-8; else a ConfigError saying which."""
+    p = Path(path)
+    try:
+        with p.open("rb") as f:
+            data = f.read(MAX_YAML_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(p, "", f"cannot read: {exc.strerror or exc}") from None
+    if len(data) > MAX_YAML_BYTES:
+        raise ConfigError(p, "", f"larger than {MAX_YAML_BYTES >> 20} MB: not a data file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise ConfigError(
+            p, f"line {line}", f"not UTF-8 text (byte 0x{data[exc.start]:02x})"
+        ) from None
+
+
 def load_yaml(path: str | Path) -> object:
     """Parse one YAML file: a syntax error, or a mapping key given twice, becomes a ConfigError
-    naming the file, the line and column, and the problem.
+    naming the file, the line and column, and the problem; so does a file that is not UTF-8
+    text, that nests deeper than MAX_DEPTH, or whose aliases repeat more than MAX_ALIAS_NODES
+    values (refused before they are written out).
 
     libyaml parses; a file it refuses is parsed again by the pure-Python parser, whose words
     (and marks) every error message gives, so an error reads the same with or without libyaml."""
     import yaml
 
     p = Path(path)
+    text = read_text(p)
     try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(p, "", f"cannot read: {exc.strerror or exc}") from None
-    try:
-        return yaml.load(text, Loader=yaml_loader())  # noqa: S506 -- a safe loader
-    except yaml.YAMLError:
-        pass
-    try:
+        try:
+            return yaml.load(text, Loader=yaml_loader())  # noqa: S506 -- a safe loader
+        except yaml.YAMLError:
+            pass
         return yaml.load(text, Loader=yaml_loader(fast=False))  # noqa: S506 -- a SafeLoader
+    except _Refused as exc:
+        raise ConfigError(p, exc.place, exc.problem) from None
+    except yaml.reader.ReaderError as exc:  # a control character: binary, most likely
+        line = text.count("\n", 0, exc.position) + 1
+        raise ConfigError(
+            p, f"line {line}", f"not YAML text: character #x{exc.character:04x} (a binary file?)"
+        ) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark
         place = f"line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -100,10 +233,29 @@ def load_yaml(path: str | Path) -> object:
         raise ConfigError(p, "", f"invalid YAML: {exc}") from None
 
 
+def load_mapping(path: str | Path, what: str) -> dict[Any, Any]:
+    """`load_yaml` of a file whose top is a mapping (`key: value` lines), as every data file of
+    ktcs-bench is (`what` it is: "procedure", "lab", ...); an empty file, or one whose top is a
+    list or a single value, is a ConfigError saying so."""
+    doc = load_yaml(path)
+    if doc is None:
+        raise ConfigError(path, "", f"empty: a {what} file is a YAML mapping (key: value lines)")
+    if not isinstance(doc, dict):
+        raise ConfigError(
+            path, "", f"a {what} file is a YAML mapping (key: value lines), not {kind_of(doc)}"
+        )
+    return doc
+
+
+def join(place: str, key: object) -> str:
+    """The key path of `key` under `place` ("" is the top of the file)."""
+    return f"{place}.{key}" if place else str(key)
+
+
 class YamlReader:
     """Checks the parts of one parsed YAML file; each mistake is one ConfigError naming the file,
-    the place (a key path) and what is wrong. Shared by the loaders of scenario and procedure
-    files."""
+    the place (a key path) and what is wrong -- quoting at most an `excerpt` of a value. Shared
+    by the loaders of scenario and procedure files."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -113,12 +265,12 @@ class YamlReader:
 
     def mapping(self, obj: object, place: str) -> dict[str, Any]:
         if not isinstance(obj, dict):
-            raise self.fail(place, f"expected a mapping, got {type(obj).__name__}")
+            raise self.fail(place, f"expected a mapping, got {kind_of(obj)}")
         return obj
 
     def seq(self, obj: object, place: str) -> list[Any]:
         if not isinstance(obj, list):
-            raise self.fail(place, f"expected a list, got {type(obj).__name__}")
+            raise self.fail(place, f"expected a list, got {kind_of(obj)}")
         return obj
 
     def num(
@@ -129,47 +281,58 @@ class YamlReader:
         default: float | None = None,
         minimum: float | None = None,
         infinite: bool = False,
+        maximum: float | None = None,
     ) -> float:
         """A number at `m[key]`; never NaN, and infinite only where `infinite` says it means
         "for ever" (a zone active until the end)."""
         if key not in m:
             if default is None:
-                raise self.fail(f"{place}.{key}", "missing")
+                raise self.fail(join(place, key), "missing")
             return default
-        return self.value(m[key], f"{place}.{key}", minimum, infinite)
+        return self.value(m[key], join(place, key), minimum, infinite, maximum)
 
     def value(
-        self, v: Any, place: str, minimum: float | None = None, infinite: bool = False
+        self,
+        v: Any,
+        place: str,
+        minimum: float | None = None,
+        infinite: bool = False,
+        maximum: float | None = None,
     ) -> float:
         """One number of the file (a list item, a field), checked as `num` checks."""
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(place, f"expected a number, got {v!r}")
+            raise self.fail(place, f"expected a number, got {kind_of(v)} {excerpt(v)}")
         if math.isnan(v) or (math.isinf(v) and not infinite):
             raise self.fail(place, f"expected a finite number, got {v!r}")
         if minimum is not None and v < minimum:
-            raise self.fail(place, f"must be at least {minimum}, got {v}")
+            raise self.fail(place, f"must be at least {minimum:g}, got {excerpt(v)}")
+        if maximum is not None and v > maximum:
+            raise self.fail(place, f"must be at most {maximum:g}, got {excerpt(v)}")
         return float(v)
 
     def text(self, m: dict[str, Any], key: str, place: str, default: str | None = None) -> str:
         if key not in m:
             if default is None:
-                raise self.fail(f"{place}.{key}", "missing")
+                raise self.fail(join(place, key), "missing")
             return default
-        v = m[key]
+        return self.word(m[key], join(place, key))
+
+    def word(self, v: object, place: str) -> str:
+        """One text value of the file (a number is taken as its digits)."""
         if not isinstance(v, (str, int)) or isinstance(v, bool):
-            raise self.fail(f"{place}.{key}", f"expected text, got {v!r}")
+            raise self.fail(place, f"expected text, got {kind_of(v)} {excerpt(v)}")
         return str(v)
 
     def flag(self, m: dict[str, Any], key: str, place: str, default: bool) -> bool:
         v = m.get(key, default)
         if not isinstance(v, bool):
-            raise self.fail(f"{place}.{key}", f"expected true or false, got {v!r}")
+            raise self.fail(join(place, key), f"expected true or false, got {excerpt(v)}")
         return v
 
     def known(self, m: dict[str, Any], keys: set[str], place: str) -> None:
-        extra = sorted(set(m) - keys)
+        extra = sorted((str(k) for k in set(m) - keys), key=str)
         if extra:
             raise self.fail(
-                f"{place}.{extra[0]}" if place else str(extra[0]),
+                join(place, excerpt(extra[0], 40) if len(extra[0]) > 40 else extra[0]),
                 f"unknown key (known: {', '.join(sorted(keys))})",
             )

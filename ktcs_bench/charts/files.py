@@ -20,21 +20,21 @@ from pathlib import Path
 
 from ktcs_bench.codes.chart import Code, CodeChart
 from ktcs_bench.codes.stations import ONE_ZERO, ChartSpec, build_specs
-from ktcs_bench.datafiles import load_yaml
-from ktcs_bench.errors import ConfigError
+from ktcs_bench.datafiles import load_mapping
+from ktcs_bench.errors import ConfigError, excerpt
 from ktcs_bench.station.model import Line
 
 
 def load_chart(path: str | Path) -> CodeChart:
     """Load and schema-check one chart file; errors name the file, the key path and the problem."""
-    raw = load_yaml(path)
-    if not isinstance(raw, dict):
-        raise ConfigError(path, "", "a chart must be a mapping with keys chart, protocol, codes")
+    raw = load_mapping(path, "code chart")
     for key in ("chart", "protocol", "direction", "codes"):
         if key not in raw:
             raise ConfigError(path, key, "missing key")
     if raw["protocol"] not in ("type1", "type2"):
-        raise ConfigError(path, "protocol", f"must be type1 or type2, not {raw['protocol']!r}")
+        raise ConfigError(
+            path, "protocol", f"must be type1 or type2, not {excerpt(raw['protocol'])}"
+        )
     items = raw["codes"]
     if not isinstance(items, list):
         raise ConfigError(path, "codes", "must be a list of {name, type, status}")
@@ -47,12 +47,14 @@ def load_chart(path: str | Path) -> CodeChart:
         name = item["name"]
         if name in seen:
             other = f"codes[{seen[name]}]"
-            raise ConfigError(path, f"{place}.name", f"duplicate code {name!r} (also {other})")
+            raise ConfigError(
+                path, f"{place}.name", f"duplicate code {excerpt(name)} (also {other})"
+            )
         seen[name] = i
         seq = item.get("sequence")
         if seq is not None and seq != i + 1:
             raise ConfigError(
-                path, f"{place}.sequence", f"is {seq!r}, but the code is number {i + 1}"
+                path, f"{place}.sequence", f"is {excerpt(seq)}, but the code is number {i + 1}"
             )
         codes.append(Code(i + 1, name, str(item.get("type", "")), str(item.get("status", ""))))
     station = raw.get("station")

@@ -16,8 +16,8 @@ from typing import Any
 
 from ktcs_bench.codec.crc import CrcFunction, CrcSpec
 from ktcs_bench.codec.opcodes import FieldSpec, Opcode, OpcodeTable
-from ktcs_bench.datafiles import data_dir, load_yaml
-from ktcs_bench.errors import ConfigError, UsageError
+from ktcs_bench.datafiles import data_dir, load_mapping
+from ktcs_bench.errors import ConfigError, UsageError, excerpt
 
 HEADER_FIELDS = ("len", "seq", "op", "sub")
 _SIZE_FMT = {1: "B", 2: "H", 4: "I"}
@@ -150,7 +150,7 @@ class _Reader:
         # YAML's true/false are ints to Python; a bool is never a number here
         if not isinstance(value, kinds) or (bool not in kinds and isinstance(value, bool)):
             names = " or ".join(_KIND_NAMES.get(k, k.__name__) for k in kinds)
-            raise self.fail(where, f"must be {names}, not {value!r}")
+            raise self.fail(where, f"must be {names}, not {excerpt(value)}")
         return value
 
     def number(self, m: Mapping[str, Any], key: str, place: str, low: int, high: int) -> int:
@@ -219,9 +219,9 @@ def _field_specs(r: _Reader, raw: Any, place: str) -> tuple[FieldSpec, ...]:
         name = r.get(fm, "name", f"{place}[{i}]", str)
         typ = r.get(fm, "type", f"{place}[{i}]", str)
         if not name.isidentifier() or name in _RESERVED_FIELD_NAMES:
-            raise r.fail(f"{place}[{i}].name", f"{name!r} cannot name a field")
+            raise r.fail(f"{place}[{i}].name", f"{excerpt(name)} cannot name a field")
         if typ not in ("u8", "u16", "u32"):
-            raise r.fail(f"{place}[{i}].type", f"must be u8, u16 or u32, not {typ!r}")
+            raise r.fail(f"{place}[{i}].type", f"must be u8, u16 or u32, not {excerpt(typ)}")
         specs.append(FieldSpec(name, typ))
     return tuple(specs)
 
@@ -243,7 +243,9 @@ def _opcode(r: _Reader, raw: Any, place: str, little: bool) -> Opcode:
     op = r.number(m, "op", place, 0, MAX_OPCODE)
     name = r.get(m, "name", place, str).strip()
     if not name or any(c.isspace() or c in "=,:" for c in name):
-        raise r.fail(f"{place}.name", f"{name!r} cannot name an opcode (used on command lines)")
+        raise r.fail(
+            f"{place}.name", f"{excerpt(name)} cannot name an opcode (used on command lines)"
+        )
     shapes = [k for k in ("items", "statuses") if m.get(k)]
     if len(shapes) > 1:
         raise r.fail(place, "an opcode carries items or statuses, not both")
@@ -253,7 +255,7 @@ def _opcode(r: _Reader, raw: Any, place: str, little: bool) -> Opcode:
         seen: set[str] = set()
         for i, spec in enumerate(specs):
             if spec.name in seen:
-                raise r.fail(f"{place}.{part}[{i}].name", f"{spec.name!r} appears twice")
+                raise r.fail(f"{place}.{part}[{i}].name", f"{excerpt(spec.name)} appears twice")
             seen.add(spec.name)
     return Opcode(
         op=op,
@@ -273,7 +275,7 @@ def _opcode_list(r: _Reader, raw: Any, place: str, little: bool) -> list[tuple[s
     if raw is None:
         return []
     if not isinstance(raw, list):
-        raise r.fail(place, f"must be a list of opcodes, not {raw!r}")
+        raise r.fail(place, f"must be a list of opcodes, not {excerpt(raw)}")
     out: list[tuple[str, Opcode]] = []
     numbers: dict[int, str] = {}
     names: dict[str, str] = {}
@@ -321,11 +323,13 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
     file = Path(path)
     r = _Reader(file)
     top = r.mapping(
-        load_yaml(file), "", ("protocol", "crc_algorithms", "profiles", "opcodes", "nak_reasons")
+        load_mapping(file, "protocol"),
+        "",
+        ("protocol", "crc_algorithms", "profiles", "opcodes", "nak_reasons"),
     )
     protocol = r.get(top, "protocol", "", str)
     if protocol not in ("type1", "type2"):
-        raise r.fail("protocol", f"must be type1 or type2, not {protocol!r}")
+        raise r.fail("protocol", f"must be type1 or type2, not {excerpt(protocol)}")
     crcs: dict[str, CrcSpec] = {}
     for cname, craw in r.mapping(r.get(top, "crc_algorithms", "", dict), "crc_algorithms").items():
         crcs[str(cname)] = _crc_spec(r, str(cname), craw)
@@ -337,7 +341,7 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
         pm = r.mapping(praw, place, _PROFILE_KEYS)
         order = pm.get("byte_order", "little")
         if order not in ("little", "big"):
-            raise r.fail(f"{place}.byte_order", f"must be little or big, not {order!r}")
+            raise r.fail(f"{place}.byte_order", f"must be little or big, not {excerpt(order)}")
         little = order == "little"
         header: list[tuple[str, int]] = []
         for i, h in enumerate(r.get(pm, "header", place, list)):
@@ -350,18 +354,20 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
             if size not in _SIZE_FMT:
                 raise r.fail(f"{hp}.size", f"must be 1, 2 or 4, not {size}")
             if any(n == hname for n, _ in header):
-                raise r.fail(f"{hp}.name", f"field {hname!r} appears twice")
+                raise r.fail(f"{hp}.name", f"field {excerpt(hname)} appears twice")
             header.append((hname, size))
         for needed in ("len", "seq", "op"):
             if all(n != needed for n, _ in header):
-                raise r.fail(f"{place}.header", f"needs a {needed!r} field")
+                raise r.fail(f"{place}.header", f"needs a {excerpt(needed)} field")
         counts = r.get(pm, "length_counts", place, list)
         for i, c in enumerate(counts):
             if c != "data" and all(n != c for n, _ in header if n != "len"):
                 parts = ", ".join([n for n, _ in header if n != "len"] + ["data"])
-                raise r.fail(f"{place}.length_counts[{i}]", f"must be one of {parts}, not {c!r}")
+                raise r.fail(
+                    f"{place}.length_counts[{i}]", f"must be one of {parts}, not {excerpt(c)}"
+                )
             if c in counts[:i]:
-                raise r.fail(f"{place}.length_counts[{i}]", f"{c!r} appears twice")
+                raise r.fail(f"{place}.length_counts[{i}]", f"{excerpt(c)} appears twice")
         if "data" not in counts:
             raise r.fail(f"{place}.length_counts", "LEN must count data")
         max_len = r.get(pm, "max_len", place, int)
@@ -379,7 +385,7 @@ def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
                         ("algorithm", "covers", "size", "pad"))  # fmt: skip
         algo = r.get(crc, "algorithm", f"{place}.crc", str)
         if algo not in crcs:
-            raise r.fail(f"{place}.crc.algorithm", f"unknown algorithm {algo!r}")
+            raise r.fail(f"{place}.crc.algorithm", f"unknown algorithm {excerpt(algo)}")
         covers = r.get(crc, "covers", f"{place}.crc", list)
         names = ("stx", *(n for n, _ in header), "data")
         if len(covers) != 2 or any(c not in names for c in covers):
@@ -448,11 +454,11 @@ def get_profile(name: str) -> FrameProfile:
                 raise UsageError(f"{path} holds several profiles; name one as {path}:NAME")
             return next(iter(profiles.values()))
         if pname not in profiles:
-            raise UsageError(f"{path} has no profile {pname!r} (has {', '.join(profiles)})")
+            raise UsageError(f"{path} has no profile {excerpt(pname)} (has {', '.join(profiles)})")
         return profiles[pname]
     profiles = shipped_profiles()
     if name in DEFAULT_PROFILE:
         name = DEFAULT_PROFILE[name]
     if name not in profiles:
-        raise UsageError(f"unknown profile {name!r} (shipped: {', '.join(profiles)})")
+        raise UsageError(f"unknown profile {excerpt(name)} (shipped: {', '.join(profiles)})")
     return profiles[name]

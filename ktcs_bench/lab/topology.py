@@ -23,10 +23,10 @@ from typing import Any
 
 import serial
 
-from ktcs_bench.datafiles import data_dir, load_yaml
+from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.emulator.build import KINDS as KINDS
 from ktcs_bench.emulator.build import ROLE as ROLE
-from ktcs_bench.errors import ConfigError, UsageError
+from ktcs_bench.errors import ConfigError, UsageError, excerpt
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable, load_timetable
@@ -152,7 +152,7 @@ def resolve_lab_path(name: str | None) -> Path:
 
 def load_lab(path: str | Path | None = None) -> Lab:
     file = Path(path) if path is not None else default_lab_path()
-    raw = load_yaml(file)
+    raw = load_mapping(file, "lab")
 
     def fail(place: str, problem: str) -> ConfigError:
         return ConfigError(file, place, problem)
@@ -175,14 +175,12 @@ def load_lab(path: str | Path | None = None) -> Lab:
             value = None
         if value is None or not math.isfinite(value) or value <= 0:
             what = "a positive whole number" if whole else "a positive number"
-            raise fail(place, f"must be {what}, not {section.get(key)!r}")
+            raise fail(place, f"must be {what}, not {excerpt(section.get(key))}")
         return float(value)
 
     def whole(value: float | None) -> int | None:
         return None if value is None else int(value)
 
-    if not isinstance(raw, dict):
-        raise fail("", "a lab file is a mapping (lab, line, devices, links)")
     for key in ("lab", "line", "devices", "links"):
         if key not in raw:
             raise fail(key, "missing key")
@@ -199,7 +197,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
             raise fail(place, "must be a mapping with at least 'kind'")
         kind = spec.get("kind")
         if kind not in KINDS:
-            raise fail(f"{place}.kind", f"must be one of {', '.join(KINDS)}, not {kind!r}")
+            raise fail(f"{place}.kind", f"must be one of {', '.join(KINDS)}, not {excerpt(kind)}")
         station = spec.get("station")
         if kind in STATION_KINDS and not isinstance(station, int):
             raise fail(f"{place}.station", f"a {kind} needs its station number")
@@ -233,7 +231,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         a, b, typ = str(lk["a"]), str(lk["b"]), lk["type"]
         for end in ("a", "b"):
             if str(lk[end]) not in devices:
-                raise fail(f"{place}.{end}", f"unknown device {lk[end]!r}")
+                raise fail(f"{place}.{end}", f"unknown device {excerpt(lk[end])}")
         if devices[a].kind != "ixl":
             raise fail(f"{place}.a", "end a of every link is an IXL")
         if devices[a].external is not None and typ == "type1":
@@ -245,7 +243,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         peer = devices[b].kind
         allowed = {"type1": ("atc", "trackside"), "type2": ("ctc",)}.get(typ)
         if allowed is None:
-            raise fail(f"{place}.type", f"must be type1 or type2, not {typ!r}")
+            raise fail(f"{place}.type", f"must be type1 or type2, not {excerpt(typ)}")
         if peer not in allowed:
             raise fail(
                 f"{place}.b",
@@ -265,7 +263,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
     for key in ("type1", "type2", "console"):
         section = raw.get(key) or {}
         if not isinstance(section, dict):
-            raise fail(key, f"must be a mapping of settings, not {section!r}")
+            raise fail(key, f"must be a mapping of settings, not {excerpt(section)}")
         sections[key] = section
     t1, t2, console = sections["type1"], sections["type2"], sections["console"]
     origins = console.get("origins") or []
@@ -280,7 +278,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
             raise fail("timetable", f"no such timetable file: {timetable_file}")
     mode = raw.get("ixl_mode", "center")
     if mode not in ("center", "local"):
-        raise fail("ixl_mode", f"must be center or local, not {mode!r}")
+        raise fail("ixl_mode", f"must be center or local, not {excerpt(mode)}")
     lab = Lab(
         name=str(raw["lab"]),
         file=file.resolve(),
@@ -319,7 +317,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         if train not in {t.id for t in timetable.trains}:
             raise fail(
                 f"devices.{d.name}.train",
-                f"train {train!r} is not in the timetable {timetable.file} "
+                f"train {excerpt(train)} is not in the timetable {timetable.file} "
                 f"({', '.join(t.id for t in timetable.trains)})",
             )
     if raw.get("ars") is not None:
@@ -349,10 +347,10 @@ def _external(raw: Any, kind: str, place: str, fail: _Fail) -> External:
         raise fail(f"{place}.{key}", f"missing key: where the real {kind} is, e.g. {_EXAMPLE[key]}")
     value = raw[key]
     if not isinstance(value, str) or not value.strip():
-        raise fail(f"{place}.{key}", f"must be text, e.g. {_EXAMPLE[key]}, not {value!r}")
+        raise fail(f"{place}.{key}", f"must be text, e.g. {_EXAMPLE[key]}, not {excerpt(value)}")
     rails = raw.get("rails", False)
     if not isinstance(rails, bool):
-        raise fail(f"{place}.rails", f"must be true or false, not {rails!r}")
+        raise fail(f"{place}.rails", f"must be true or false, not {excerpt(rails)}")
     if key == "address":  # a CTC is connected to (a port); an IXL is served (0: any free port)
         try:
             return External(address=parse_host_port(value, any_free=kind == "ixl"))
@@ -372,11 +370,11 @@ def _serial_url(text: str, place: str, fail: _Fail) -> str:
     except UsageError:
         kind = "tcp"
     if kind != "serial":
-        raise fail(place, f"the real device's serial port or a pyserial URL, not {text!r}")
+        raise fail(place, f"the real device's serial port or a pyserial URL, not {excerpt(text)}")
     try:
         serial.serial_for_url(text, do_not_open=True)
     except (ValueError, serial.SerialException) as exc:
-        raise fail(place, f"{text!r}: {exc}") from None
+        raise fail(place, f"{excerpt(text)}: {exc}") from None
     match = _HOST_PORT_URL.match(text)
     if match:
         try:
@@ -409,9 +407,10 @@ def _ars(section: object, lab: Lab, fail: _Fail) -> ArsSpec:
         for i, st in enumerate(on):
             if isinstance(st, bool) or not isinstance(st, int) or st not in lab.stations:
                 raise fail(
-                    f"ars.start_on[{i}]", f"must be a station of the lab {lab.stations}, not {st!r}"
+                    f"ars.start_on[{i}]",
+                    f"must be a station of the lab {lab.stations}, not {excerpt(st)}",
                 )
         stations = tuple(sorted(set(on)))
     else:
-        raise fail("ars.start_on", f"a list of the lab's stations, or all; not {on!r}")
+        raise fail("ars.start_on", f"a list of the lab's stations, or all; not {excerpt(on)}")
     return ArsSpec(stations)

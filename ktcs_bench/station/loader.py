@@ -15,8 +15,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from ktcs_bench.datafiles import data_dir, load_yaml
-from ktcs_bench.errors import ConfigError
+from ktcs_bench.datafiles import data_dir, load_mapping
+from ktcs_bench.errors import ConfigError, excerpt
 from ktcs_bench.station.model import (
     ASPECT_ORDER,
     DIRECTIONS,
@@ -114,7 +114,7 @@ class _Doc:
         allowed = tuple(allowed)
         if value not in allowed:
             raise self.fail(
-                _join(place, key), f"must be one of {', '.join(allowed)}, not {value!r}"
+                _join(place, key), f"must be one of {', '.join(allowed)}, not {excerpt(value)}"
             )
         return value
 
@@ -132,7 +132,8 @@ class _Doc:
         for i, name in enumerate(names):
             if name in seen:
                 raise self.fail(
-                    f"{place}[{i}].name", f"duplicate {what} {name!r} (also {place}[{seen[name]}])"
+                    f"{place}[{i}].name",
+                    f"duplicate {what} {excerpt(name)} (also {place}[{seen[name]}])",
                 )
             seen[name] = i
 
@@ -152,7 +153,7 @@ def _kind(value: object) -> str:
 def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) -> Station:
     """Load one station file; `external_track_circuits` are plain-line names approaches may use."""
     doc = _Doc(path)
-    raw = doc.mapping(load_yaml(path), "")
+    raw = load_mapping(path, "station")
     number = doc.integer(raw, "station", "")
     name = doc.string(raw, "name", "", f"Station {number}")
     tracks = doc.strings(raw, "tracks", "")
@@ -168,7 +169,9 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
         on = doc.strings(o, "tracks", place, optional=True)
         for i, t in enumerate(on):
             if t not in tracks:
-                raise doc.fail(f"{place}.tracks[{i}]", f"unknown track {t!r} (tracks: {tracks})")
+                raise doc.fail(
+                    f"{place}.tracks[{i}]", f"unknown track {excerpt(t)} (tracks: {tracks})"
+                )
         return TrackCircuit(nm, lo, hi, length, number, on)
 
     tcs = doc.list_of(raw, "track_circuits", "", build_tc)
@@ -178,7 +181,7 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
 
     def tc_ref(name: str, place: str, allowed: set[str] = tc_names) -> str:
         if name not in allowed:
-            raise doc.fail(place, f"unknown track circuit {name!r}")
+            raise doc.fail(place, f"unknown track circuit {excerpt(name)}")
         return name
 
     def build_point(o: dict[str, Any], place: str) -> Point:
@@ -206,14 +209,16 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
         aspects = doc.strings(o, "aspects", place, optional=True)
         for i, a in enumerate(aspects):
             if a not in ASPECT_ORDER:
-                raise doc.fail(f"{place}.aspects[{i}]", f"unknown aspect {a!r} ({ASPECT_ORDER})")
+                raise doc.fail(
+                    f"{place}.aspects[{i}]", f"unknown aspect {excerpt(a)} ({ASPECT_ORDER})"
+                )
         if kind != "marker" and "R" not in aspects:
             raise doc.fail(f"{place}.aspects", "a signal with lamps must be able to show R (stop)")
         if kind == "marker" and aspects:
             raise doc.fail(f"{place}.aspects", "a marker has no lamps")
         track = doc.string(o, "track", place) if "track" in o else None
         if track is not None and track not in tracks:
-            raise doc.fail(f"{place}.track", f"unknown track {track!r}")
+            raise doc.fail(f"{place}.track", f"unknown track {excerpt(track)}")
         return Signal(nm, kind, direction, doc.number(o, "position_m", place), aspects, track)
 
     signals = doc.list_of(raw, "signals", "", build_signal)
@@ -227,7 +232,7 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
             m = doc.mapping(item, here)
             pt = doc.string(m, "point", here)
             if pt not in point_names:
-                raise doc.fail(f"{here}.point", f"unknown point {pt!r}")
+                raise doc.fail(f"{here}.point", f"unknown point {excerpt(pt)}")
             pos: PointPosition = (
                 "normal"
                 if doc.choice(m, "position", here, POINT_POSITIONS) == "normal"
@@ -242,14 +247,17 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
         exit_ = doc.string(o, "exit", place)
         for key, sig in (("entry", entry), ("exit", exit_)):
             if sig not in by_signal:
-                raise doc.fail(f"{place}.{key}", f"unknown signal {sig!r}")
+                raise doc.fail(f"{place}.{key}", f"unknown signal {excerpt(sig)}")
         if not by_signal[entry].has_lamps:
             raise doc.fail(
-                f"{place}.entry", f"signal {entry!r} is a marker and cannot start a route"
+                f"{place}.entry", f"signal {excerpt(entry)} is a marker and cannot start a route"
             )
         direction = by_signal[entry].direction
         if by_signal[exit_].direction != direction:
-            raise doc.fail(f"{place}.exit", f"signal {exit_!r} faces the other way from {entry!r}")
+            raise doc.fail(
+                f"{place}.exit",
+                f"signal {excerpt(exit_)} faces the other way from {excerpt(entry)}",
+            )
         pts = settings(o, "points", place)
         route_tcs = doc.strings(o, "track_circuits", place)
         if not route_tcs:
@@ -270,13 +278,13 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
                 if not set(own.track_circuits) & set(where):
                     raise doc.fail(
                         f"{place}.{key}[{i}].point",
-                        f"point {s.point!r} lies in {', '.join(own.track_circuits)}, "
+                        f"point {excerpt(s.point)} lies in {', '.join(own.track_circuits)}, "
                         f"which is not among the track circuits it is listed with",
                     )
         seen_pts = [s.point for s in pts + ov_pts]
         for i, p in enumerate(seen_pts):
             if seen_pts.index(p) != i:
-                raise doc.fail(f"{place}.points", f"point {p!r} is listed twice")
+                raise doc.fail(f"{place}.points", f"point {excerpt(p)} is listed twice")
         approach = doc.strings(o, "approach", place)
         for i, t in enumerate(approach):
             tc_ref(t, f"{place}.approach[{i}]", approach_names)
@@ -301,7 +309,7 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
         if aspect not in by_signal[entry].aspects or aspect == "R":
             raise doc.fail(
                 f"{place}.aspect",
-                f"{aspect!r} is not a proceed aspect of signal {entry!r} {by_signal[entry].aspects}",
+                f"{excerpt(aspect)} is not a proceed aspect of signal {excerpt(entry)} {by_signal[entry].aspects}",
             )
         limit = doc.number(o, "speed_limit_kmh", place) if "speed_limit_kmh" in o else None
         return Route(
@@ -352,11 +360,13 @@ def _check_conflicts(doc: _Doc, routes: list[Route], points: dict[str, Point]) -
         for j, c in enumerate(r.conflicts):
             place = f"routes[{i}].conflicts[{j}]"
             if c not in index:
-                raise doc.fail(place, f"unknown route {c!r}")
+                raise doc.fail(place, f"unknown route {excerpt(c)}")
             if c == r.name:
                 raise doc.fail(place, "a route cannot conflict with itself")
             if r.name not in routes[index[c]].conflicts:
-                raise doc.fail(place, f"route {c!r} does not list {r.name!r} back as conflicting")
+                raise doc.fail(
+                    place, f"route {excerpt(c)} does not list {excerpt(r.name)} back as conflicting"
+                )
     for i, r in enumerate(routes):
         mine = set(r.all_track_circuits) | {s.point for s in r.all_points}
         for other in routes[i + 1 :]:
@@ -371,7 +381,7 @@ def _check_conflicts(doc: _Doc, routes: list[Route], points: dict[str, Point]) -
             ):
                 raise doc.fail(
                     f"routes[{i}].conflicts",
-                    f"route {r.name!r} shares {', '.join(shared)} with route {other.name!r} "
+                    f"route {excerpt(r.name)} shares {', '.join(shared)} with route {excerpt(other.name)} "
                     "but does not list it as conflicting",
                 )
 
@@ -420,7 +430,7 @@ def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
     """`load_line` from the files, each file's digest appended to `read` before it is parsed."""
     read.append((path, _digest(path)))
     doc = _Doc(path)
-    raw = doc.mapping(load_yaml(path), "")
+    raw = load_mapping(path, "line")
     name = doc.string(raw, "line", "")
     start, end = doc.number(raw, "start_m", ""), doc.number(raw, "end_m", "")
     if end <= start:
@@ -466,7 +476,7 @@ def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
                 raise ConfigError(
                     st.file,
                     f"track_circuits[{i}].name",
-                    f"duplicate track circuit {t.name!r} (also in {owner_of[t.name]})",
+                    f"duplicate track circuit {excerpt(t.name)} (also in {owner_of[t.name]})",
                 )
             owner_of[t.name] = st.file
 
@@ -478,7 +488,7 @@ def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
                     raise ConfigError(
                         st.file,
                         f"routes[{i}].approach[{j}]",
-                        f"track circuit {tc!r} belongs to station {owned[tc]}, not {st.number}",
+                        f"track circuit {excerpt(tc)} belongs to station {owned[tc]}, not {st.number}",
                     )
 
     def build_interval(o: dict[str, Any], place: str) -> Interval:
@@ -491,7 +501,9 @@ def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
         refs = doc.strings(o, "track_circuits", place)
         for i, t in enumerate(refs):
             if t not in plain_names:
-                raise doc.fail(f"{place}.track_circuits[{i}]", f"unknown track circuit {t!r}")
+                raise doc.fail(
+                    f"{place}.track_circuits[{i}]", f"unknown track circuit {excerpt(t)}"
+                )
         lo, hi = doc.number(o, "from_m", place), doc.number(o, "to_m", place)
         d = doc.choice(o, "default_direction", place, DIRECTIONS, "up")
         return Interval(nm, west, east, lo, hi, refs, "up" if d == "up" else "down", boundary)

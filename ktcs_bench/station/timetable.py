@@ -24,7 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.datafiles import load_yaml
+from ktcs_bench.datafiles import load_mapping
+from ktcs_bench.errors import excerpt
 from ktcs_bench.station.loader import _Doc
 from ktcs_bench.station.model import (
     DIRECTIONS,
@@ -167,7 +168,7 @@ def load_timetable(path: str | Path, line: Line) -> Timetable:
     """Load and check a timetable against `line` (see the module docstring)."""
     path = Path(path)
     doc = _Doc(path)
-    raw = doc.mapping(load_yaml(path), "")
+    raw = load_mapping(path, "timetable")
     name = doc.string(raw, "timetable", "")
     if "line" in raw:
         runs_on = (path.parent / doc.string(raw, "line", "")).resolve()
@@ -178,7 +179,9 @@ def load_timetable(path: str | Path, line: Line) -> Timetable:
     def number(o: dict[str, Any], key: str, place: str, default: float | None = None) -> float:
         value = doc.number(o, key, place, default)
         if not math.isfinite(value) or value < 0:
-            raise doc.fail(f"{place}.{key}", f"must be a finite number >= 0, not {o.get(key)!r}")
+            raise doc.fail(
+                f"{place}.{key}", f"must be a finite number >= 0, not {excerpt(o.get(key))}"
+            )
         return value
 
     data: dict[str, TrainData] = {}
@@ -210,7 +213,7 @@ def load_timetable(path: str | Path, line: Line) -> Timetable:
         if track not in st.tracks:
             raise doc.fail(
                 f"{here}.track",
-                f"station {number_} has no track {track!r} (tracks: {', '.join(st.tracks)})",
+                f"station {number_} has no track {excerpt(track)} (tracks: {', '.join(st.tracks)})",
             )
         stop_m = doc.number(o, "stop_m", here)
         rear = stop_m - length if direction == "up" else stop_m + length
@@ -250,7 +253,7 @@ def load_timetable(path: str | Path, line: Line) -> Timetable:
         if kind not in data:
             raise doc.fail(
                 f"{place}.train",
-                f"no train data {kind!r} under train_data ({', '.join(data) or 'none'})",
+                f"no train data {excerpt(kind)} under train_data ({', '.join(data) or 'none'})",
             )
         direction: Direction = (
             "up" if doc.choice(o, "direction", place, DIRECTIONS) == "up" else "down"
@@ -262,12 +265,12 @@ def load_timetable(path: str | Path, line: Line) -> Timetable:
             if where not in tcs:
                 raise doc.fail(
                     f"{place}.enters.track_circuit",
-                    f"no track circuit {where!r} on the line {line.name}",
+                    f"no track circuit {excerpt(where)} on the line {line.name}",
                 )
             enters = Entry(where, number(e, "at_s", f"{place}.enters", 0.0))
         leaves = o.get("leaves_lab", False)
         if not isinstance(leaves, bool):
-            raise doc.fail(f"{place}.leaves_lab", f"must be true or false, not {leaves!r}")
+            raise doc.fail(f"{place}.leaves_lab", f"must be true or false, not {excerpt(leaves)}")
         raw_stops = doc.items(o, "stops", place)
         if not raw_stops:
             raise doc.fail(f"{place}.stops", "a train stops at one station at least")
@@ -335,6 +338,6 @@ def load_timetable(path: str | Path, line: Line) -> Timetable:
         if ids.index(train_id) != i:
             raise doc.fail(
                 f"trains[{i}].id",
-                f"duplicate train {train_id!r} (also trains[{ids.index(train_id)}])",
+                f"duplicate train {excerpt(train_id)} (also trains[{ids.index(train_id)}])",
             )
     return Timetable(name, str(path), tuple(trains))
