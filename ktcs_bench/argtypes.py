@@ -9,23 +9,24 @@ import re
 from collections.abc import Callable
 from typing import Any
 
-from ktcs_bench.errors import UsageError
+from ktcs_bench.errors import UsageError, excerpt
 from ktcs_bench.transport.endpoints import parse_host_port
 
-__all__ = ["duration", "host_port", "positive", "seconds"]
+__all__ = ["duration", "host_port", "positive", "say_seconds", "seconds"]
 
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?|\.\d+)\s*(ms|s|sec|min|m|h)?\s*$")
 _UNIT = {"ms": 0.001, "s": 1.0, "sec": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0}
 
 
-def seconds(value: object) -> float:
+def seconds(value: object, maximum: float | None = None) -> float:
     """A duration as a person writes it -- `90`, `1.5`, `500ms`, `5s`, `2min`, `15m`, `1h` (a
-    bare number is seconds) -- in seconds: positive and finite, else ValueError saying so. The one
-    reading of a duration, for the command line and the procedure files alike."""
+    bare number is seconds) -- in seconds: positive and finite, and at most `maximum` where one
+    is given, else ValueError saying so. The one reading of a duration, for the command line and
+    the procedure files alike."""
     result = math.nan
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         result = float(value)
-    elif isinstance(value, str):
+    elif isinstance(value, str) and len(value) <= 40:
         try:
             result = float(value)  # a bare number is seconds ("nan", "inf": refused below)
         except ValueError:
@@ -33,9 +34,20 @@ def seconds(value: object) -> float:
                 result = float(m.group(1)) * _UNIT[m.group(2) or "s"]
     if not (math.isfinite(result) and result > 0):
         raise ValueError(
-            f"a duration is a positive number of seconds (or 500ms, 5s, 2min, 1h), not {value!r}"
+            "a duration is a positive number of seconds (or 500ms, 5s, 2min, 1h), "
+            f"not {excerpt(value)}"
         )
+    if maximum is not None and result > maximum:
+        raise ValueError(f"a duration here is at most {say_seconds(maximum)}, not {excerpt(value)}")
     return result
+
+
+def say_seconds(value: float) -> str:
+    """A bound in seconds as a person reads it: 86400 -> '24 h (86400 s)', 90 -> '90 s'."""
+    for unit, size in (("h", 3600.0), ("min", 60.0)):
+        if value >= size and value % size == 0:
+            return f"{value / size:.10g} {unit} ({value:.10g} s)"
+    return f"{value:.10g} s"
 
 
 def duration(text: str) -> float:

@@ -26,11 +26,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.datafiles import YamlReader, load_yaml
-from ktcs_bench.errors import ConfigError, UsageError
+from ktcs_bench.argtypes import say_seconds
+from ktcs_bench.datafiles import YamlReader, load_mapping
+from ktcs_bench.errors import ConfigError, UsageError, excerpt
 from ktcs_bench.lab.topology import Lab, load_lab, resolve_lab_path
 from ktcs_bench.procedure.names import LabNames, StepError
-from ktcs_bench.procedure.steps import KINDS, Ghost, Step, parse_step
+from ktcs_bench.procedure.steps import (
+    KINDS,
+    MAX_DURATION_S,
+    ExpectStep,
+    Ghost,
+    Step,
+    WaitStep,
+    parse_step,
+)
 
 MODES = ("center", "local")
 
@@ -73,11 +82,16 @@ def _texts(r: YamlReader, doc: dict[str, Any], key: str) -> tuple[str, ...]:
     value = doc.get(key, [])
     if isinstance(value, (str, int)) and not isinstance(value, bool):
         return (str(value),)
-    items = r.seq(value, key)
-    for i, v in enumerate(items):
-        if not isinstance(v, (str, int)) or isinstance(v, bool):
-            raise r.fail(f"{key}[{i}]", f"expected text, got {v!r}")
-    return tuple(str(v) for v in items)
+    return tuple(r.word(v, f"{key}[{i}]") for i, v in enumerate(r.seq(value, key)))
+
+
+def _longest(step: Step) -> float:
+    """The most lab time one step may take waiting: its `wait:`, `within:` or `holds:`."""
+    if isinstance(step, WaitStep):
+        return step.seconds
+    if isinstance(step, ExpectStep):
+        return step.holds if step.holds is not None else step.within
+    return 0.0
 
 
 def _lab(r: YamlReader, path: Path, word: str) -> Lab:
@@ -94,7 +108,7 @@ def _lab(r: YamlReader, path: Path, word: str) -> Lab:
 def load_procedure(path: str | Path) -> Procedure:
     p = Path(path)
     r = YamlReader(p)
-    doc = r.mapping(load_yaml(p), "")
+    doc = load_mapping(p, "procedure")
     r.known(doc, {"id", "title", "verifies", "tags", "setup", "steps"}, "")
     setup_m = r.mapping(doc.get("setup", {}), "setup")
     r.known(setup_m, {"lab", "trains", "modes", "ars", "restart"}, "setup")
@@ -131,15 +145,15 @@ def load_procedure(path: str | Path) -> Procedure:
         except StepError as exc:
             raise r.fail(f"setup.modes.{key}", str(exc)) from None
         if mode not in MODES:
-            raise r.fail(f"setup.modes.{key}", f"center or local, not {mode!r}")
+            raise r.fail(f"setup.modes.{key}", f"center or local, not {excerpt(mode)}")
         modes[st] = str(mode)
     ars = setup_m.get("ars")
     if ars is not None and not isinstance(ars, bool):
-        raise r.fail("setup.ars", f"expected true or false, got {ars!r}")
+        raise r.fail("setup.ars", f"expected true or false, got {excerpt(ars)}")
     restart = []
     for i, word in enumerate(r.seq(setup_m.get("restart", []), "setup.restart")):
         try:
-            restart.append(names.device(str(word)))
+            restart.append(names.device(r.word(word, f"setup.restart[{i}]")))
         except StepError as exc:
             raise r.fail(f"setup.restart[{i}]", str(exc)) from None
     steps = []
@@ -152,6 +166,13 @@ def load_procedure(path: str | Path) -> Procedure:
         except StepError as exc:
             kind = next((k for k in raw if k in KINDS), None) if isinstance(raw, dict) else None
             raise r.fail(f"step {i}" + (f" ({kind})" if kind else ""), str(exc)) from None
+    total = sum(_longest(s) for s in steps)
+    if total > MAX_DURATION_S:
+        raise r.fail(
+            "steps",
+            f"the waits, within: and holds: add up to {say_seconds(total)}; a procedure "
+            f"takes at most {say_seconds(MAX_DURATION_S)} of lab time",
+        )
     return Procedure(
         path=p,
         id=r.text(doc, "id", "", default=p.stem),

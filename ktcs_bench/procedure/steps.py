@@ -32,7 +32,7 @@ from typing import Any, Protocol
 
 from ktcs_bench.argtypes import seconds
 from ktcs_bench.ctc.log import parse_words
-from ktcs_bench.errors import UsageError
+from ktcs_bench.errors import UsageError, excerpt, kind_of
 from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.procedure.expect import Expectation, Observer, parse_expectation
 from ktcs_bench.procedure.names import LabNames, StepError
@@ -49,12 +49,28 @@ TRAIN_DEVICE_VERBS = ("hold", "dispatch [now]", "run to AT", "release_eb")
 LOCAL_ACTIONS = ("grant", "refuse", "take")
 
 
+MAX_DURATION_S = 24 * 3600.0
+"""The longest `wait:`, `within:` or `holds:` (of lab time): longer cannot be meant (a virtual
+run spinning through 10000 h); also the most the steps of one procedure may take together."""
+
+
 def parse_duration(value: object) -> float:
-    """`5s`, `500ms`, `2min`, `1.5`, 7 -> seconds (> 0): `argtypes.seconds`, as a StepError."""
+    """`5s`, `500ms`, `2min`, `1.5`, 7 -> seconds (> 0, at most MAX_DURATION_S):
+    `argtypes.seconds`, as a StepError."""
     try:
-        return seconds(value)
+        return seconds(value, maximum=MAX_DURATION_S)
     except ValueError as exc:
         raise StepError(str(exc)) from None
+
+
+def _note(raw: dict[Any, Any]) -> str:
+    """A step's `note:`, a sentence (a bare number is its digits); nothing else."""
+    note = raw.get("note")
+    if note is None:
+        return ""
+    if isinstance(note, bool) or not isinstance(note, (str, int, float)):
+        raise StepError(f"note: give a sentence as text, not {kind_of(note)} {excerpt(note)}")
+    return str(note)
 
 
 @dataclass
@@ -448,7 +464,7 @@ def _local_step(names: LabNames, base: dict[str, Any], text: str) -> LocalStep:
 def parse_step(index: int, raw: object, names: LabNames) -> Step:
     """One step's mapping -> its Step; StepError says what is wrong."""
     if not isinstance(raw, dict):
-        raise StepError(f"a step is a mapping such as `expect: ...`, not {raw!r}")
+        raise StepError(f"a step is a mapping such as `expect: ...`, not {excerpt(raw)}")
     kinds = [k for k in raw if k in KINDS]
     if len(kinds) != 1:
         what = f"several ({', '.join(kinds)})" if kinds else "none"
@@ -461,12 +477,12 @@ def parse_step(index: int, raw: object, names: LabNames) -> Step:
     value = raw[kind]
     if kind == "wait":
         seconds = parse_duration(value)
-        return WaitStep(index, kind, f"{value}", str(raw.get("note", "")), seconds)
+        return WaitStep(index, kind, f"{value}", _note(raw), seconds)
     if not isinstance(value, (str, int)) or isinstance(value, bool) or not str(value).strip():
-        raise StepError(f"{kind}: give its words as text, not {value!r}")
+        raise StepError(f"{kind}: give its words as text, not {excerpt(value)}")
     text = str(value).strip()
     base: dict[str, Any] = {"index": index, "kind": kind, "text": text,
-                            "note": str(raw.get("note", ""))}  # fmt: skip
+                            "note": _note(raw)}  # fmt: skip
     if kind == "ctc":
         try:
             command = parse_words(text.split())
@@ -476,7 +492,7 @@ def parse_step(index: int, raw: object, names: LabNames) -> Step:
             names.station(str(command["station"]))
         refused = raw.get("refused")
         if refused is not None and not isinstance(refused, str):
-            raise StepError(f"refused: give the reason's words as text, not {refused!r}")
+            raise StepError(f"refused: give the reason's words as text, not {excerpt(refused)}")
         return CtcStep(**base, command=command, refused=refused, ctc=names.device_of("ctc"))
     if kind == "local":
         return _local_step(names, base, text)
