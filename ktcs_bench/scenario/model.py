@@ -12,14 +12,23 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.datafiles import YamlReader, load_yaml
-from ktcs_bench.errors import UsageError
+from ktcs_bench.argtypes import say_seconds
+from ktcs_bench.datafiles import YamlReader, load_mapping
+from ktcs_bench.errors import UsageError, excerpt
 from ktcs_bench.train.deceleration import GradientProfile
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import LineData, Station, TrainConfig
 from ktcs_bench.train.mrsp import Restriction
 from ktcs_bench.train.resources import Resource
 from ktcs_bench.train.units import kmh
+
+MAX_DURATION_S = 24 * 3600.0
+"""The longest scenario (virtual time); the shipped ones run 200..900 s."""
+MAX_CYCLES = 500_000
+"""The most cycles (duration_s / dt_s) a scenario runs: every cycle of every train is kept for
+the report (some kB a cycle), so more cannot fit (a 24 h scenario takes dt_s 0.2 or more)."""
+MAX_LENGTH_M = 1_000_000.0
+"""The longest line (1000 km): its tags and resources are laid out one by one."""
 
 ASSERTION_KINDS = (
     "min_gap",
@@ -77,7 +86,7 @@ class Scenario:
 def load_scenario(path: str | Path) -> Scenario:
     p = Path(path)
     r = YamlReader(p)
-    doc = r.mapping(load_yaml(p), "")
+    doc = load_mapping(p, "scenario")
     r.known(
         doc,
         {
@@ -107,7 +116,7 @@ def load_scenario(path: str | Path) -> Scenario:
         },
         "line",
     )
-    length = r.num(line_m, "length_m", "line", minimum=1.0)
+    length = r.num(line_m, "length_m", "line", minimum=1.0, maximum=MAX_LENGTH_M)
     tags: list[float] = []
     if "tags" in line_m:
         tm = r.mapping(line_m["tags"], "line.tags")
@@ -231,15 +240,25 @@ def load_scenario(path: str | Path) -> Scenario:
             )
         args_m = r.mapping(args, f"{place}.{kind}")
         for key in ("train", "follower", "leader"):
-            if key in args_m and str(args_m[key]) not in ids:
-                raise r.fail(f"{place}.{kind}.{key}", f"no train {args_m[key]!r} (trains: {ids})")
+            if key in args_m and r.word(args_m[key], f"{place}.{kind}.{key}") not in ids:
+                raise r.fail(
+                    f"{place}.{kind}.{key}", f"no train {excerpt(args_m[key])} (trains: {ids})"
+                )
         assertions.append(Assertion(kind, args_m, f"{place}.{kind}"))
+    duration = r.num(doc, "duration_s", "", minimum=0.1, maximum=MAX_DURATION_S)
+    dt = r.num(doc, "dt_s", "", default=0.1, minimum=0.001)
+    if duration / dt > MAX_CYCLES:
+        raise r.fail(
+            "dt_s",
+            f"{say_seconds(duration)} in steps of {dt:g} s is {duration / dt:.0f} cycles; a "
+            f"scenario runs at most {MAX_CYCLES} (a longer dt_s, or a shorter duration_s)",
+        )
     return Scenario(
         path=p,
         name=r.text(doc, "name", "", default=p.stem),
         description=r.text(doc, "description", "", default=""),
-        duration=r.num(doc, "duration_s", "", minimum=0.1),
-        dt=r.num(doc, "dt_s", "", default=0.1, minimum=0.001),
+        duration=duration,
+        dt=dt,
         line=line,
         trains=trains,
         zones=zones,
@@ -278,10 +297,10 @@ def _train(r: YamlReader, m: dict[str, Any], place: str) -> TrainConfig:
     r.known(m, _TRAIN_KEYS, place)
     mode = r.text(m, "mode", place, default="atcs")
     if mode not in ("atcs", "ktcs"):
-        raise r.fail(f"{place}.mode", f"must be atcs or ktcs, got {mode!r}")
+        raise r.fail(f"{place}.mode", f"must be atcs or ktcs, got {excerpt(mode)}")
     sb = r.text(m, "service_brake", place, default="enabled")
     if sb not in ("enabled", "disabled"):
-        raise r.fail(f"{place}.service_brake", f"must be enabled or disabled, got {sb!r}")
+        raise r.fail(f"{place}.service_brake", f"must be enabled or disabled, got {excerpt(sb)}")
     res = r.mapping(m.get("resistance", {}), f"{place}.resistance")
     try:
         params = TrainParams(
@@ -298,7 +317,10 @@ def _train(r: YamlReader, m: dict[str, Any], place: str) -> TrainConfig:
     except UsageError as exc:
         raise r.fail(place, str(exc)) from None
     delay = m.get("eb_release_delay_s", 5.0)
-    missed = frozenset(int(x) for x in r.seq(m.get("missed_tags", []), f"{place}.missed_tags"))
+    missed = frozenset(
+        int(r.value(x, f"{place}.missed_tags[{i}]", minimum=0))
+        for i, x in enumerate(r.seq(m.get("missed_tags", []), f"{place}.missed_tags"))
+    )
     return TrainConfig(
         train_id=r.text(m, "id", place),
         params=params,
