@@ -10,6 +10,13 @@ front (a `trains` message to the pages every `TRAIN_PERIOD_S`, placed by `diagra
 Given the CTC's automatic route setting (`ars`, an `ArsSwitch`), each station card shows whether
 ARS is on there and switches it (a click goes the same way as the operator's other requests).
 
+The console never starves the lab it serves (it may share its loop with every device): each page's
+requests pass the `gate.Gate` -- a rate per page and per console, a short queue per page worked one
+request at a time, a bound on the controls outstanding per station -- and one beyond a bound is
+answered `busy` at once, not sent; the websocket's reader takes one message per turn of the loop,
+so the lab's timers and links come first; a page that reads nothing is dropped before its backlog
+grows without end, and the console takes at most `MAX_PAGES` pages.
+
 Embedding (e.g. in the CTC emulator process, on its event loop):
 
     console = ConsoleServer(desk, taps=["st18-ctc"])
@@ -49,8 +56,10 @@ from ktcs_bench.codec.render import to_text
 from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.console.diagram import build
+from ktcs_bench.console.gate import Gate, Page
 from ktcs_bench.console.trains import EndpointTrains, TrainPosition, TrainSource
 from ktcs_bench.ctc.desk import Desk
+from ktcs_bench.ctc.log import command_words
 from ktcs_bench.ctc.model import Action
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.runtime import client_token
@@ -67,6 +76,9 @@ TRAIN_PERIOD_S = 0.5  # speed–distance refresh for a client watching a train, 
 LOG_KEEP = 300  # log entries kept for pages that connect later
 FRAMES_KEEP = 60  # decoded frames kept per tap
 TAP_RETRY_S = 2.0
+MAX_PAGES = 64  # websockets at once; more are refused (503)
+MAX_MESSAGE = 64 * 1024  # bytes of one message from a page (a request is some 100)
+BACKLOG = 1000  # messages to one page not yet written; beyond, the page is dropped as too slow
 
 TapSpec = str | tuple[str, int]
 # Type II opcodes whose items are code numbers (protocols/type2.yaml)
@@ -100,9 +112,17 @@ def _clock(t: float) -> str:
 @dataclass(eq=False)
 class _Client:
     ws: web.WebSocketResponse
+    page: Page
+    peer: str = "?"
+    transport: asyncio.Transport | None = None
     tap: int | None = None
     train: str | None = None
     train_task: asyncio.Task[None] | None = None
+    # the page's admitted requests, carried out one at a time by `worker`
+    queue: asyncio.Queue[dict[str, Any]] = field(default_factory=asyncio.Queue)
+    worker: asyncio.Task[None] | None = None
+    backlog: int = 0  # messages being written to it
+    dropped: bool = False
 
 
 @dataclass
@@ -130,6 +150,7 @@ class ConsoleServer:
         origins: Sequence[str] = (),
         token: str | None = None,
         ars: ArsSwitch | None = None,
+        gate: Gate | None = None,
     ) -> None:
         self.desk = desk
         self.ars = ars
@@ -147,6 +168,8 @@ class ConsoleServer:
         self.origins = frozenset(o.rstrip("/").lower() for o in origins)
         self.token = token
         self.log_entries: deque[dict[str, Any]] = deque(maxlen=LOG_KEEP)
+        self.gate = gate or Gate()
+        self.busy_answers = 0  # requests answered busy, over all pages
         self._clients: set[_Client] = set()
         self._runner: web.AppRunner | None = None
         self._site: web.TCPSite | None = None
@@ -202,6 +225,7 @@ class ConsoleServer:
         pollers = (self._poller, self._train_poller)
         tasks = [t for t in (*pollers, *(f.task for f in self.taps)) if t is not None]
         tasks += [c.train_task for c in self._clients if c.train_task is not None]
+        tasks += [c.worker for c in self._clients if c.worker is not None]
         for t in tasks:
             t.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
@@ -245,6 +269,8 @@ class ConsoleServer:
         while True:
             await asyncio.sleep(POLL_S)
             self._flush()
+            for c in list(self._clients):
+                self._report_busy(c)
 
     def _broadcast_text(self, text: str, clients: Iterable[_Client] | None = None) -> None:
         for c in list(self._clients if clients is None else clients):
@@ -252,15 +278,32 @@ class ConsoleServer:
                 asyncio.get_running_loop().create_task(self._send(c, text))
 
     async def _send(self, c: _Client, text: str) -> None:
-        with contextlib.suppress(ConnectionError, RuntimeError):
-            await c.ws.send_str(text)
+        if c.backlog >= BACKLOG:  # it reads nothing: drop it rather than hold all it is owed
+            if not c.dropped:
+                c.dropped = True
+                log.warning("console: dropped the page at %s: %d messages unread", c.peer,
+                            c.backlog)  # fmt: skip
+                if c.transport is not None:
+                    c.transport.abort()
+            return
+        c.backlog += 1
+        try:
+            with contextlib.suppress(ConnectionError, RuntimeError):
+                await c.ws.send_str(text)
+        finally:
+            c.backlog -= 1
 
-    def _log(self, text: str, level: str = "info") -> dict[str, Any]:
+    def _log(
+        self, text: str, level: str = "info", source: str = "console", echo: bool = True
+    ) -> dict[str, Any]:
+        """An entry in the page's Log panel (`source`: console, ars); `echo`: to Python logging
+        too (ARS's entries are there already, as the CTC device's events)."""
         now = time.time()
-        entry = {"time": _clock(now), "t": now, "text": text, "level": level}
+        entry = {"time": _clock(now), "t": now, "text": text, "level": level, "source": source}
         self.log_entries.append(entry)
-        pylevel = logging.WARNING if level == "error" else logging.INFO
-        log.log(pylevel, "%s", text)
+        if echo:
+            pylevel = logging.WARNING if level in ("error", "busy") else logging.INFO
+            log.log(pylevel, "%s", text)
         self._broadcast_text(json.dumps({"type": "log", "entry": entry}))
         return entry
 
@@ -359,10 +402,15 @@ class ConsoleServer:
                 text=f"refused: this console takes operators from its own pages only, not from "
                 f"{origin} (a lab file may allow more under console: origins:)\n",
             )
-        ws = web.WebSocketResponse(heartbeat=20.0)
+        if len(self._clients) >= MAX_PAGES:
+            return web.Response(
+                status=503, text=f"console busy: {len(self._clients)} pages are connected\n"
+            )
+        ws = web.WebSocketResponse(heartbeat=20.0, max_msg_size=MAX_MESSAGE)
         await ws.prepare(request)
-        client = _Client(ws)
+        client = _Client(ws, self.gate.page(), str(request.remote), request.transport)
         self._clients.add(client)
+        client.worker = asyncio.get_running_loop().create_task(self._work(client))
         hello = {
             "type": "hello",
             "line": self.line.name,
@@ -385,30 +433,80 @@ class ConsoleServer:
                     continue
                 if isinstance(msg, dict):
                     await self._on_message(client, msg)
+                # one message a turn of the loop: the lab's timers and links go first
+                await asyncio.sleep(0)
         finally:
             self._clients.discard(client)
-            if client.train_task is not None:
-                client.train_task.cancel()
+            for task in (client.train_task, client.worker):
+                if task is not None:
+                    task.cancel()
+            self._report_busy(client, final=True)
         return ws
 
     async def _on_message(self, client: _Client, msg: dict[str, Any]) -> None:
         kind = msg.get("type")
         if kind in ("route_set", "route_cancel", "point", "mode", "ars"):
-
-            async def run() -> None:
-                result = await self.perform(msg)
-                result.update(type="result", id=msg.get("id"))
-                await self._send(client, json.dumps(result))
-
-            asyncio.get_running_loop().create_task(run())
+            why = self.gate.admit(client.page, time.monotonic(), client.queue.qsize())
+            if why is None:
+                client.queue.put_nowait(msg)
+            else:
+                await self._busy(client, msg, why)
         elif kind == "monitor":
-            self._select_tap(client, msg.get("tap"))
+            await self._select_tap(client, msg.get("tap"))
         elif kind == "train":
             self._select_train(client, msg.get("train"))
 
+    async def _work(self, client: _Client) -> None:
+        """The page's admitted requests, one at a time, each answered with its result."""
+        while True:
+            msg = await client.queue.get()
+            why = self._station_busy(client, msg)
+            if why is not None:
+                await self._busy(client, msg, why)
+                continue
+            try:
+                result = await self.perform(msg)
+            except Exception:  # a request failing must not stop the page's others
+                log.exception("console: request %r failed", msg)
+                result = {"ok": False, "reason": "internal error", "text": "internal error"}
+            result.update(type="result", id=msg.get("id"))
+            await self._send(client, json.dumps(result))
+
+    def _station_busy(self, client: _Client, msg: Mapping[str, Any]) -> str | None:
+        """Why `msg` may not go out now (its station's controls outstanding), or None."""
+        if msg.get("type") not in REQUESTS:
+            return None
+        try:
+            station = self.model.station(msg.get("station")).number
+        except UsageError:
+            return None  # `perform` refuses it, sending nothing
+        return self.gate.dispatch(client.page, station, self.desk.outstanding.get(station, 0))
+
+    async def _busy(self, client: _Client, msg: Mapping[str, Any], why: str) -> None:
+        """Answer `msg` busy: not sent, because of `why` (a `Gate` bound)."""
+        self.busy_answers += 1
+        kind = msg.get("type")
+        words = REQUESTS.get(kind) if isinstance(kind, str) else None
+        if words is not None:
+            what = command_words({**words, **{k: msg[k] for k in REQUEST_FIELDS if k in msg}})
+        else:
+            what = f"ARS {'on' if msg.get('on') else 'off'} at station {msg.get('station')}"
+        text = f"console busy: {what} not sent ({why}); try again"
+        answer = {"type": "busy", "id": msg.get("id"), "request": kind, "reason": why, "text": text}
+        self._report_busy(client)
+        await self._send(client, json.dumps(answer))
+
+    def _report_busy(self, client: _Client, final: bool = False) -> None:
+        """The page's busy answers to the log, when `Gate.report` says they are due."""
+        count = self.gate.report(client.page, time.monotonic(), final)
+        if count:
+            many = "request" if count == 1 else "requests"
+            self._log(f"console busy: {count} {many} from the page at {client.peer} answered "
+                      f"busy, not sent ({client.page.why})", "busy")  # fmt: skip
+
     # ------------------------------------------------------------------ link monitor
 
-    def _select_tap(self, client: _Client, index: object) -> None:
+    async def _select_tap(self, client: _Client, index: object) -> None:
         if not isinstance(index, int) or not 0 <= index < len(self.taps):
             client.tap = None
             return
@@ -418,7 +516,7 @@ class ConsoleServer:
             feed.task = asyncio.get_running_loop().create_task(self._follow(index))
         payload = {"type": "frames", "tap": index, "reset": True, "status": feed.status,
                    "entries": list(feed.entries)}  # fmt: skip
-        asyncio.get_running_loop().create_task(self._send(client, json.dumps(payload)))
+        await self._send(client, json.dumps(payload))
 
     def _tap_push(self, index: int, entries: list[dict[str, Any]], reset: bool = False) -> None:
         feed = self.taps[index]

@@ -3,7 +3,8 @@
 `Desk.operate(command)` is the one way a command goes out, whoever gives it (`ktcs-bench ctc`
 through the CTC's control port, or a click on the web console): the model turns it into an
 `Action` (or refuses it), the server sends the CONTROL and waits for its CONTROL_RESULT, and the
-command log records the command in the operator's words with what came of it.
+command log records the command in the operator's words with what came of it. `outstanding`
+counts, per station, the controls sent and awaiting their CONTROL_RESULT (the console bounds it).
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ class Desk:
         self.server = server
         self.timeout = timeout
         self.log = CommandLog()
+        self.outstanding: dict[int, int] = {}  # station -> controls awaiting their result
 
     async def operate(
         self,
@@ -75,10 +77,10 @@ class Desk:
         if on_sent is not None:
             on_sent(action)
         t0 = time.monotonic()
+        st = action.station
+        self.outstanding[st] = self.outstanding.get(st, 0) + 1
         try:
-            answer = await self.server.control(
-                action.station, action.code, action.value, self.timeout
-            )
+            answer = await self.server.control(st, action.code, action.value, self.timeout)
         except TimeoutError:
             why = f"no CONTROL_RESULT from station {action.station} within {self.timeout:g} s"
         except (UsageError, PeerError) as exc:  # not connected, or the link went while waiting
@@ -91,5 +93,7 @@ class Desk:
             log.info("station %d %s=%d -> %s", action.station, action.name, action.value,
                      outcome.result)  # fmt: skip
             return outcome
+        finally:
+            self.outstanding[st] -= 1
         entry["result"] = f"no result: {why}"
         return Outcome(action, why=why)

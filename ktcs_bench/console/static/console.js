@@ -1,5 +1,6 @@
 // ktcs-bench CTC console: draws the CTC's state on the diagram, sends the operator's requests.
-// Plain JS, no build step. Server messages: hello, state, trains, log, result, frames, speed.
+// Plain JS, no build step. Server messages: hello, state, trains, log, result, busy, frames,
+// speed.
 "use strict";
 
 const ui = {
@@ -372,6 +373,8 @@ function connect() {
       addLog(msg.entry);
     } else if (msg.type === "result") {
       showResult(msg.ok ? "ok" : "error", msg.text);
+    } else if (msg.type === "busy") {  // not sent: the console is bounding its work (try again)
+      showResult("busy", msg.text);
     } else if (msg.type === "frames") {
       onFrames(msg);
     } else if (msg.type === "speed") {
