@@ -330,7 +330,7 @@ def _up_in_process(args: argparse.Namespace) -> int:
                 break
             status = await lab.status()
             if args.json:
-                print(json.dumps({"status": status}, default=str), flush=True)
+                print(json.dumps({"status": status}), flush=True)
             else:
                 text = "\n".join(station_lines(status, colour))
                 if text != last:

@@ -132,7 +132,7 @@ class IxlDevice(Device):
             "mode": ixl.modes.mode.value,
             "links": {r: p.up for r, p in self.ports.items()}
             | {"ctc": bool(self.client and self.client.identified)},
-            "routes": {n: str(ixl.route_status(n)) for n in ixl.routes},
+            "routes": {n: ixl.route_status(n).value for n in ixl.routes},
             "held": {
                 n: sorted(rs.held_tcs | rs.held_points)
                 for n, rs in ixl.routes.items()

@@ -301,7 +301,7 @@ class TrainDevice(Device):
                 self.code.gradient,
                 self.code.target_point,
             ],  # fmt: skip
-            "status": None if verdict is None else str(verdict.status),
+            "status": None if verdict is None else verdict.status.value,
             "emergency_brakes": ep.eb_count,
             "target_point": None if self.last is None else self.last.target_point,
         }

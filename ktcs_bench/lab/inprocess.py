@@ -499,7 +499,7 @@ class InProcessLab:
 def _as_on_the_wire(answer: dict[str, Any]) -> dict[str, Any]:
     """An answer as a control port's client reads it (JSON: lists, not tuples; string keys), so
     a procedure sees the same answer from a lab in one process as from a live one."""
-    out: dict[str, Any] = json.loads(json.dumps(answer, default=str))
+    out: dict[str, Any] = json.loads(json.dumps(answer))
     return out
 
 

@@ -47,7 +47,7 @@ def test_ato_train_runs_through_station_18_and_releases_the_routes(train_lab: Ru
     )
     status = lab.status("train1")
     assert status["tail"] > 1100, status  # it really ran through the station
-    assert status["status"] != "Status.INTERVENTION", status
+    assert status["status"] in ("normal", "indication", "overspeed", "warning"), status
 
 
 def test_console_lists_the_lab_train_and_its_curves_come_from_the_train_process(
