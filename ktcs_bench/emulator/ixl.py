@@ -1,7 +1,8 @@
 """The IXL process: one station's `Interlocking` bound to its Type I links (ATC, trackside I/O)
 and its Type II link to the CTC (as a client that reconnects with back-off). Each link's codes go
 through its binding (`binding.LinkBinding`; `ControlLink` for the CTC's controls): the
-interlocking takes and gives code names only."""
+interlocking takes and gives code names only. Each link going up or down is one event in the
+device's log: the interlocking's own for the Type I links, the device's for the CTC link."""
 
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig
+from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.ixl_client import IxlClient
 
 
@@ -66,6 +68,7 @@ class IxlDevice(Device):
         )  # fmt: skip
         self.ctc_endpoint = links.get("ctc")
         self.client: IxlClient | None = None
+        self.ctc_up = False  # the Type II link as this device last logged it
         self.faults, self.ssl, self.server_hostname = faults, ssl, server_hostname
 
     # -- the CTC's controls, by name -------------------------------------------------------------
@@ -112,7 +115,19 @@ class IxlDevice(Device):
                 self.faults, self.station, ep.host, ep.port, self.ctc_link, ssl=self.ssl,
                 server_hostname=self.server_hostname,
             )  # fmt: skip
+            self.client.on_event = self._ctc_event
             self.client.start()
+
+    def _ctc_event(self, station: int | None, event: ev.SessionEvent) -> None:
+        """The CTC link's transitions in the device's log, one event each, in the words the
+        interlocking logs its Type I links' ("atc link up"): up when the CTC accepts the
+        station's IDENT, down when that session closes."""
+        if isinstance(event, ev.IdentAccepted):
+            self.ctc_up = True
+            self.note("link", "ctc link up")
+        elif isinstance(event, ev.Closed) and self.ctc_up:
+            self.ctc_up = False
+            self.note("link", f"ctc link down ({event.reason})")
 
     async def tasks(self) -> list[asyncio.Task[None]]:
         return [asyncio.ensure_future(p.run()) for p in self.ports.values()]

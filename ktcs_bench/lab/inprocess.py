@@ -10,8 +10,9 @@ from the loop, their TCP (Type II, the rails, control ports) runs on the memory 
 two ends of every link stands the tap a live lab puts there (`tap.wire.WireTap` for Type I,
 `tap.tcp.TcpTap` for Type II, both on this loop), so a link takes the same tap commands.
 
-It keeps `events.jsonl` (every device's events and its links going up and down, in the loop's
-time), a pcapng capture per link, and a summary. It is a `lab.access.LabAccess`.
+It keeps `events.jsonl` (every device's events, in the loop's time: each link going up and down
+among them, once a transition at each end, as that device logs it), a pcapng capture per link,
+and a summary. It is a `lab.access.LabAccess`.
 
     lab = InProcessLab("reference", seed=1, out=Path("run"))
     lab.run(lambda lab: lab.sleep(3600))       # up, the coroutine, down; on a fresh loop
@@ -33,7 +34,6 @@ from typing import IO, Any, TypeVar
 
 from ktcs_bench.capture import CaptureWriter, open_writer
 from ktcs_bench.emulator.build import build_device, device_namespace
-from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.runner import device_args, lab_command, start_in_order
@@ -46,8 +46,6 @@ from ktcs_bench.tap.wire import WireTap
 from ktcs_bench.timed.vloop import ScaledTimeLoop, VirtualTimeLoop
 from ktcs_bench.transport import jsonlines, memory, net
 from ktcs_bench.transport.memory import VIRTUAL_SCHEME, MemoryNetwork
-from ktcs_bench.type1 import CommunicationError, LinkDown, LinkEvent, LinkUp
-from ktcs_bench.type2 import events as ev
 
 log = logging.getLogger("ktcs_bench.lab")
 T = TypeVar("T")
@@ -258,15 +256,10 @@ class InProcessLab:
         args = device_namespace(self.argv(name))
         device: Device = build_device(args, self.topology)
         device.clock = loop.time
-        device.on_note = self._on_note
-        for role, port in _ports(device).items():
-            port.on_event = partial(self._link_event, name, role)
+        device.on_note = self._on_note  # its links' transitions too: the devices log them
         context = contextvars.copy_context()
         context.run(memory.OWNER.set, name)
         tasks = await loop.create_task(device.launch(self.token), context=context)
-        client = getattr(device, "client", None)
-        if client is not None and hasattr(client, "on_event"):
-            client.on_event = partial(self._ctc_event, name)
         self.objects[name] = device
         self.running[name] = tasks
         self.ready[name] = dict(device.ready_info)
@@ -453,18 +446,6 @@ class InProcessLab:
     def _note_lab(self, name: str, kind: str, text: str) -> None:
         self._log({"t": round(self.now(), 6), "device": name, "kind": kind, "text": text})
 
-    def _link_event(self, name: str, role: str, port: str, event: LinkEvent) -> None:
-        if isinstance(event, LinkUp):
-            self._note_lab(name, "link", f"{role} up")
-        elif isinstance(event, LinkDown | CommunicationError):
-            self._note_lab(name, "link", f"{role} down ({type(event).__name__})")
-
-    def _ctc_event(self, name: str, station: int | None, event: ev.SessionEvent) -> None:
-        if isinstance(event, ev.IdentAccepted):
-            self._note_lab(name, "link", "ctc up")
-        elif isinstance(event, ev.Closed):
-            self._note_lab(name, "link", f"ctc down ({event.reason})")
-
     def _task_done(self, name: str, device: Device, task: asyncio.Task[None]) -> None:
         if task.cancelled() or self.objects.get(name) is not device:
             return
@@ -501,15 +482,6 @@ def _as_on_the_wire(answer: dict[str, Any]) -> dict[str, Any]:
     a procedure sees the same answer from a lab in one process as from a live one."""
     out: dict[str, Any] = json.loads(json.dumps(answer))
     return out
-
-
-def _ports(device: Device) -> dict[str, CodePort]:
-    """The device's Type I code ports, by the role of the peer."""
-    ports = getattr(device, "ports", None)
-    if isinstance(ports, dict):
-        return {str(r): p for r, p in ports.items() if isinstance(p, CodePort)}
-    port = getattr(device, "port", None)
-    return {"ixl": port} if isinstance(port, CodePort) else {}
 
 
 class _NoPeer:

@@ -91,8 +91,8 @@ def test_the_reference_lab_comes_up_in_center_mode_with_every_link_up(tmp_path: 
     t = run(main, out=tmp_path)
     assert 0 < t < 10  # in the lab's clock: the links' start-up, not a wall-clock wait
     events = (tmp_path / "events.jsonl").read_text().splitlines()
-    assert any('"text":"atc up"' in e and '"device":"ixl18"' in e for e in events)
-    assert any('"text":"ctc up"' in e for e in events)
+    assert any('"text":"atc link up"' in e and '"device":"ixl18"' in e for e in events)
+    assert any('"text":"ctc link up"' in e for e in events)
     captures = sorted(p.name for p in (tmp_path / "captures").iterdir())
     assert captures == sorted(f"{lk}.pcapng" for lk in InProcessLab("reference").links)
     summary_json = (tmp_path / "summary.json").read_text()
@@ -162,7 +162,11 @@ def test_a_type1_cut_gives_stop_everywhere_and_restore_resyncs(
     run(main, empty_line, out=tmp_path)
     events = (tmp_path / "events.jsonl").read_text()
     assert '"kind":"tap","t":' in events and '"text":"cut"' in events
-    assert '"text":"atc down' in events
+    # the cut and the restore are a transition each at each end of the link: one event each
+    ixl22 = [json.loads(e)["text"] for e in events.splitlines()
+             if '"device":"ixl22","kind":"link"' in e and "atc" in e]  # fmt: skip
+    assert ixl22 == ["atc link up", "atc link in communication error", "atc link up"], ixl22
+    assert events.count('"device":"atc22","kind":"link"') == 3
 
 
 def test_an_ixl_restarted_in_process_resyncs_and_the_ctc_view_equals_it_again(

@@ -1,6 +1,6 @@
 """What a lab writes as JSON -- `lab simulate`'s summary.json and events.jsonl, `lab status
 --json` -- carries the values a JSON reader expects: an enum as its value ("normal", "set"), never
-Python's text of it ("Status.NORMAL")."""
+Python's text of it ("Status.NORMAL"); and each link going up or down is one event at each end."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import re
 import subprocess
 import sys
 import time
+from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -94,3 +95,19 @@ def test_lab_status_json_carries_enum_values_not_their_python_text(tmp_path: Pat
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_simulate_logs_each_link_going_up_once_at_each_end(tmp_path: Path) -> None:
+    """The reference lab's nine links come up once: at the IXL end each (atc, io, ctc), and at
+    the ATC's and trackside's end of the Type I ones -- one event a transition, not two."""
+    run_ = _cli("lab", "simulate", "reference", "--for", "10", "--out", str(tmp_path))
+    assert run_.returncode == 0, run_.stderr
+    events = [json.loads(e) for e in (tmp_path / "events.jsonl").read_text().splitlines()]
+    links = Counter(  # while the lab runs (the lab's end takes the CTC link down)
+        (e["device"], e["text"]) for e in events if e["kind"] == "link" and e["t"] < 10
+    )
+    want: Counter[tuple[str, str]] = Counter()
+    for st in (18, 20, 22):
+        want.update({(f"ixl{st}", f"{role} link up"): 1 for role in ("atc", "io", "ctc")})
+        want.update({(f"{dev}{st}", "IXL link up"): 1 for dev in ("atc", "io")})
+    assert links == want
