@@ -8,7 +8,9 @@ control ports (Fig. 7 console text) and a speed–distance view of a train (`tra
 the trains stand on the diagram where their source says, each labelled with its number at its
 front (a `trains` message to the pages every `TRAIN_PERIOD_S`, placed by `diagram.Layout.place`).
 Given the CTC's automatic route setting (`ars`, an `ArsSwitch`), each station card shows whether
-ARS is on there and switches it (a click goes the same way as the operator's other requests).
+ARS is on there and switches it (a click goes the same way as the operator's other requests), and
+the CTC hands ARS's log to `note_ars`: what ARS asked for, what came of it and why a train waits go
+to the page's Log panel beside the operator's requests.
 
 The console never starves the lab it serves (it may share its loop with every device): each page's
 requests pass the `gate.Gate` -- a rate per page and per console, a short queue per page worked one
@@ -306,6 +308,11 @@ class ConsoleServer:
             log.log(pylevel, "%s", text)
         self._broadcast_text(json.dumps({"type": "log", "entry": entry}))
         return entry
+
+    def note_ars(self, entry: Mapping[str, Any]) -> None:
+        """One entry of ARS's log (`ctc.ars.Ars.on_log`: what it asked for, what came of it, why
+        a train waits), to the Log panel."""
+        self._log(f"ARS: {entry.get('text')}", "ars", source="ars", echo=False)
 
     # ------------------------------------------------------------------ operator actions
 

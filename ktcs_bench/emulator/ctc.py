@@ -10,7 +10,8 @@ clicks go through.
 With a timetable (the lab file's `ars:`), the CTC runs automatic route setting (`ctc.ars`): ARS
 reads the indications after every change the server brings (and at its own deadlines, on the
 device's clock: seconds from the CTC's start), and each route it asks for goes out through the
-same desk, logged with source "ars"; why a train waits goes to the device's events. The operator
+same desk, logged with source "ars"; ARS's log (what it asked for, what came of it, why a train
+waits) goes to the device's events and the console's Log panel. The operator
 switches it per station (`{"cmd": "ars", "station": N, "on": bool}`, `ktcs-bench ctc ars`, the
 console's ARS button); where it is off, routes are set by hand.
 """
@@ -255,6 +256,8 @@ class CtcDevice(Device):
 
     def _ars_logged(self, entry: dict[str, Any]) -> None:
         self.note("ars", str(entry["text"]))
+        if self.console is not None:
+            self.console.note_ars(entry)
 
     async def timed_route(self, obj: dict[str, Any]) -> dict[str, Any]:
         """Set a route and time, in this process's clock, CONTROL sent -> CONTROL_RESULT -> the
@@ -294,6 +297,9 @@ class CtcDevice(Device):
                 ars=self if self.ars is not None else None,
             )
             await self.console.start()
+            if self.ars is not None:  # what ARS logged before the console was up
+                for entry in self.ars.last(len(self.ars.log)):
+                    self.console.note_ars(entry)
             self.ready_info["console"] = self.console.url
 
     async def close(self) -> None:

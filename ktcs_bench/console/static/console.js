@@ -243,7 +243,7 @@ function applyTrains(trains) {
 
 function addLog(entry) {
   const div = document.createElement("div");
-  div.className = "entry " + entry.level;
+  div.className = `entry ${entry.level} from-${entry.source || "console"}`;
   div.textContent = `${entry.time} ${entry.text}`;
   const log = $("#log");
   log.insertBefore(div, log.firstChild);
