@@ -100,7 +100,10 @@ def _lab(r: YamlReader, path: Path, word: str) -> Lab:
     try:
         return load_lab(candidate or resolve_lab_path(word))
     except ConfigError as exc:
-        raise r.fail("setup.lab", f"{word}: {exc}") from None
+        said = str(exc)  # names the lab file: the word again only where it is a shipped name
+        raise r.fail(
+            "setup.lab", said if said.startswith(word) else f"{excerpt(word)}: {said}"
+        ) from None
     except UsageError as exc:
         raise r.fail("setup.lab", str(exc)) from None
 
