@@ -18,7 +18,7 @@ from typing import BinaryIO
 
 from ktcs_bench.charts.files import load_chart
 from ktcs_bench.codec.frame import Frame, Record
-from ktcs_bench.codec.hextext import Chunk, HexTextParser, text_encoding
+from ktcs_bench.codec.hextext import TEXT_WINDOW, Chunk, HexTextParser, TextWatch, text_encoding
 from ktcs_bench.codec.profile import FrameProfile, get_profile, profile_names
 from ktcs_bench.codec.render import BOLD, RESET, json_line, payload, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
@@ -158,17 +158,19 @@ def _check_inputs(inputs: list[str]) -> list[str]:
 
 
 def _binary_lines(stream: BinaryIO, name: str) -> Iterator[list[str]]:
-    """The lines of a text file or pipe, a block at a time, in the encoding its head shows."""
+    """The lines of a text file or pipe, a block at a time, in the encoding its head shows. The
+    whole input is watched as it streams: where it stops being text, it is refused (exit 2)
+    before a line of the block holding that is yielded."""
     block = stream.read1(READ_BLOCK) if hasattr(stream, "read1") else stream.read(READ_BLOCK)
-    encoding = text_encoding(block[:65536])
+    encoding = text_encoding(block[:TEXT_WINDOW])
     if encoding is None:
-        raise UsageError(
-            f"{name} is not text (a binary file?): decode reads hex text; "
-            f"for raw bytes, `xxd {name if name != 'stdin' else 'FILE'} | ktcs-bench decode`"
-        )
+        raise UsageError(f"{name} is not text (a binary file?): {_raw_hint(name)}")
+    watch = TextWatch(encoding)
     decoder = codecs.getincrementaldecoder(encoding)(errors="replace")
     tail = ""
     while block:
+        if (at := watch.feed(block)) is not None:
+            raise _not_text_from(name, at)
         lines = (tail + decoder.decode(block)).split("\n")
         tail = lines.pop()
         if len(tail) > READ_BLOCK:  # a line with no end in sight (one long hex string)
@@ -177,9 +179,25 @@ def _binary_lines(stream: BinaryIO, name: str) -> Iterator[list[str]]:
                 lines.append(head)
         yield lines
         block = stream.read1(READ_BLOCK) if hasattr(stream, "read1") else stream.read(READ_BLOCK)
+    if (at := watch.close()) is not None:
+        raise _not_text_from(name, at)
     rest = tail + decoder.decode(b"", final=True)
     if rest:
         yield [rest]
+
+
+def _raw_hint(name: str) -> str:
+    return (
+        "decode reads hex text; "
+        f"for raw bytes, `xxd {name if name != 'stdin' else 'FILE'} | ktcs-bench decode`"
+    )
+
+
+def _not_text_from(name: str, at: int) -> UsageError:
+    return UsageError(
+        f"{name} stops being text at byte {at} (binary from there on, never decoded as hex; "
+        f"what was printed before it stands): {_raw_hint(name)}"
+    )
 
 
 def _cut_long_line(text: str) -> tuple[str, str]:

@@ -326,7 +326,17 @@ def parse_hex_text(text: str) -> HexText:
 # -- text files ----------------------------------------------------------------------------------
 # bytes that never occur in text (NUL and the C0 controls other than \t \n \v \f \r and ESC)
 _BINARY_BYTES = bytes(b for b in range(32) if b not in (9, 10, 11, 12, 13, 27))
-BINARY_SHARE = 0.05  # a head with more control bytes than this is not text
+_BINARY_RE = re.compile(b"[" + re.escape(_BINARY_BYTES) + b"]")
+BINARY_SHARE = 0.05  # a window with more control bytes than this is not text
+TEXT_WINDOW = 1 << 16  # text is judged 64 KiB at a time: the head, then every window after it
+
+
+def _binary(window: bytes | bytearray) -> bool:
+    """Whether a window of an ASCII-compatible text is binary: a NUL, or too many controls."""
+    if b"\0" in window:
+        return True
+    controls = len(window) - len(window.translate(None, _BINARY_BYTES))
+    return bool(window) and controls / len(window) > BINARY_SHARE
 
 
 def text_encoding(head: bytes) -> str | None:
@@ -337,10 +347,7 @@ def text_encoding(head: bytes) -> str | None:
         return "utf-8-sig"
     if head.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
         return "utf-16"
-    if b"\0" in head:
-        return None
-    controls = len(head) - len(head.translate(None, _BINARY_BYTES))
-    if head and controls / len(head) > BINARY_SHARE:
+    if _binary(head):
         return None
     for encoding in ("utf-8", "cp949"):
         try:
@@ -351,7 +358,82 @@ def text_encoding(head: bytes) -> str | None:
     return "utf-8"  # mostly text with a stray byte or two: decoded with replacement characters
 
 
+class TextWatch:
+    """Where a stream that began as text stops being text, watched as it streams: every 64 KiB
+    window after the head is judged by the head's rule (a NUL, or more than 5 % control bytes),
+    so a capture with a binary tail is refused however long its text head, in memory bounded by
+    two windows.
+
+    `feed(block)` and `close()` return the stream offset of the first NUL or control byte of the
+    first window found binary, None while the stream is text. Blocks may be of any size; windows
+    are aligned at the stream's start (the first is the head `text_encoding` judged), each judged
+    once complete; the last, partial one is judged at `close()` with the end of the window
+    before it, never on a handful of bytes alone. UTF-8 and CP949 are ASCII-compatible (a control
+    byte is never part of a character), so their bytes are judged as they are; UTF-16 is judged
+    on its text, a character a unit, its offsets counted two bytes a character past the BOM."""
+
+    def __init__(self, encoding: str) -> None:
+        self._decoder = (
+            codecs.getincrementaldecoder(encoding)(errors="replace")
+            if encoding == "utf-16"
+            else None
+        )
+        self._window = bytearray()  # the window being filled
+        self._previous = b""  # the last complete window, for the partial one at the end
+        self._at = 0  # stream offset (in units) of _window[0]
+
+    def feed(self, block: bytes | bytearray) -> int | None:
+        if self._decoder is not None:
+            block = _units(self._decoder.decode(block))
+        window = self._window
+        pos, size = 0, len(block)
+        while pos < size:
+            take = min(TEXT_WINDOW - len(window), size - pos)
+            window += block[pos : pos + take]
+            pos += take
+            if len(window) == TEXT_WINDOW:
+                if _binary(window):
+                    return self._offset(window, self._at)
+                self._previous = bytes(window)
+                self._at += TEXT_WINDOW
+                window.clear()
+        return None
+
+    def close(self) -> int | None:
+        if self._decoder is not None:
+            found = self.feed(_units(self._decoder.decode(b"", final=True)))
+            if found is not None:
+                return found
+        window = self._window
+        if not window:
+            return None
+        keep = min(TEXT_WINDOW - len(window), len(self._previous))
+        last = self._previous[len(self._previous) - keep :] + window
+        return self._offset(last, self._at - keep) if _binary(last) else None
+
+    def _offset(self, window: bytes | bytearray, start: int) -> int:
+        """The stream offset of the first NUL or control byte of a window starting at `start`."""
+        m = _BINARY_RE.search(window)
+        units = start + (0 if m is None else m.start())
+        return units if self._decoder is None else len(codecs.BOM_UTF16) + 2 * units
+
+
+def _units(text: str) -> bytes:
+    """Text as one byte a character, controls and NUL as themselves (UTF-16, to be judged)."""
+    return text.encode("latin-1", errors="replace")
+
+
+def binary_from(data: bytes, encoding: str) -> int | None:
+    """Where a whole text in `encoding` stops being text (`TextWatch`'s rule), None if never."""
+    watch = TextWatch(encoding)
+    found = watch.feed(data)
+    return found if found is not None else watch.close()
+
+
 def decode_text(data: bytes) -> str | None:
-    """A whole file's bytes as text in the encoding `text_encoding` finds, None if binary."""
-    encoding = text_encoding(data[:65536])
-    return None if encoding is None else data.decode(encoding, errors="replace")
+    """A whole file's bytes as text in the encoding `text_encoding` finds; None if binary, at
+    its head or anywhere after it."""
+    encoding = text_encoding(data[:TEXT_WINDOW])
+    if encoding is None or binary_from(data, encoding) is not None:
+        return None
+    return data.decode(encoding, errors="replace")

@@ -1,6 +1,8 @@
 """decode/encode as a user runs them: real subprocesses, stdin, files, exit codes."""
 
 import json
+import random
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -121,6 +123,50 @@ def test_a_binary_file_is_refused(tmp_path: Path) -> None:
     out = cli_in(tmp_path, "decode", str(path))
     assert out.returncode == 2 and "is not text" in out.stderr and "xxd" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def test_a_binary_tail_after_megabytes_of_text_is_refused_where_it_starts(tmp_path: Path) -> None:
+    """Issue 21 item 8: hex text past the head and the first block read, then random bytes. The
+    tail is refused (exit 2) at its offset, not decoded as hex with its lines skipped; from a
+    pipe, the frames before it are printed as they streamed."""
+    text = (ACK.hex(" ") + "\n").encode() * 40_000  # 1.36 MB: past the 1 MiB first read
+    tail = random.Random(8).randbytes(3_000_000)
+    path = tmp_path / "capture.hex"
+    path.write_bytes(text + tail)
+    out = cli_in(tmp_path, "decode", "--profile", "ktcs-type1", str(path))
+    assert out.returncode == 2, (out.returncode, out.stdout[-300:])
+    assert "non-hex lines skipped" not in out.stdout and "Traceback" not in out.stderr
+    m = re.search(r"capture.hex stops being text at byte (\d+)", out.stderr)
+    assert m is not None and "xxd" in out.stderr, out.stderr
+    assert len(text) <= int(m.group(1)) < len(text) + 256  # where the tail starts
+    piped = subprocess.run(
+        [sys.executable, "-m", "ktcs_bench.cli.main", "decode", "--json", "--profile", "ktcs-type1"],
+        input=text + tail, capture_output=True, timeout=60, cwd=tmp_path,
+    )  # fmt: skip
+    assert piped.returncode == 2 and b"stdin stops being text at byte" in piped.stderr
+    rows = [json.loads(line) for line in piped.stdout.splitlines()]
+    assert rows and all(r["op_name"] == "ACK" and r["error"] is None for r in rows)
+
+
+def test_text_in_every_form_is_never_taken_for_binary(tmp_path: Path) -> None:
+    """The watch over the whole input leaves text alone: a CP949 console log with ANSI colours
+    and tabs, an xxd dump and a hexdump -C dump, each megabytes long, decode as before."""
+    console = (FIG7.read_text(encoding="utf-8") + "\x1b[32m\tok\x1b[0m\r\n") * 3000
+    path = tmp_path / "console.hex"
+    path.write_bytes(console.encode("cp949"))
+    assert path.stat().st_size > 1 << 20
+    out = cli_in(tmp_path, "decode", "--json", str(path))
+    assert out.returncode == 1 and out.stderr == ""  # 1: the Fig. 7 reply is truncated
+    assert len(out.stdout.splitlines()) >= 2 * 3000
+    wire = tmp_path / "wire.bin"
+    wire.write_bytes((REQ + ACK) * 60_000)
+    for dump in ("xxd", "hexdump -C"):
+        dumped = subprocess.run([*dump.split(), str(wire)], capture_output=True, check=True)
+        assert len(dumped.stdout) > 1 << 20
+        out = cli_in(tmp_path, "decode", "--json", "--profile", "ktcs-type1",
+                     stdin=dumped.stdout.decode())  # fmt: skip
+        assert out.returncode == 0, (dump, out.stderr)
+        assert len(out.stdout.splitlines()) == 2 * 60_000
 
 
 @pytest.mark.parametrize("dump", ["hexdump -C", "od -t x1", "od -A x -t x1z", "xxd"])

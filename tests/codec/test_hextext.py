@@ -1,12 +1,23 @@
 """Every hex form of SPEC §7 gives the same bytes."""
 
+import random
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from ktcs_bench.codec.hextext import REPEAT_PIECE, HexTextParser, parse_hex_text, text_encoding
+from ktcs_bench.codec.hextext import (
+    REPEAT_PIECE,
+    TEXT_WINDOW,
+    HexTextParser,
+    TextWatch,
+    binary_from,
+    parse_hex_text,
+    text_encoding,
+)
 
 FRAME = bytes.fromhex("0200001006000387000003")
 
@@ -106,3 +117,45 @@ def test_text_encoding_of_utf8_cp949_euc_kr_and_binary() -> None:
     assert text_encoding(line.encode("utf-8")[:4]) == "utf-8"  # cut inside a character
     assert text_encoding(bytes(range(256)) * 4) is None
     assert text_encoding(Path(sys.executable).read_bytes()[:65536]) is None
+
+
+# -- where a stream stops being text (issue 21 item 8) -------------------------------------------
+CONSOLE = "수신 = <02><04><00><10>\n\x1b[31mPacket = [F1]-[E7]\x1b[0m\r\n\t송신 = [02][84]\n"
+
+
+@pytest.mark.parametrize("encoding", ["utf-8", "cp949", "utf-16"])
+def test_text_is_text_to_its_end_and_a_binary_tail_is_found_where_it_starts(
+    encoding: str,
+) -> None:
+    text = (CONSOLE * 20_000).encode(encoding)  # megabytes, colours, tabs, CRs
+    assert text_encoding(text[:TEXT_WINDOW]) in (encoding, "cp949")
+    assert binary_from(text, encoding) is None
+    tail = random.Random(4).randbytes(200_000)
+    at = binary_from(text + tail, encoding)
+    assert at is not None
+    if encoding != "utf-16":  # UTF-16 is judged on characters: random ones are rarely controls
+        assert len(text) <= at < len(text) + 64
+
+
+@settings(max_examples=50, deadline=None)
+@given(cuts=st.lists(st.integers(0, 400_000), max_size=8), binary=st.booleans())
+def test_the_verdict_does_not_depend_on_how_the_stream_was_read(
+    cuts: list[int], binary: bool
+) -> None:
+    data = (CONSOLE * 4000).encode("utf-8")
+    if binary:
+        data = data[:150_000] + random.Random(1).randbytes(50_000) + data[150_000:]
+    watch = TextWatch("utf-8")
+    found = None
+    edges = [0, *sorted(cuts), len(data)]
+    for a, b in zip(edges, edges[1:], strict=False):
+        found = watch.feed(data[a:b]) if found is None else found
+    found = watch.close() if found is None else found
+    assert found == binary_from(data, "utf-8")
+    assert (found is not None) == binary
+
+
+def test_a_few_control_bytes_at_the_end_are_not_a_binary_tail() -> None:
+    text = (CONSOLE * 10_000).encode("utf-8")
+    assert binary_from(text + b"\x1a", "utf-8") is None  # DOS's end-of-file mark
+    assert binary_from(b"02 04 00\x07\n", "utf-8") is not None  # a short file is its head
