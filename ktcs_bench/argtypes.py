@@ -10,7 +10,6 @@ from collections.abc import Callable
 from typing import Any
 
 from ktcs_bench.errors import UsageError, excerpt
-from ktcs_bench.transport.endpoints import parse_host_port
 
 __all__ = ["duration", "host_port", "positive", "say_seconds", "seconds"]
 
@@ -79,6 +78,10 @@ def host_port(any_free: bool = False) -> Callable[[str], tuple[str, int]]:
     """The argparse type of a HOST:PORT option -> (host, port); `any_free`: port 0 allowed."""
 
     def parse(text: str) -> tuple[str, int]:
+        # imported here: the data loaders read durations through this module, and the sans-I/O
+        # cores they serve must not import the transports (tests/ctc/test_layers.py)
+        from ktcs_bench.transport.endpoints import parse_host_port
+
         try:
             return parse_host_port(text, any_free=any_free)
         except UsageError as exc:
