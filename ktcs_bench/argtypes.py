@@ -9,7 +9,8 @@ import re
 from collections.abc import Callable
 from typing import Any
 
-from ktcs_bench.errors import UsageError, excerpt
+from ktcs_bench.errors import UsageError, excerpt, say_seconds
+from ktcs_bench.transport.endpoints import parse_host_port
 
 __all__ = ["duration", "host_port", "positive", "say_seconds", "seconds"]
 
@@ -41,14 +42,6 @@ def seconds(value: object, maximum: float | None = None) -> float:
     return result
 
 
-def say_seconds(value: float) -> str:
-    """A bound in seconds as a person reads it: 86400 -> '24 h (86400 s)', 90 -> '90 s'."""
-    for unit, size in (("h", 3600.0), ("min", 60.0)):
-        if value >= size and value % size == 0:
-            return f"{value / size:.10g} {unit} ({value:.10g} s)"
-    return f"{value:.10g} s"
-
-
 def duration(text: str) -> float:
     """The argparse type of every option that takes a duration (`seconds`)."""
     try:
@@ -78,10 +71,6 @@ def host_port(any_free: bool = False) -> Callable[[str], tuple[str, int]]:
     """The argparse type of a HOST:PORT option -> (host, port); `any_free`: port 0 allowed."""
 
     def parse(text: str) -> tuple[str, int]:
-        # imported here: the data loaders read durations through this module, and the sans-I/O
-        # cores they serve must not import the transports (tests/ctc/test_layers.py)
-        from ktcs_bench.transport.endpoints import parse_host_port
-
         try:
             return parse_host_port(text, any_free=any_free)
         except UsageError as exc:

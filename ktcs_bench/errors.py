@@ -76,3 +76,11 @@ class ConfigError(KtcsError):
         self.problem = problem
         where = f"{self.file}: {place}" if place else self.file
         super().__init__(f"{where}: {problem}")
+
+
+def say_seconds(value: float) -> str:
+    """A bound in seconds as a person reads it: 86400 -> '24 h (86400 s)', 90 -> '90 s'."""
+    for unit, size in (("h", 3600.0), ("min", 60.0)):
+        if value >= size and value % size == 0:
+            return f"{value / size:.10g} {unit} ({value:.10g} s)"
+    return f"{value:.10g} s"

@@ -12,9 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench.argtypes import say_seconds
 from ktcs_bench.datafiles import YamlReader, load_mapping
-from ktcs_bench.errors import UsageError, excerpt
+from ktcs_bench.errors import UsageError, excerpt, say_seconds
 from ktcs_bench.train.deceleration import GradientProfile
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import LineData, Station, TrainConfig
