@@ -1,6 +1,7 @@
 """`ktcs-bench test run PROCEDURES...`: integration test procedures against a lab, with verdicts
 and reports (`ktcs_bench.procedure`). Exit codes: 0 every procedure passed, 1 one failed, 2 a bad
-procedure file or usage, 3 the lab unreachable, 130 interrupted (the faults set are cleared)."""
+procedure file or usage, 3 the lab unreachable, 130 interrupted (SIGINT or SIGTERM: the faults
+set are cleared, the reports written)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,11 @@ import argparse
 import asyncio
 import importlib
 import logging
+import signal
 import sys
 import tempfile
+from collections import Counter
+from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +31,8 @@ ARS) and steps -- CTC commands in the `ctc` console's words, train actions, faul
 expectations with a time limit. The format: docs/procedures.md.
 
 exit codes: 0 every procedure passed, 1 a procedure failed, 2 a bad procedure file or usage,
-3 the lab unreachable, 130 interrupted (every fault the run set is cleared first).
+3 the lab unreachable, 130 interrupted by SIGINT or SIGTERM (every fault the run set is cleared
+first; the reports are written, the procedure it was in an error, the rest skipped).
 """
 
 
@@ -71,10 +76,59 @@ def _in_process() -> Any:
     return module.InProcessLab
 
 
-def _run_virtual(args: argparse.Namespace, procedures: list[Any]) -> tuple[list[Any], bool]:
-    """Each procedure on a fresh lab in this process, on the virtual clock."""
+class _Stop:
+    """SIGINT and SIGTERM during a run. The first cancels the procedure running -- it clears its
+    faults and is recorded as interrupted (between two, the next is, before its setup) -- and no
+    procedure starts after it; the later ones are ignored while the run winds up and writes its
+    reports. A handler of the process (not of the loop: the virtual loop never waits on its
+    wake-up pipe), installed for the whole run."""
+
+    def __init__(self) -> None:
+        self.signum = 0
+        self._task: asyncio.Task[Any] | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> _Stop:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, previous in self._previous.items():
+            signal.signal(sig, previous)
+
+    def _handle(self, signum: int, _frame: object) -> None:
+        if self.signum:
+            return
+        self.signum = signum
+        task, loop = self._task, self._loop
+        if task is not None and loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(task.cancel)
+
+    async def run(self, procedure: Coroutine[Any, Any, Any]) -> Any:
+        """The procedure's run as a task the first signal cancels; None if a signal came before
+        it began."""
+        if self.signum:
+            procedure.close()
+            return None
+        self._loop = asyncio.get_running_loop()
+        task = self._task = self._loop.create_task(procedure)
+        try:
+            return await task
+        except asyncio.CancelledError:
+            me = asyncio.current_task()
+            if task.cancelled() and self.signum and (me is None or not me.cancelling()):
+                return None  # cancelled before its first step: it never began
+            raise
+        finally:
+            self._task = None
+
+
+def _run_virtual(args: argparse.Namespace, procedures: list[Any], stop: _Stop) -> list[Any]:
+    """Each procedure on a fresh lab in this process, on the virtual clock, until a signal."""
     from ktcs_bench.procedure.report import result_text
-    from ktcs_bench.procedure.runner import run_procedure
+    from ktcs_bench.procedure.runner import run_procedure, unfinished
 
     lab_class = _in_process()
     from ktcs_bench.timed.vloop import VirtualDeadlock
@@ -82,51 +136,62 @@ def _run_virtual(args: argparse.Namespace, procedures: list[Any]) -> tuple[list[
     logging.basicConfig(level=logging.ERROR, stream=sys.stderr)  # the report has their events
     results: list[Any] = []
     for proc in procedures:
-        with tempfile.TemporaryDirectory(prefix="ktcs-procedure-") as tmp:
-            lab = lab_class(proc.setup.lab, clock="virtual", out=Path(tmp))
-            try:
-                result = lab.run(lambda access, p=proc: run_procedure(p, access, "virtual"))
-            except KeyboardInterrupt:  # the lab, and every fault in it, ends with this process
-                return results, True
-            except VirtualDeadlock as exc:
-                raise PeerError(f"{proc.id}: the lab stalled: {exc}") from None
+        result = None
+        if not stop.signum:
+            with tempfile.TemporaryDirectory(prefix="ktcs-procedure-") as tmp:
+                lab = lab_class(proc.setup.lab, clock="virtual", out=Path(tmp))
+                try:
+                    result = lab.run(lambda access, p=proc: stop.run(run_procedure(
+                        p, access, "virtual")))  # fmt: skip
+                except VirtualDeadlock as exc:
+                    raise PeerError(f"{proc.id}: the lab stalled: {exc}") from None
+        if result is None:  # the next one to run is the one interrupted
+            result = unfinished(proc, "virtual", interrupted="before its setup")
         results.append(result)
         if not args.json:
             print(result_text(result, args.colour), flush=True)
-    return results, False
+        if result.interrupted:
+            break
+    return results
 
 
-async def _run_live(args: argparse.Namespace, procedures: list[Any]) -> tuple[list[Any], bool]:
-    """Every procedure, in order, on the running lab `--live` names (else the one they name)."""
+async def _run_live(args: argparse.Namespace, procedures: list[Any], stop: _Stop) -> list[Any]:
+    """Every procedure, in order, on the running lab `--live` names (else the one they name),
+    until a signal."""
     from ktcs_bench.lab.access_live import LiveLabAccess
     from ktcs_bench.procedure.report import result_text
-    from ktcs_bench.procedure.runner import run_procedure
+    from ktcs_bench.procedure.runner import run_procedure, unfinished
 
-    names = {args.live} if args.live else {p.setup.lab.name for p in procedures}
-    if len(names) > 1:
-        raise UsageError(f"the procedures name several labs ({', '.join(sorted(names))}): "
-                         "give --live LAB")  # fmt: skip
-    name = names.pop()
+    name = _live_lab(args, procedures)
     access = LiveLabAccess.attach(name)
     results: list[Any] = []
     try:
         for proc in procedures:
-            result = await run_procedure(proc, access, f"live {name}")
+            result = await stop.run(run_procedure(proc, access, f"live {name}"))
+            if result is None:  # the next one to run is the one interrupted
+                result = unfinished(proc, f"live {name}", interrupted="before its setup")
             results.append(result)
             if not args.json:
                 print(result_text(result, args.colour), flush=True)
-            if result.interrupted:
-                return results, True
-            if result.lab_gone:
+            if result.lab_gone or result.interrupted:
                 break
     finally:
         await access.close()
-    return results, False
+    return results
+
+
+def _live_lab(args: argparse.Namespace, procedures: list[Any]) -> str:
+    names = {str(args.live)} if args.live else {str(p.setup.lab.name) for p in procedures}
+    if len(names) > 1:
+        raise UsageError(f"the procedures name several labs ({', '.join(sorted(names))}): "
+                         "give --live LAB")  # fmt: skip
+    return names.pop()
 
 
 def run(args: argparse.Namespace) -> int:
     from ktcs_bench.procedure.model import load_procedure
     from ktcs_bench.procedure.report import json_text, junit, write_reports
+    from ktcs_bench.procedure.runner import unfinished
 
     if args.live and args.live.endswith((".yaml", ".yml")):  # `--live P.yaml`: no lab named
         args.procedures, args.live = [args.live, *args.procedures], ""
@@ -137,23 +202,38 @@ def run(args: argparse.Namespace) -> int:
     twice = sorted({i for i in ids if ids.count(i) > 1})
     if twice:
         raise UsageError(f"procedure id given twice: {', '.join(twice)}")
-    if args.junit:
-        _writable(Path(args.junit).parent, "--junit")
-    if args.live is None:
-        results, interrupted = _run_virtual(args, procedures)
+    junit_path = Path(args.junit) if args.junit else None
+    if junit_path is not None:
+        _writable(junit_path.parent, "--junit")
+    report_dir = Path(args.report) if args.report else None
+    if args.live is not None:
+        mode = f"live {_live_lab(args, procedures)}"
     else:
-        results, interrupted = asyncio.run(_run_live(args, procedures))
-    if args.junit:
-        Path(args.junit).write_bytes(junit(results))
-    if args.report:
-        paths = write_reports(results, Path(args.report))
-        if not args.json:
-            print(f"report: {paths[0]}")
-    if args.json:
-        print(json_text(results))
-    elif not interrupted:
-        passed = sum(1 for r in results if r.verdict == "pass")
-        print(f"{passed} of {len(results)} procedures passed", file=sys.stderr)
+        _in_process()  # this installation can run a lab in one process, before anything runs
+        mode = "virtual"
+    with _Stop() as stop:  # from here on a signal ends the run with its reports written
+        if args.live is None:
+            results = _run_virtual(args, procedures, stop)
+        else:
+            results = asyncio.run(_run_live(args, procedures, stop))
+        # interrupted: a procedure was (a signal after the last one finished is too late)
+        interrupted = any(r.interrupted for r in results)
+        why = "the run was interrupted" if interrupted else "the lab went away"
+        results += [unfinished(p, mode, not_run=why) for p in procedures[len(results) :]]
+        if junit_path is not None:
+            junit_path.write_bytes(junit(results))
+        if report_dir is not None:
+            paths = write_reports(results, report_dir)
+            if not args.json:
+                print(f"report: {paths[0]}")
+        if args.json:
+            print(json_text(results))
+        else:
+            counts = Counter(r.verdict for r in results)
+            print(f"{counts['pass']} of {len(results)} procedures passed"
+                  + "".join(f", {counts[v]} {w}" for v, w in (("fail", "failed"),
+                            ("error", "in error"), ("skipped", "not run")) if counts[v])
+                  + (" (interrupted)" if interrupted else ""), file=sys.stderr)  # fmt: skip
     if interrupted:
         return 130
     gone = next((r.lab_gone for r in results if r.lab_gone), "")

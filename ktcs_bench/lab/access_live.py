@@ -124,6 +124,9 @@ class LiveLabAccess:
                 self._drop(address)
                 self._still_up()
                 raise PeerError(f"{address}: {exc or type(exc).__name__}") from None
+            except asyncio.CancelledError:  # its answer would be read as the next one's
+                self._drop(address)
+                raise
             if answer is None:
                 self._drop(address)
                 raise PeerError(f"{address} closed without answering")

@@ -21,7 +21,8 @@ from ktcs_bench.procedure.runner import ProcedureResult
 
 _COLOUR = {"pass": "\x1b[32m", "fail": "\x1b[31m", "error": "\x1b[35m", "skipped": "\x1b[2m"}
 _RESET = "\x1b[0m"
-_OUTCOME = {"pass": "pass", "fail": "fail", "error": "error"}
+_OUTCOME = {"pass": "pass", "fail": "fail", "error": "error", "skipped": "skip"}
+COUNTED = ("pass", "fail", "error", "skipped")
 
 
 # -- text --------------------------------------------------------------------------------------------
@@ -43,8 +44,8 @@ def result_text(result: ProcedureResult, colour: bool) -> str:
         if s.verdict != "pass":
             line += f"\n            {s.message}" + (f"; seen: {s.seen}" if s.seen else "")
         lines.append(line)
-    if result.interrupted:
-        lines.append("      interrupted")
+    if result.interrupted or result.not_run:
+        lines.append(f"      {result.message}")
     if result.cleared:
         lines.append(f"      cleared: {', '.join(result.cleared)}")
     return "\n".join(lines)
@@ -53,8 +54,9 @@ def result_text(result: ProcedureResult, colour: bool) -> str:
 # -- JUnit and JSON ------------------------------------------------------------------------------------
 def _details(result: ProcedureResult) -> str:
     s = result.failed_step
-    if s is None:
-        return result.message
+    if s is None or result.interrupted:
+        cleared = f"\ncleared: {', '.join(result.cleared)}" if result.cleared else ""
+        return result.message + cleared
     return (f"step {s.index}: {s.title}\n{s.message}\nseen instead: {s.seen or 'nothing'}"
             + (f"\nnote: {s.note}" if s.note else ""))  # fmt: skip
 
@@ -63,15 +65,14 @@ def junit(results: Sequence[ProcedureResult]) -> bytes:
     cases = []
     for r in results:
         p = r.procedure
-        outcome = _OUTCOME.get(r.verdict, "error")
-        if r.interrupted and outcome == "pass":
-            outcome = "fail"
+        outcome = "error" if r.interrupted else _OUTCOME.get(r.verdict, "error")
+        kind = "Interrupted" if r.interrupted else "ProcedureError"
         steps = "\n".join(f"{s.index:3d} {s.verdict:7s} {s.start:8.1f} s  {s.title}"
                           + (f"  -- {s.message}" if s.message else "") for s in r.steps)  # fmt: skip
         cases.append(JUnitCase(
             p.id, f"procedure.{'.'.join(p.tags[:1]) or 'procedure'}", r.duration, outcome,
             r.message, _details(r), steps,
-            "ExpectationFailed" if outcome == "fail" else "ProcedureError",
+            "ExpectationFailed" if outcome == "fail" else kind,
         ))  # fmt: skip
     total = sum(r.duration for r in results)
     modes = sorted({r.mode for r in results})
@@ -86,7 +87,7 @@ def as_json(result: ProcedureResult) -> dict[str, Any]:
         "tags": list(p.tags), "mode": result.mode, "verdict": result.verdict,
         "message": result.message, "setup_error": result.setup_error,
         "started": result.started, "duration_s": round(result.duration, 3),
-        "wall_s": round(result.wall_s, 3), "interrupted": result.interrupted,
+        "wall_s": round(result.wall_s, 3), "interrupted": bool(result.interrupted),
         "steps": [s.as_dict() for s in result.steps],
         "timeline": [{"t_s": t, "what": k, "value": v} for t, k, v in result.timeline],
         "trains": {tid: [{"t_s": t, "head_m": h, "tail_m": tl, "speed_kmh": v}
@@ -97,7 +98,7 @@ def as_json(result: ProcedureResult) -> dict[str, Any]:
 
 
 def json_text(results: Sequence[ProcedureResult]) -> str:
-    counts = {v: sum(1 for r in results if r.verdict == v) for v in ("pass", "fail", "error")}
+    counts = {v: sum(1 for r in results if r.verdict == v) for v in COUNTED}
     return json.dumps({"summary": counts, "procedures": [as_json(r) for r in results]},
                       ensure_ascii=False, indent=1)  # fmt: skip
 
@@ -275,15 +276,18 @@ def write_html(result: ProcedureResult, folder: Path) -> Path:
 
 
 def write_reports(results: Sequence[ProcedureResult], folder: Path) -> list[Path]:
-    """One HTML page per procedure, an index, and the JSON of the run."""
-    paths = [write_html(r, folder) for r in results]
+    """One HTML page per procedure run (none for one not run), an index, and the JSON of the
+    run, in `folder` (made if need be)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    pages = {id(r): write_html(r, folder) for r in results if not r.not_run}
     items = "".join(f'<li><span class="v {r.verdict}">{r.verdict}</span> '
-                    f'<a href="{_e(p.name)}">{_e(r.procedure.id)}</a>: {_e(r.procedure.title)}'
-                    f"{' -- ' + _e(r.message) if r.message else ''}</li>"
-                    for r, p in zip(results, paths, strict=True))  # fmt: skip
+                    + (f'<a href="{_e(pages[id(r)].name)}">{_e(r.procedure.id)}</a>'
+                       if id(r) in pages else _e(r.procedure.id))
+                    + f": {_e(r.procedure.title)}{' -- ' + _e(r.message) if r.message else ''}</li>"
+                    for r in results)  # fmt: skip
     index = folder / "index.html"
     index.write_text(f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>'
                      f"procedures</title><style>{CSS}</style></head><body><h1>Procedures</h1>"
                      f"<ul>{items}</ul></body></html>\n", encoding="utf-8")  # fmt: skip
     (folder / "results.json").write_text(json_text(results) + "\n", encoding="utf-8")
-    return [index, *paths]
+    return [index, *pages.values()]

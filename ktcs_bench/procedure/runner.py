@@ -77,8 +77,9 @@ class ProcedureResult:
     captures: dict[str, list[CaptureRecord]] = field(default_factory=dict)
     link_types: dict[str, str] = field(default_factory=dict)
     cleared: list[str] = field(default_factory=list)
-    interrupted: bool = False
+    interrupted: str = ""  # where a SIGINT or SIGTERM stopped it ("in step 3 (wait: 1h)")
     lab_gone: str = ""  # the lab went away during the run (why)
+    not_run: str = ""  # why it was not run at all (verdict skipped)
 
     @property
     def failed_step(self) -> StepResult | None:
@@ -87,15 +88,30 @@ class ProcedureResult:
     @property
     def message(self) -> str:
         """What went wrong, in one sentence (empty on a pass)."""
+        if self.not_run:
+            return f"not run: {self.not_run}"
+        if self.interrupted:
+            return f"interrupted {self.interrupted}"
         if self.lab_gone:
             return self.lab_gone
         if self.setup_error:
             return f"setup: {self.setup_error}"
         s = self.failed_step
         if s is None:
-            return "interrupted" if self.interrupted else ""
+            return ""
         seen = f"; seen: {s.seen}" if s.seen else ""
         return f"step {s.index} ({s.title}) {s.verdict}ed: {s.message}{seen}"
+
+
+def unfinished(procedure: Procedure, mode: str, *, interrupted: str = "",
+               not_run: str = "") -> ProcedureResult:  # fmt: skip
+    """The result of a procedure a run never carried out: `interrupted` before it began (an
+    error), or `not_run` at all (skipped) -- every step skipped."""
+    return ProcedureResult(
+        procedure, mode, verdict="skipped" if not_run and not interrupted else "error",
+        steps=[StepResult(s.index, s.kind, s.text, s.note) for s in procedure.steps],
+        started=time.time(), interrupted=interrupted, not_run=not_run,
+    )  # fmt: skip
 
 
 class CaptureCursor:
@@ -500,6 +516,8 @@ class ProcedureRun:
             await self.access.sleep(self.sample_s)
 
     async def run(self) -> ProcedureResult:
+        """The setup and the steps, then -- however they end, a cancellation (the user's
+        SIGINT or SIGTERM) included -- the faults cleared and the trains taken off."""
         result = self.result
         result.started = time.time()
         wall0 = time.monotonic()
@@ -521,36 +539,47 @@ class ProcedureRun:
                         break
         except LabGone as exc:
             result.lab_gone = str(exc)
-        except asyncio.CancelledError:  # Ctrl-C: the faults are cleared all the same, below
-            result.interrupted = True
-            task = asyncio.current_task()
-            if task is not None:
-                task.uncancel()
+        except asyncio.CancelledError:  # interrupted: the faults are cleared all the same, below
+            s = next((s for s in result.steps if s.message == "interrupted"), None)
+            self._interrupted(f"in step {s.index} ({s.title})" if s else "during its setup")
         finally:
             try:
-                result.cleared = await self.clear_faults()
-                for train in list(self.ghosts):
-                    tc = self.names.device_of("trackcircuit")
-                    await self._quiet(self.access.device(tc, {"cmd": "remove", "train": train}))
-                    result.cleared.append(f"train {train} taken off")
-                self.ghosts.clear()
+                try:
+                    await self._wind_up()
+                except asyncio.CancelledError:  # interrupted as it wound up: it winds up again
+                    self._interrupted("while clearing its faults")
+                    await self._wind_up()
             finally:
                 result.captures = {k: c.new() for k, c in self.run_cursors.items()}
                 result.duration = self.elapsed()
                 result.wall_s = time.monotonic() - wall0
                 verdicts = {s.verdict for s in result.steps}
-                if (
-                    result.setup_error
-                    or "error" in verdicts
-                    or result.interrupted
-                    or result.lab_gone
-                ):
+                if (result.setup_error or "error" in verdicts or result.interrupted
+                        or result.lab_gone):  # fmt: skip
                     result.verdict = "error"
                 elif "fail" in verdicts:
                     result.verdict = "fail"
                 else:
                     result.verdict = "pass"
         return result
+
+    def _interrupted(self, where: str) -> None:
+        """A cancellation caught: noted, and taken back, so that the run can wind up."""
+        self.result.interrupted = self.result.interrupted or where
+        task = asyncio.current_task()
+        if task is not None:
+            task.uncancel()
+
+    async def _wind_up(self) -> None:
+        """Every fault the run set cleared, every train it placed taken off (again, if an
+        interrupt cut the first attempt short: clearing twice does no harm)."""
+        result = self.result
+        result.cleared = await self.clear_faults()
+        for train in list(self.ghosts):
+            tc = self.names.device_of("trackcircuit")
+            await self._quiet(self.access.device(tc, {"cmd": "remove", "train": train}))
+            result.cleared.append(f"train {train} taken off")
+        self.ghosts.clear()
 
     async def _step(self, step: Step, sr: StepResult) -> None:
         sr.start = self.elapsed()

@@ -244,22 +244,24 @@ class FaultStep(Step):
             done = await ctx.clear_faults()
             await ctx.action_done()
             return Outcome("pass", "; ".join(done) or "no fault was set")
+        # each fault is booked before it is asked for: a run interrupted while the lab carries
+        # it out clears it all the same (clearing what was not set does no harm)
         if self.target == "link":
-            answer = await ctx.access.link(self.name, self.command)
             if self.command.get("cmd") != "status":
                 book.links.add(self.name)
+            answer = await ctx.access.link(self.name, self.command)
         elif self.target in ("kill", "restart"):
-            answer = await ctx.access.lab({"cmd": self.target, "device": self.name})
             if self.target == "kill":
                 book.killed.add(self.name)
-            else:
+            answer = await ctx.access.lab({"cmd": self.target, "device": self.name})
+            if self.target == "restart":
                 book.killed.discard(self.name)
         else:
-            answer = await ctx.access.device(self.name, self.command)
             if self.target in ("point", "relay"):
                 book.trackside.add(self.name)
             else:
                 book.track_circuits.add(str(self.command.get("tc")))
+            answer = await ctx.access.device(self.name, self.command)
         await ctx.action_done()
         if answer.get("ok"):
             return Outcome("pass", _answer_text(answer))

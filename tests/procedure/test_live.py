@@ -10,7 +10,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from pathlib import Path
@@ -66,7 +65,7 @@ def test_three_shipped_procedures_pass_live(lab: RunningLab, tmp_path: Path) -> 
     assert "data:application/vnd.tcpdump.pcap;base64," in page and "<svg" in page
     assert "link st22-atc cleared" in page  # the cut was taken off at the end
     results = json.loads((report / "results.json").read_text(encoding="utf-8"))
-    assert results["summary"] == {"pass": 3, "fail": 0, "error": 0}
+    assert results["summary"] == {"pass": 3, "fail": 0, "error": 0, "skipped": 0}
     assert not faulted(lab, "st22-atc")
 
 
@@ -120,24 +119,27 @@ steps:
 """
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_ctrl_c_ends_the_run_with_130_and_clears_its_faults(
-    lab: RunningLab, tmp_path: Path
+    lab: RunningLab, tmp_path: Path, sig: signal.Signals
 ) -> None:
+    """Ctrl-C (or SIGTERM) as the run has its fault set: exit 130, the fault cleared, nothing
+    on stderr but the count, and the reports written -- the procedure an error, "interrupted"."""
     path = tmp_path / "interrupted.yaml"
     path.write_text(
         INTERRUPTED.replace("QUIET", str(SHIPPED / "labs" / "quiet.yaml")), encoding="utf-8"
     )
+    report = tmp_path / "new" / "report"
     proc = subprocess.Popen(
         [sys.executable, "-m", "ktcs_bench.cli.main", "test", "run", "--live", "proclab",
-         "--no-colour", str(path), "--junit", str(tmp_path / "j.xml")],
+         "--no-colour", str(path), "--junit", str(tmp_path / "j.xml"), "--report", str(report)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env={**os.environ, "KTCS_BENCH_RUN_DIR": str(lab.run_dir)},
     )  # fmt: skip
     try:
         wait_until("the run cut the link", lambda: faulted(lab, "st20-io"),
                    timeout=90)  # fmt: skip
-        time.sleep(0.5)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
         out, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
@@ -145,5 +147,11 @@ def test_ctrl_c_ends_the_run_with_130_and_clears_its_faults(
     assert proc.returncode == 130, out + err
     assert not faulted(lab, "st20-io")
     assert "cleared: link st20-io cleared" in out
-    error = ET.parse(tmp_path / "j.xml").getroot().find("./testsuite/testcase/error")
-    assert error is not None and "interrupted" in (error.get("message") or "")
+    assert err.splitlines() == ["0 of 1 procedures passed, 1 in error (interrupted)"]
+    suite = ET.parse(tmp_path / "j.xml").getroot().find("./testsuite")
+    assert suite is not None and (suite.get("errors"), suite.get("failures")) == ("1", "0")
+    error = suite.find("./testcase/error")
+    assert error is not None and (error.get("message") or "").startswith("interrupted")
+    results = json.loads((report / "results.json").read_text(encoding="utf-8"))
+    assert results["summary"] == {"pass": 0, "fail": 0, "error": 1, "skipped": 0}
+    assert (report / "interrupted.html").is_file()
