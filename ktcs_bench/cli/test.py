@@ -1,7 +1,7 @@
 """`ktcs-bench test run PROCEDURES...`: integration test procedures against a lab, with verdicts
 and reports (`ktcs_bench.procedure`). Exit codes: 0 every procedure passed, 1 one failed, 2 a bad
-procedure file or usage, 3 the lab unreachable, 130 interrupted (SIGINT or SIGTERM: the faults
-set are cleared, the reports written)."""
+procedure file, report path or usage, 3 the lab unreachable, 130 interrupted (SIGINT or SIGTERM:
+the faults set are cleared, the reports written)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import argparse
 import asyncio
 import importlib
 import logging
+import os
 import signal
 import sys
 import tempfile
@@ -22,6 +23,7 @@ from ktcs_bench.errors import PeerError, UsageError
 EPILOG = """\
 examples:
   ktcs-bench test run emulators/procedures/*.yaml                 # in one process, virtual time
+  ktcs-bench test run emulators/procedures --report out/          # a folder: every *.yaml in it
   ktcs-bench lab up emulators/procedures/labs/quiet.yaml &     # the procedures' lab, live ...
   ktcs-bench test run --live emulators/procedures/route_set.yaml  # ... and a procedure on it
   ktcs-bench test run --live mylab P.yaml --junit out.xml --report out/ # a running lab `mylab`
@@ -30,9 +32,9 @@ A procedure is a YAML file: metadata (id, title, verifies, tags), a setup (lab, 
 ARS) and steps -- CTC commands in the `ctc` console's words, train actions, faults, waits and
 expectations with a time limit. The format: docs/procedures.md.
 
-exit codes: 0 every procedure passed, 1 a procedure failed, 2 a bad procedure file or usage,
-3 the lab unreachable, 130 interrupted by SIGINT or SIGTERM (every fault the run set is cleared
-first; the reports are written, the procedure it was in an error, the rest skipped).
+exit codes: 0 every procedure passed, 1 a procedure failed, 2 a bad procedure file, report path
+or usage, 3 the lab unreachable, 130 interrupted by SIGINT or SIGTERM (every fault the run set is
+cleared first; the reports are written, the procedure it was in an error, the rest skipped).
 """
 
 
@@ -47,7 +49,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "run", help="run procedures and give a verdict for each", epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )  # fmt: skip
-    run_p.add_argument("procedures", nargs="*", metavar="PROCEDURE", help="procedure YAML files")
+    run_p.add_argument("procedures", nargs="*", metavar="PROCEDURE",
+                       help="procedure YAML files, or folders of them")  # fmt: skip
     where = run_p.add_mutually_exclusive_group()
     where.add_argument(
         "--virtual", action="store_true",
@@ -58,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="a running `lab up` (default: the lab the procedures name), in real time",
     )  # fmt: skip
     run_p.add_argument("--junit", metavar="FILE", help="write JUnit XML here")
-    run_p.add_argument("--report", metavar="DIR", help="write an HTML page per procedure here")
+    run_p.add_argument("--report", metavar="DIR",
+                       help="write an HTML page per procedure, an index and the JSON here")  # fmt: skip
     run_p.add_argument("--json", action="store_true", help="print the results as JSON")
     run_p.set_defaults(handler=run)
     p.set_defaults(handler=lambda args: (p.print_help(), 2)[1])
@@ -193,19 +197,18 @@ def run(args: argparse.Namespace) -> int:
     from ktcs_bench.procedure.report import json_text, junit, write_reports
     from ktcs_bench.procedure.runner import unfinished
 
-    if args.live and args.live.endswith((".yaml", ".yml")):  # `--live P.yaml`: no lab named
+    if args.live and _names_files(args.live):  # `--live P.yaml` (or a folder): no lab named
         args.procedures, args.live = [args.live, *args.procedures], ""
     if not args.procedures:
         raise UsageError("test run: give one procedure file or more")
-    procedures = [load_procedure(path) for path in args.procedures]  # every file checked first
+    files = _procedure_files(args.procedures)
+    junit_path = _output_file(args.junit, "--junit") if args.junit else None
+    report_dir = _output_folder(args.report, "--report") if args.report else None
+    procedures = [load_procedure(path) for path in files]  # every file checked first
     ids = [p.id for p in procedures]
     twice = sorted({i for i in ids if ids.count(i) > 1})
     if twice:
         raise UsageError(f"procedure id given twice: {', '.join(twice)}")
-    junit_path = Path(args.junit) if args.junit else None
-    if junit_path is not None:
-        _writable(junit_path.parent, "--junit")
-    report_dir = Path(args.report) if args.report else None
     if args.live is not None:
         mode = f"live {_live_lab(args, procedures)}"
     else:
@@ -242,6 +245,73 @@ def run(args: argparse.Namespace) -> int:
     return 0 if all(r.verdict == "pass" for r in results) else 1
 
 
-def _writable(folder: Path, what: str) -> None:
+PROCEDURE_SUFFIXES = (".yaml", ".yml")
+
+
+def _names_files(word: str) -> bool:
+    """Whether `--live WORD` names procedure files rather than a lab: a YAML file, or a folder
+    given as a path."""
+    return word.endswith(PROCEDURE_SUFFIXES) or (os.sep in word and Path(word).is_dir())
+
+
+def _procedure_files(words: list[str]) -> list[Path]:
+    """The files the arguments name: a folder stands for every procedure file in it (*.yaml,
+    *.yml; not its sub-folders), sorted by name."""
+    files: list[Path] = []
+    for word in words:
+        path = Path(word)
+        if not path.is_dir():
+            files.append(path)
+            continue
+        found = sorted(p for p in path.iterdir() if p.suffix in PROCEDURE_SUFFIXES and p.is_file())
+        if not found:
+            raise UsageError(f"test run: no procedure file (*.yaml, *.yml) in the folder {word}")
+        files += found
+    return files
+
+
+def _output_file(word: str, option: str) -> Path:
+    """A file a report is written to, checked before anything runs (its folder there and
+    writable, itself no folder); a UsageError naming it and what is wrong."""
+    path = Path(word)
+    if path.is_dir():
+        raise UsageError(f"{option} {word}: is a folder; give a file name")
+    folder = path.parent
     if not folder.is_dir():
-        raise UsageError(f"{what}: no folder {folder}")
+        what = "is not a folder" if folder.exists() else "is not there"
+        raise UsageError(f"{option} {word}: {folder} {what}")
+    try:
+        if path.exists():
+            with path.open("ab"):
+                pass
+        else:
+            _probe(folder)
+    except OSError as exc:
+        raise UsageError(f"{option} {word}: cannot write there: {exc.strerror or exc}") from None
+    return path
+
+
+def _output_folder(word: str, option: str) -> Path:
+    """A folder reports are written to, checked before anything runs: a folder, or a path to
+    one that can be made (made when the reports are written)."""
+    path = Path(word)
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{option} {word}: is a file, not a folder")
+    there = path
+    while not there.exists():  # the nearest folder that is there
+        there = there.parent
+    if not there.is_dir():
+        raise UsageError(f"{option} {word}: {there} is a file, not a folder")
+    try:
+        _probe(there)
+    except OSError as exc:
+        raise UsageError(f"{option} {word}: cannot write in {there}: "
+                         f"{exc.strerror or exc}") from None  # fmt: skip
+    return path
+
+
+def _probe(folder: Path) -> None:
+    """OSError unless a file can be made in `folder` (tried: permissions alone do not say, for
+    root, or on a read-only file system)."""
+    with tempfile.NamedTemporaryFile(dir=folder, prefix=".ktcs-bench-probe-"):
+        pass

@@ -1,0 +1,78 @@
+"""What `test run` takes (issue 21 items 7, 10): the report paths are checked before anything
+runs, and a folder of procedures is every procedure file in it, sorted. Each procedure runs on its
+own lab in this process, on the virtual clock."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from ktcs_bench.cli.main import main
+from ktcs_bench.datafiles import data_dir
+
+SHIPPED = data_dir("emulators") / "procedures"
+QUIET = SHIPPED / "labs" / "quiet.yaml"
+
+
+def procedure(folder: Path, file: str, ident: str) -> Path:
+    """A short procedure on the quiet lab that passes, with id `ident`."""
+    path = folder / file
+    path.write_text(f"id: {json.dumps(ident)}\ntitle: {file}\nsetup: {{lab: '{QUIET}'}}\n"
+                    "steps:\n  - expect: ctc 18 signal 01 is R\n", encoding="utf-8")  # fmt: skip
+    return path
+
+
+# -- item 7: the report paths, checked first -----------------------------------------------------
+def bad_paths(tmp: Path) -> list[tuple[list[str], str, str]]:
+    (tmp / "a-file").write_text("x", encoding="utf-8")
+    return [  # (options, the path named, the problem)
+        (["--junit", str(tmp)], str(tmp), "is a folder"),
+        (["--junit", "/sys/x.xml"], "/sys/x.xml", "cannot write"),
+        (["--junit", str(tmp / "nowhere" / "j.xml")], str(tmp / "nowhere"), "is not there"),
+        (["--report", str(tmp / "a-file")], str(tmp / "a-file"), "is a file"),
+        (["--report", str(tmp / "a-file" / "out")], str(tmp / "a-file"), "is a file"),
+        (["--report", "/sys/report"], "/sys", "cannot write"),
+    ]
+
+
+@pytest.mark.parametrize("case", range(6))
+def test_a_report_path_that_cannot_be_written_is_refused_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], case: int
+) -> None:
+    options, path, problem = bad_paths(tmp_path)[case]
+    proc = procedure(tmp_path, "p.yaml", "p")
+    code = main(["test", "run", str(proc), *options, "--no-colour"])
+    out, err = capsys.readouterr()
+    assert code == 2, out + err
+    assert out == ""  # nothing ran: no verdict, no report
+    assert len(err.splitlines()) == 1 and path in err and problem in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "p.yaml"]
+
+
+# -- item 10: a folder of procedures ---------------------------------------------------------------
+def test_a_folder_means_every_procedure_file_in_it_sorted(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "procs"
+    (folder / "labs").mkdir(parents=True)
+    procedure(folder, "b.yaml", "second")
+    procedure(folder, "a.yml", "first")
+    procedure(folder / "labs", "c.yaml", "not-in-a-sub-folder")
+    (folder / "notes.txt").write_text("not a procedure", encoding="utf-8")
+    code = main(["test", "run", str(folder), "--json", "--no-colour"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert [p["id"] for p in json.loads(out)["procedures"]] == ["first", "second"]
+
+
+def test_a_folder_with_no_procedure_file_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "notes.txt").write_text("not a procedure", encoding="utf-8")
+    code = main(["test", "run", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.splitlines() == [f"ktcs-bench: error: test run: no procedure file (*.yaml, *.yml) "
+                                f"in the folder {tmp_path}"]  # fmt: skip
