@@ -10,6 +10,7 @@ import base64
 import html
 import io
 import json
+import re
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -230,7 +231,7 @@ def html_report(result: ProcedureResult) -> str:
     caps = []
     for link, records in sorted(result.captures.items()):
         data = base64.b64encode(_pcapng(result, link)).decode()
-        caps.append(f'<li><a download="{_e(p.id)}-{_e(link)}.pcapng" '
+        caps.append(f'<li><a download="{_e(safe_stem(p.id))}-{_e(link)}.pcapng" '
                     f'href="data:application/vnd.tcpdump.pcap;base64,{data}">{_e(link)}.pcapng</a>'
                     f" ({len(records)} records)</li>")  # fmt: skip
     setup = (f'<p class="v error">setup: {_e(result.setup_error)}</p>'
@@ -268,26 +269,53 @@ the steps. Hover for the values.</p>
 """
 
 
-def write_html(result: ProcedureResult, folder: Path) -> Path:
+_UNSAFE = re.compile(r"[^\w.-]+")
+
+
+def safe_stem(text: str) -> str:
+    """`text` as the stem of a file name: word characters, '.' and '-' (any other run becomes
+    '_'; no path, no leading dot, at most 80 characters)."""
+    return _UNSAFE.sub("_", text).strip("._-")[:80].strip("._-") or "procedure"
+
+
+def page_names(ids: Sequence[str]) -> list[str]:
+    """The file name of each procedure's page, from its id (`safe_stem`): never the index's,
+    and never one another's -- ids that come out alike (even but for case) get -2, -3, ..."""
+    taken, out = {"index.html"}, []
+    for ident in ids:
+        stem = safe_stem(ident)
+        name, n = f"{stem}.html", 1
+        while name.lower() in taken:
+            n += 1
+            name = f"{stem}-{n}.html"
+        taken.add(name.lower())
+        out.append(name)
+    return out
+
+
+def write_html(result: ProcedureResult, folder: Path, name: str | None = None) -> Path:
+    """The procedure's page in `folder`, as `name` (default: from its id, `page_names`)."""
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{result.procedure.id}.html"
+    path = folder / (name or page_names([result.procedure.id])[0])
     path.write_text(html_report(result), encoding="utf-8")
     return path
 
 
 def write_reports(results: Sequence[ProcedureResult], folder: Path) -> list[Path]:
     """One HTML page per procedure run (none for one not run), an index, and the JSON of the
-    run, in `folder` (made if need be)."""
+    run -- every file in `folder` (made if need be), named by `page_names`."""
     folder.mkdir(parents=True, exist_ok=True)
-    pages = {id(r): write_html(r, folder) for r in results if not r.not_run}
+    names = page_names([r.procedure.id for r in results])
+    pages = [None if r.not_run else name for r, name in zip(results, names, strict=True)]
+    paths = [write_html(r, folder, name) for r, name in zip(results, pages, strict=True) if name]
     items = "".join(f'<li><span class="v {r.verdict}">{r.verdict}</span> '
-                    + (f'<a href="{_e(pages[id(r)].name)}">{_e(r.procedure.id)}</a>'
-                       if id(r) in pages else _e(r.procedure.id))
+                    + (f'<a href="{_e(page)}">{_e(r.procedure.id)}</a>' if page
+                       else _e(r.procedure.id))
                     + f": {_e(r.procedure.title)}{' -- ' + _e(r.message) if r.message else ''}</li>"
-                    for r in results)  # fmt: skip
+                    for r, page in zip(results, pages, strict=True))  # fmt: skip
     index = folder / "index.html"
     index.write_text(f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>'
                      f"procedures</title><style>{CSS}</style></head><body><h1>Procedures</h1>"
                      f"<ul>{items}</ul></body></html>\n", encoding="utf-8")  # fmt: skip
     (folder / "results.json").write_text(json_text(results) + "\n", encoding="utf-8")
-    return [index, *pages.values()]
+    return [index, *paths]

@@ -1,10 +1,12 @@
-"""What `test run` takes (issue 21 items 7, 10): the report paths are checked before anything
-runs, and a folder of procedures is every procedure file in it, sorted. Each procedure runs on its
-own lab in this process, on the virtual clock."""
+"""What `test run` takes and where it writes (issue 21 items 6, 7, 10): the report paths are
+checked before anything runs; a folder of procedures is every procedure file in it, sorted; and a
+procedure's id never puts a file outside the report folder, nor over another's. Each procedure
+runs on its own lab in this process, on the virtual clock."""
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -76,3 +78,24 @@ def test_a_folder_with_no_procedure_file_is_a_usage_error(
     assert code == 2
     assert err.splitlines() == [f"ktcs-bench: error: test run: no procedure file (*.yaml, *.yml) "
                                 f"in the folder {tmp_path}"]  # fmt: skip
+
+
+# -- item 6: ids are not paths -------------------------------------------------------------------
+def test_a_procedure_id_never_writes_outside_the_report_folder_nor_over_another(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    procs, report = tmp_path / "procs", tmp_path / "deep" / "report"
+    procs.mkdir()
+    ids = [str(tmp_path / "outside"), "../escaped", "a/b", "a_b", "index", "A_B"]
+    files = [procedure(procs, f"p{i}.yaml", ident) for i, ident in enumerate(ids)]
+    code = main(["test", "run", *map(str, files), "--report", str(report), "--no-colour"])
+    assert code == 0, capsys.readouterr()
+    written = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*") if p.is_file())
+    assert [w for w in written if not w.startswith(("procs/", "deep/report/"))] == []
+    pages = sorted(p.name for p in report.glob("*.html"))
+    assert len(pages) == len(ids) + 1  # one each, and the index
+    links = re.findall(r'<a href="([^"]+)">([^<]+)</a>', (report / "index.html").read_text())
+    assert sorted(i for _, i in links) == sorted(ids)
+    for page, ident in links:
+        assert "/" not in page and not page.startswith(".") and page != "index.html"
+        assert f"{ident}: " in (report / page).read_text(encoding="utf-8")  # its own page
