@@ -10,6 +10,7 @@ import base64
 import html
 import io
 import json
+import math
 import re
 from collections.abc import Sequence
 from datetime import UTC, datetime
@@ -128,7 +129,15 @@ def _png_uri(fig: Any) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
+def moved(series: Sequence[tuple[float, float, float, float]]) -> bool:
+    """Whether a train's samples (t, head, tail, km/h) show it moving at all."""
+    heads = [h for _t, h, _tl, _v in series]
+    return bool(heads) and (max(heads) - min(heads) > 0.5 or any(v > 0 for *_, v in series))
+
+
 def _plots(result: ProcedureResult) -> str:
+    """A speed-distance plot of each train that moved (one that stood still is named instead:
+    its plot would be empty), and every train's position over time."""
     if not result.trains:
         return "<p>No train ran in this procedure.</p>"
     import matplotlib
@@ -140,15 +149,23 @@ def _plots(result: ProcedureResult) -> str:
 
     none = {"safe_front_m": None, **{f"{k}_kmh": None for k in LIMITS}}
     out = []
-    n = len(result.trains)
-    fig, axes = plt.subplots(n, 1, figsize=(10, 3.2 * n), squeeze=False)
-    for ax, (tid, series) in zip(axes[:, 0], result.trains.items(), strict=True):
-        rows = [{"train": tid, "t_s": t, "front_m": h, "speed_kmh": v, **none}
-                for t, h, _tl, v in series]  # fmt: skip
-        plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
-    fig.tight_layout()
-    out.append(f'<img alt="speed-distance" src="{_png_uri(fig)}">')
-    plt.close(fig)
+    running = {tid: series for tid, series in result.trains.items() if moved(series)}
+    still = [f"{tid} (at {series[0][1]:.0f} m)" for tid, series in result.trains.items()
+             if tid not in running and series]  # fmt: skip
+    if running:
+        n = len(running)
+        fig, axes = plt.subplots(n, 1, figsize=(10, 3.2 * n), squeeze=False)
+        for ax, (tid, series) in zip(axes[:, 0], running.items(), strict=True):
+            rows = [{"train": tid, "t_s": t, "front_m": h, "speed_kmh": v, **none}
+                    for t, h, _tl, v in series]  # fmt: skip
+            plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
+        fig.tight_layout()
+        out.append(f'<img alt="speed-distance" src="{_png_uri(fig)}" '
+                   f'data-trains="{_e(" ".join(running))}">')  # fmt: skip
+        plt.close(fig)
+    if still:
+        out.append(f'<p class="still">Did not move, so no speed-distance plot: '
+                   f"{_e(', '.join(still))}.</p>")  # fmt: skip
     td = [{"train": tid, "t_s": t, "front_m": h, "rear_m": tl}
           for tid, series in result.trains.items() for t, h, tl, _v in series]  # fmt: skip
     fig, ax = plt.subplots(figsize=(10, 4))
@@ -169,41 +186,103 @@ def _lane_colour(key: str, value: str) -> str:
     return ASPECT_COLOURS.get(value, "#999")
 
 
+LABEL_CHAR_PX = 7.0  # the widest a character of the timeline's 11 px labels is taken to be
+
+
+def time_ticks(end: float, most: int = 10) -> list[float]:
+    """Round times from 0 to `end` (s) for an axis, at most `most` + 1 of them: a step of 1, 2
+    or 5 times a power of ten."""
+    raw = max(end, 1e-9) / most
+    power = 10 ** math.floor(math.log10(raw))
+    step = next(k * power for k in (1, 2, 5, 10) if k * power >= raw)
+    return [i * step for i in range(int(end / step + 1e-9) + 1)]
+
+
+def step_labels(marks: Sequence[tuple[float, int]]) -> list[tuple[float, str, int]]:
+    """The steps' marks on the timeline -- (x in px, step number), in order -- as labels (x,
+    text, row): steps closer than a few px share one label ("3-7"), and each label goes to the
+    first row where it clears the labels already there, so no two overlap."""
+    groups: list[list[tuple[float, int]]] = []
+    for x, index in sorted(marks):
+        if groups and x - groups[-1][0][0] < 4:
+            groups[-1].append((x, index))
+        else:
+            groups.append([(x, index)])
+    rows: list[float] = []  # where each row's last label ends
+    out = []
+    for group in groups:
+        x = group[0][0]
+        first, last = group[0][1], group[-1][1]
+        text = str(first) if first == last else f"{first}-{last}"
+        width = LABEL_CHAR_PX * len(text) + 3
+        row = next((i for i, right in enumerate(rows) if right < x), len(rows))
+        if row == len(rows):
+            rows.append(0.0)
+        rows[row] = x + width
+        out.append((x, text, row))
+    return out
+
+
 def _lanes(result: ProcedureResult) -> str:
     """An SVG strip per signal (the CTC's indication) and per ATC code that changed during the
-    run, each value in its colour over time, and the steps' start times marked."""
+    run, each value in its colour over time, on a time axis; the steps' starts are dashed lines,
+    numbered below the axis in as many rows as keep the numbers apart."""
     changes: dict[str, list[tuple[float, str]]] = {}
     for t, k, v in result.timeline:
         if (k.startswith("ctc ") and " signal " in k) or k.startswith("code "):
             changes.setdefault(k, []).append((t, v))
-    moved = [k for k, series in changes.items() if len({v for _, v in series}) > 1]
-    signals = sorted(k for k in moved if k.startswith("ctc "))
-    codes = sorted((k for k in moved if k.startswith("code ")), key=lambda k: k.split()[1])
+    moved_ = [k for k, series in changes.items() if len({v for _, v in series}) > 1]
+    signals = sorted(k for k in moved_ if k.startswith("ctc "))
+    codes = sorted((k for k in moved_ if k.startswith("code ")), key=lambda k: k.split()[1])
     shown = signals + codes or sorted(changes)[:6]
     if not shown:
         return ""
     end = max(result.duration, 1.0)
     left, width, lane = 120, 760, 16
-    height = lane * len(shown) + 24
-    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{left + width + 10}" '
-             f'height="{height}" font-size="11">']  # fmt: skip
+
+    def at(t: float) -> float:
+        return left + width * min(max(t, 0.0), end) / end
+
+    axis = lane * len(shown) + 6  # the time axis, under the lanes
+    ran = [s for s in result.steps if s.verdict != "skipped"]
+    labels = step_labels([(at(s.start), s.index) for s in ran])
+    rows = 1 + max((row for *_, row in labels), default=-1)
+    first_row = axis + 46
+    height = first_row + 14 * rows + 4
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{left + width + 60}" '
+             f'height="{height}" font-size="11" class="timeline">']  # fmt: skip
     for i, k in enumerate(shown):
         y = i * lane + 4
         parts.append(f'<text x="2" y="{y + 11}">{_e(k.removeprefix("ctc "))}</text>')
         series = changes[k]
         for j, (t, v) in enumerate(series):
             t1 = series[j + 1][0] if j + 1 < len(series) else end
-            x0, x1 = left + width * t / end, left + width * t1 / end
+            x0, x1 = at(t), at(t1)
             parts.append(f'<rect x="{x0:.1f}" y="{y}" width="{max(x1 - x0, 0.5):.1f}" '
                          f'height="{lane - 3}" fill="{_lane_colour(k, v)}"><title>{_e(k)}: '
                          f"{_e(v)} from {t:.1f} s</title></rect>")  # fmt: skip
-    for s in result.steps:
-        if s.verdict != "skipped":
-            x = left + width * s.start / end
-            parts.append(f'<line x1="{x:.1f}" y1="0" x2="{x:.1f}" y2="{height - 18}" '
-                         f'stroke="#555" stroke-dasharray="2,2"><title>step {s.index}: '
-                         f'{_e(s.title)}</title></line><text x="{x + 1:.1f}" y="{height - 6}">'
-                         f"{s.index}</text>")  # fmt: skip
+    parts.append(f'<line x1="{left}" y1="{axis}" x2="{left + width}" y2="{axis}" '
+                 f'stroke="#333"/>')  # fmt: skip
+    for t in time_ticks(end):
+        x = at(t)
+        parts.append(f'<line x1="{x:.1f}" y1="{axis}" x2="{x:.1f}" y2="{axis + 4}" '
+                     f'stroke="#333"/><text class="tick" x="{x:.1f}" y="{axis + 15}" '
+                     f'text-anchor="middle">{t:g}</text>')  # fmt: skip
+    parts.append(f'<text class="axis" x="{left + width / 2:.0f}" y="{axis + 30}" '
+                 f'text-anchor="middle">time since the start of the procedure (s, on the '
+                 f"lab's clock)</text>")  # fmt: skip
+    for s in ran:
+        x = at(s.start)
+        parts.append(f'<line x1="{x:.1f}" y1="0" x2="{x:.1f}" y2="{axis}" stroke="#555" '
+                     f'stroke-dasharray="2,2"><title>step {s.index} at {s.start:.1f} s: '
+                     f"{_e(s.title)}</title></line>")  # fmt: skip
+    if labels:
+        parts.append(f'<text x="2" y="{first_row + 10}">steps</text>')
+    for x, text, row in labels:
+        y = first_row + 14 * row
+        parts.append(f'<line x1="{x:.1f}" y1="{y}" x2="{x:.1f}" y2="{y + 11}" stroke="#555"/>'
+                     f'<text class="step" x="{x + 2:.1f}" y="{y + 10}">{_e(text)}<title>step '
+                     f"{_e(text)}</title></text>")  # fmt: skip
     parts.append("</svg>")
     return "".join(parts)
 
@@ -301,6 +380,50 @@ def write_html(result: ProcedureResult, folder: Path, name: str | None = None) -
     return path
 
 
+def _lab_name(result: ProcedureResult) -> str:
+    return result.mode.removeprefix("live ") if result.mode.startswith("live ") else (
+        result.procedure.setup.lab.name)  # fmt: skip
+
+
+def index_html(results: Sequence[ProcedureResult], pages: Sequence[str | None]) -> str:
+    """The run's index: what came of it (counted), when it began, the mode and the labs, and
+    each procedure with its verdict, linked to its page (`pages`; None: it has none)."""
+    counts = {v: sum(1 for r in results if r.verdict == v) for v in COUNTED}
+    words = {"pass": "passed", "fail": "failed", "error": "in error", "skipped": "not run"}
+    summary = ", ".join(f'<span class="v {v if counts[v] else ""}">{counts[v]} {words[v]}</span>'
+                        for v in COUNTED if counts[v] or v != "skipped")  # fmt: skip
+    began = min((r.started for r in results), default=0.0)
+    when = datetime.fromtimestamp(began, UTC).strftime("%Y-%m-%d %H:%M:%S UTC") if began else "-"
+    modes = sorted({"live" if r.mode.startswith("live") else r.mode for r in results})
+    labs = sorted({_lab_name(r) for r in results})
+    lab_time = sum(r.duration for r in results)
+    wall = sum(r.wall_s for r in results)
+    stopped = next((f"{r.procedure.id}: {r.message}" for r in results if r.interrupted), "")
+    rows = []
+    for r, page in zip(results, pages, strict=True):
+        name = (f'<a href="{_e(page)}">{_e(r.procedure.id)}</a>' if page
+                else _e(r.procedure.id))  # fmt: skip
+        rows.append(f'<tr><td><span class="v {r.verdict}">{r.verdict}</span></td><td>{name}</td>'
+                    f"<td>{_e(r.procedure.title)}</td><td>{r.duration:.1f} s</td>"
+                    f"<td>{_e(r.message)}</td></tr>")  # fmt: skip
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>procedures: {counts["pass"]} of {len(results)}
+passed</title><style>{CSS}</style></head><body>
+<h1>Procedures</h1>
+<table class="meta">
+<tr id="summary"><td>result</td><td>{summary} (of {len(results)})</td></tr>
+<tr id="started"><td>started</td><td>{when}</td></tr>
+<tr id="mode"><td>mode</td><td>{_e(", ".join(modes) or "-")}</td></tr>
+<tr id="lab"><td>lab</td><td>{_e(", ".join(labs) or "-")}</td></tr>
+<tr id="took"><td>took</td><td>{lab_time:.1f} s on the labs' clocks, {wall:.1f} s of wall time</td></tr>
+{f'<tr id="interrupted"><td>stopped</td><td>{_e(stopped)}</td></tr>' if stopped else ""}
+</table>
+<table><tr><th>verdict</th><th>procedure</th><th>title</th><th>took</th><th>why</th></tr>
+{"".join(rows)}</table>
+</body></html>
+"""
+
+
 def write_reports(results: Sequence[ProcedureResult], folder: Path) -> list[Path]:
     """One HTML page per procedure run (none for one not run), an index, and the JSON of the
     run -- every file in `folder` (made if need be), named by `page_names`."""
@@ -308,14 +431,7 @@ def write_reports(results: Sequence[ProcedureResult], folder: Path) -> list[Path
     names = page_names([r.procedure.id for r in results])
     pages = [None if r.not_run else name for r, name in zip(results, names, strict=True)]
     paths = [write_html(r, folder, name) for r, name in zip(results, pages, strict=True) if name]
-    items = "".join(f'<li><span class="v {r.verdict}">{r.verdict}</span> '
-                    + (f'<a href="{_e(page)}">{_e(r.procedure.id)}</a>' if page
-                       else _e(r.procedure.id))
-                    + f": {_e(r.procedure.title)}{' -- ' + _e(r.message) if r.message else ''}</li>"
-                    for r, page in zip(results, pages, strict=True))  # fmt: skip
     index = folder / "index.html"
-    index.write_text(f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>'
-                     f"procedures</title><style>{CSS}</style></head><body><h1>Procedures</h1>"
-                     f"<ul>{items}</ul></body></html>\n", encoding="utf-8")  # fmt: skip
+    index.write_text(index_html(results, pages), encoding="utf-8")
     (folder / "results.json").write_text(json_text(results) + "\n", encoding="utf-8")
     return [index, *paths]
