@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import argparse
 import codecs
+import math
 import re
 import sys
-from collections import deque
+from array import array
 from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
@@ -52,9 +53,11 @@ exit status: 0 every frame checks; 1 a frame failed a check (crc, etx, length, t
 or no frame was found; 2 bad arguments, profile, chart or input file.
 """
 
-READ_BLOCK = 1 << 20  # bytes of input read, parsed, decoded and printed at a time
+READ_BLOCK = 1 << 20  # bytes of input read and parsed at a time
+DECODE_SLICE = 64 << 10  # bytes of a block decoded and printed at a time: one slice's records
 AUTO_WINDOW = 256 << 10  # --profile auto decides once this many bytes decoded hold a good frame,
-AUTO_WINDOW_MAX = 4 << 20  # or at this many in any case (or at the end of the input)
+AUTO_WINDOW_MAX = 4 << 20  # or at this many in any case (or at the end of the input),
+AUTO_WINDOW_RECORDS = 1 << 16  # or once this many records (lines of a hex log) have begun
 _PATHLIKE = re.compile(r"[/\\]|^[.~]|\.[A-Za-z][A-Za-z0-9]{0,7}$")
 _BARE_WORD = re.compile(r"[\w-]+")
 _HEX_WORD = re.compile(r"(?:[0-9a-fA-F]{2})+")
@@ -105,8 +108,10 @@ class ProfileVote:
 
     def feed(self, data: bytes | bytearray) -> None:
         self.seen += len(data)
-        for prof, dec in zip(self.profiles, self._decoders, strict=True):
-            self.good[prof.name] += _good(dec.feed(data))
+        with memoryview(data) as view:
+            for prof, dec in zip(self.profiles, self._decoders, strict=True):
+                for at in range(0, len(data), DECODE_SLICE):  # a slice's records at a time
+                    self.good[prof.name] += _good(dec.feed(view[at : at + DECODE_SLICE]))
 
     def close(self) -> None:
         for prof, dec in zip(self.profiles, self._decoders, strict=True):
@@ -228,6 +233,53 @@ def input_lines(inputs: list[str]) -> Iterator[list[str]]:
 
 
 # -- output -------------------------------------------------------------------------------------
+class _Origins:
+    """The origins (line, time, direction) of the records not yet labelled, a chunk of the text
+    each, oldest first. Every line of a hex log begins one, and a block of input or the window
+    of --profile auto holds many, so they are kept in arrays, not as objects."""
+
+    COMPACT = 4096  # entries passed before they are dropped from the arrays' front
+
+    def __init__(self) -> None:
+        self._offsets = array("q")
+        self._lines = array("q")
+        self._times = array("d")  # nan: none
+        self._directions: list[str | None] = []
+        self._names: dict[str, str] = {}  # one string per direction name (the first 256)
+        self._first = 0  # index of the oldest entry still wanted
+
+    def __len__(self) -> int:
+        return len(self._offsets) - self._first
+
+    def append(self, chunk: Chunk) -> None:
+        self._offsets.append(chunk.offset)
+        self._lines.append(chunk.line)
+        self._times.append(math.nan if chunk.time is None else chunk.time)
+        direction = chunk.direction
+        if direction is not None and len(self._names) < 256:
+            direction = self._names.setdefault(direction, direction)
+        self._directions.append(direction)
+
+    def label(self, offset: int) -> str:
+        """The label of a record at stream `offset`: where the chunk holding it began."""
+        offsets, k, last = self._offsets, self._first, len(self._offsets) - 1
+        while k < last and offsets[k + 1] <= offset:
+            k += 1
+        if k >= self.COMPACT and 2 * k > last:
+            for column in (self._offsets, self._lines, self._times, self._directions):
+                del column[:k]
+            k = 0
+        self._first = k
+        if k > last or offsets[k] > offset:
+            return ""
+        parts = [f"line {self._lines[k]}"]
+        if direction := self._directions[k]:
+            parts.insert(0, direction)
+        if not math.isnan(time := self._times[k]):
+            parts.insert(0, f"t={time:.6f}")
+        return " ".join(parts) + "  "
+
+
 class _Output:
     """Records -> text or JSON lines on stdout, a block at a time, and the counts of the summary."""
 
@@ -235,7 +287,7 @@ class _Output:
         self.json = bool(args.json)
         self.chart = chart
         self.colour: bool = args.colour  # main decides, for every command
-        self.origins: deque[Chunk] = deque()  # chunks not yet passed, for the line labels
+        self.origins = _Origins()  # chunks not yet passed, for the line labels
         self.frames = self.good = self.garbage = 0
         self.failed = False
         self._lines: list[str] = []
@@ -262,22 +314,17 @@ class _Output:
                     self.failed = True
             else:
                 self.garbage += len(record.raw)
-            lines.append(to_text(record, profile, self.chart, self.colour, self._label(record)))
+            label = self.origins.label(record.offset)
+            lines.append(to_text(record, profile, self.chart, self.colour, label))
             lines.append("")
 
-    def _label(self, record: Record) -> str:
-        origins = self.origins
-        while len(origins) > 1 and origins[1].offset <= record.offset:
-            origins.popleft()
-        origin = origins[0] if origins and origins[0].offset <= record.offset else None
-        if origin is None:
-            return ""
-        parts = [f"line {origin.line}"]
-        if origin.direction:
-            parts.insert(0, origin.direction)
-        if origin.time is not None:
-            parts.insert(0, f"t={origin.time:.6f}")
-        return " ".join(parts) + "  "
+    def decoded(self, decoder: StreamDecoder, data: bytes | bytearray) -> None:
+        """Decode `data` and print its records, a slice at a time: what is held at once is one
+        slice's records and output, whatever the data's size (a block, the auto window)."""
+        with memoryview(data) as view:
+            for at in range(0, len(data), DECODE_SLICE):
+                self.records(decoder.feed(view[at : at + DECODE_SLICE]), decoder.profile)
+                self.flush()
 
     def line(self, text: str) -> None:
         self._lines.append(text)
@@ -321,7 +368,7 @@ def run(args: argparse.Namespace) -> int:
             out.line(f"profile auto: {verdict} {profile.name}  (good frames per profile{scope}: "
                      f"{counts})")  # fmt: skip
         decoder = StreamDecoder(profile)
-        out.records(decoder.feed(window), profile)
+        out.decoded(decoder, window)
         window.clear()
 
     for lines in input_lines(inputs):
@@ -334,14 +381,16 @@ def run(args: argparse.Namespace) -> int:
             for piece in pieces:
                 block += piece
         total += len(block)
-        if decoder is not None and profile is not None:
-            out.records(decoder.feed(block), profile)
+        if decoder is not None:
+            out.decoded(decoder, block)
         else:
             assert vote is not None
             vote.feed(block)
             window += block
-            if vote.seen >= AUTO_WINDOW_MAX or (
-                vote.seen >= AUTO_WINDOW and any(vote.good.values())
+            if (
+                vote.seen >= AUTO_WINDOW_MAX
+                or parser.chunks >= AUTO_WINDOW_RECORDS
+                or (vote.seen >= AUTO_WINDOW and any(vote.good.values()))
             ):
                 decide(final=False)
         out.flush()

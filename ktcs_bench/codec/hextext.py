@@ -147,6 +147,7 @@ class HexTextParser:
         self.lineno = 0
         self.chunk: Chunk | None = None
         self.new_chunk = False
+        self.chunks = 0  # records begun so far
         self.skipped = 0
         self.skipped_lines: list[int] = []
         self.keep_skipped: int | None = KEEP_SKIPPED  # None: remember every skipped line
@@ -181,6 +182,7 @@ class HexTextParser:
                     self._dump = None
                     self.chunk = Chunk(self.offset, bytearray(), self.lineno, name, float(seconds))
                     self.new_chunk = True
+                    self.chunks += 1
                     self.offset += len(data)
                     return (data,)
         stripped = body.strip()
@@ -214,6 +216,7 @@ class HexTextParser:
         if self.chunk is None or starts_record:
             self.chunk = Chunk(self.offset, bytearray(), self.lineno, direction, time)
             self.new_chunk = True
+            self.chunks += 1
         self.offset += len(data)
         return (data,)
 
