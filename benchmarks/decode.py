@@ -8,13 +8,20 @@
    machine state; the figure is the ratio of the medians. Goal <= 1.5x.
 2. Peak memory (RSS) of `decode --json` and `decode --profile auto` on a generated hex-log
    capture of two sizes: it streams, so the peak does not grow with the input.
+3. `decode --json --protocol type1` and `decode --profile auto` on corrupted input -- frames that
+   all fail their CRC (`02 03 00 XX 02 00` and 8 random bytes a line), so every frame takes the
+   resynchronising slow path and auto finds no profile whose CRC checks -- at several sizes: peak
+   RSS, wall and CPU time, and CPU seconds per MB, which stay flat when the time is linear (the
+   first 4 MiB decoded are decoded three times under auto: two profiles vote, the winner prints).
 
-Run: python benchmarks/decode.py [--frames 100000] [--rounds 5] [--mb 10]
+Run: python benchmarks/decode.py [--frames 100000] [--rounds 5] [--mb 10] [--corrupt 1,3,10,30]
+     [--only ratio|memory|corrupted]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import random
 import statistics
 import subprocess
@@ -109,15 +116,67 @@ def hexlog_capture(path: Path, mb: float) -> None:
             f.write(block)
 
 
-def peak_rss_mb(argv: list[str]) -> float:
-    """Peak RSS of one subprocess, from a fresh wrapper whose only child it is."""
+def corrupted_capture(path: Path, mb: float) -> None:
+    """Type I CHANGE frames that all fail their CRC, one a line, about `mb` MB."""
+    rng = random.Random(21)
+    with path.open("w", encoding="utf-8") as f:
+        written = 0
+        while written < mb * 1e6:
+            lines = "".join(
+                (bytes((2, 3, 0, rng.randrange(256), 2, 0)) + rng.randbytes(8)).hex(" ").upper()
+                + "\n"
+                for _ in range(1000)
+            )
+            written += f.write(lines)
+
+
+def measured(argv: list[str]) -> tuple[float, float, float]:
+    """(peak RSS MB, wall s, CPU s) of one subprocess, from a fresh wrapper whose only child
+    it is (its RUSAGE_CHILDREN is that subprocess's alone)."""
     probe = (
-        "import resource, subprocess, sys\n"
+        "import json, resource, subprocess, sys, time\n"
+        "t0 = time.perf_counter()\n"
         "subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, check=False)\n"
-        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+        "wall = time.perf_counter() - t0\n"
+        "ru = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+        "print(json.dumps([ru.ru_maxrss / 1024, wall, ru.ru_utime + ru.ru_stime]))\n"
     )
     out = subprocess.run([sys.executable, "-c", probe, *argv], capture_output=True, text=True)
-    return int(out.stdout.strip()) / 1024
+    peak, wall, cpu = json.loads(out.stdout)
+    return float(peak), float(wall), float(cpu)
+
+
+def peak_rss_mb(argv: list[str]) -> float:
+    return measured(argv)[0]
+
+
+def bench_memory(mb_large: float, folder: Path) -> None:
+    sizes = (mb_large / 4, mb_large)
+    for extra in (["--json", "--profile", "ktcs-type1"], ["--profile", "auto"]):
+        peaks = []
+        for mb in sizes:
+            path = folder / f"cap{mb}.hex"
+            if not path.exists():
+                hexlog_capture(path, mb)
+            argv = [sys.executable, "-m", "ktcs_bench.cli.main", "decode", *extra, str(path)]
+            peaks.append(peak_rss_mb(argv))
+        shown = ", ".join(f"{mb:g} MB: {p:.0f} MB" for mb, p in zip(sizes, peaks, strict=True))
+        print(f"decode {' '.join(extra)} peak RSS by capture size: {shown}")
+
+
+def bench_corrupted(sizes: list[float], folder: Path) -> None:
+    print("decode on corrupted input (every frame fails its CRC), by input size:")
+    print(f"  {'options':<26} {'MB':>5} {'peak RSS':>9} {'wall s':>7} {'CPU s':>7} {'CPU s/MB':>9}")
+    for extra in (["--json", "--protocol", "type1"], ["--profile", "auto"]):
+        for mb in sizes:
+            path = folder / f"corrupted{mb:g}.hex"
+            if not path.exists():
+                corrupted_capture(path, mb)
+            real_mb = path.stat().st_size / 1e6
+            argv = [sys.executable, "-m", "ktcs_bench.cli.main", "decode", *extra, str(path)]
+            peak, wall, cpu = measured(argv)
+            print(f"  {' '.join(extra):<26} {real_mb:5.1f} {peak:6.0f} MB {wall:7.2f} {cpu:7.2f} "
+                  f"{cpu / real_mb:9.2f}")  # fmt: skip
 
 
 def main() -> None:
@@ -127,25 +186,29 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=100_000, help="CHANGE frames for the ratio")
     ap.add_argument("--rounds", type=int, default=5, help="interleaved runs of each")
     ap.add_argument("--mb", type=float, default=10.0, help="larger capture size for the memory")
+    ap.add_argument(
+        "--corrupt",
+        default="1,3,10,30",
+        help="sizes (MB) of the corrupted captures, comma-separated",
+    )
+    ap.add_argument(
+        "--only",
+        choices=("ratio", "memory", "corrupted"),
+        help="run one part (default: all three)",
+    )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        floor, ours = bench_json(args.frames, args.rounds, folder)
-        ratio = ours / floor
-        print(f"decode --json, {args.frames} CHANGE frames: plain script {floor:.2f} s, "
-              f"ktcs-bench {ours:.2f} s -> {ratio:.2f}x  (goal <= 1.5x: "
-              f"{'met' if ratio <= 1.5 else 'NOT met'})")  # fmt: skip
-        sizes = (args.mb / 4, args.mb)
-        for extra in (["--json", "--profile", "ktcs-type1"], ["--profile", "auto"]):
-            peaks = []
-            for mb in sizes:
-                path = folder / f"cap{mb}.hex"
-                if not path.exists():
-                    hexlog_capture(path, mb)
-                argv = [sys.executable, "-m", "ktcs_bench.cli.main", "decode", *extra, str(path)]
-                peaks.append(peak_rss_mb(argv))
-            shown = ", ".join(f"{mb:g} MB: {p:.0f} MB" for mb, p in zip(sizes, peaks, strict=True))
-            print(f"decode {' '.join(extra)} peak RSS by capture size: {shown}")
+        if args.only in (None, "ratio"):
+            floor, ours = bench_json(args.frames, args.rounds, folder)
+            ratio = ours / floor
+            print(f"decode --json, {args.frames} CHANGE frames: plain script {floor:.2f} s, "
+                  f"ktcs-bench {ours:.2f} s -> {ratio:.2f}x  (goal <= 1.5x: "
+                  f"{'met' if ratio <= 1.5 else 'NOT met'})")  # fmt: skip
+        if args.only in (None, "memory"):
+            bench_memory(args.mb, folder)
+        if args.only in (None, "corrupted"):
+            bench_corrupted([float(mb) for mb in args.corrupt.split(",")], folder)
 
 
 if __name__ == "__main__":
