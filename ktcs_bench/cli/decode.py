@@ -50,7 +50,8 @@ examples:
   xxd capture.bin | ktcs-bench decode --chart code_charts/st20_ixl_to_ctc.yaml
 
 exit status: 0 every frame checks; 1 a frame failed a check (crc, etx, length, truncated, format)
-or no frame was found; 2 bad arguments, profile, chart or input file.
+or no frame was found; 2 bad arguments, profile, chart or input file (one that is not text, or
+stops being text part-way: the message names the byte where it did).
 """
 
 READ_BLOCK = 1 << 20  # bytes of input read and parsed at a time
