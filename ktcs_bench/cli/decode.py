@@ -249,9 +249,6 @@ class _Origins:
         self._names: dict[str, str] = {}  # one string per direction name (the first 256)
         self._first = 0  # index of the oldest entry still wanted
 
-    def __len__(self) -> int:
-        return len(self._offsets) - self._first
-
     def append(self, chunk: Chunk) -> None:
         self._offsets.append(chunk.offset)
         self._lines.append(chunk.line)
