@@ -10,7 +10,14 @@ With nothing ready and nothing scheduled nothing can ever happen again: `select`
 
 `ScaledTimeLoop` is the same loop on a scaled wall clock: `time()` = `speed` × the wall time since
 it was made, and the selector really waits (the timeout divided by `speed`), so real sockets (the
-web console, control ports) work beside the lab: `lab up --in-process --speed X`.
+web console, control ports) work beside the lab: `lab up --in-process --speed X`. When the
+machine cannot keep up -- a timer is due more than `BEHIND` seconds of the lab's clock ago when
+the loop comes to it -- it says so once, to whoever `watch_behind`s (the lab warns: every link
+timing out after that is the clock's doing, not the devices').
+
+Neither loop has wall-clock timers for the lab; `call_every_wall` runs housekeeping that must not
+change the run (flushing files, a progress line, seeing a signal) between two steps of the loop,
+about every so many seconds of wall time.
 
     loop = VirtualTimeLoop()
     loop.run_until_complete(main())         # or asyncio.Runner(loop_factory=VirtualTimeLoop)
@@ -24,9 +31,21 @@ from __future__ import annotations
 import asyncio
 import selectors
 import time
+from collections.abc import Callable
 from typing import Any
 
 from ktcs_bench.errors import KtcsError
+
+MAX_SPEED = 50.0
+"""The fastest scaled clock a whole lab in one process is started on (`lab up --in-process`).
+Measured on a 2-core machine others shared: the reference lab with its trains takes a whole core
+at 70x to 110x real time (7% of one at 5x, 18% at 20x; `lab simulate` runs it at about 120x);
+at 100x its links went down within 20 s and stayed down, at 50x they stayed up but for a few
+resyncs while the machine was busiest."""
+
+BEHIND = 1.0
+"""Seconds of the lab's clock a timer may be overdue before a scaled loop calls itself behind:
+a Type I link gives up on a frame's ACK after about that long (four ACK timeouts)."""
 
 
 class VirtualDeadlock(KtcsError):
@@ -56,6 +75,7 @@ class _VirtualSelector(selectors.BaseSelector):
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         loop = self.loop
         assert loop is not None
+        loop._wall_chores()
         if timeout is None:
             raise VirtualDeadlock(
                 f"nothing is ready and nothing is scheduled at virtual time {loop.time():.6f} s: "
@@ -76,11 +96,34 @@ def _fd(fileobj: Any) -> int:
     return fileobj if isinstance(fileobj, int) else int(fileobj.fileno())
 
 
-class VirtualTimeLoop(asyncio.SelectorEventLoop):
+class _WallChores:
+    """`call_every_wall` for a loop (checked by its selector at every step)."""
+
+    _chores: list[list[Any]]  # [period, next wall time, callback]
+
+    def call_every_wall(self, period: float, callback: Callable[[], None]) -> None:
+        """Call `callback()` between two steps of the loop about every `period` seconds of wall
+        time (first after `period`), for as long as the loop runs. For what must not change the
+        run: on the virtual clock a callback that schedules work on the loop makes the run depend
+        on the machine's speed."""
+        self._chores.append([period, time.monotonic() + period, callback])
+
+    def _wall_chores(self) -> None:
+        if not self._chores:
+            return
+        now = time.monotonic()
+        for chore in self._chores:
+            if now >= chore[1]:
+                chore[1] = now + chore[0]
+                chore[2]()
+
+
+class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
     """An asyncio loop on a virtual clock that starts at `start` and jumps from timer to timer."""
 
     def __init__(self, start: float = 0.0) -> None:
         self._virtual_now = start
+        self._chores = []
         selector = _VirtualSelector()
         super().__init__(selector)
         selector.loop = self
@@ -100,12 +143,16 @@ class VirtualTimeLoop(asyncio.SelectorEventLoop):
 
 class _ScaledSelector(selectors.DefaultSelector):
     speed = 1.0
+    loop: ScaledTimeLoop | None = None
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        if self.loop is not None:
+            self.loop._wall_chores()
+            self.loop._check_behind()
         return super().select(None if timeout is None else timeout / self.speed)
 
 
-class ScaledTimeLoop(asyncio.SelectorEventLoop):
+class ScaledTimeLoop(_WallChores, asyncio.SelectorEventLoop):
     """An asyncio loop whose clock runs `speed` times the wall clock, from `start`; real I/O."""
 
     def __init__(self, speed: float = 1.0, start: float = 0.0) -> None:
@@ -115,9 +162,36 @@ class ScaledTimeLoop(asyncio.SelectorEventLoop):
             self.close()
             raise ValueError(f"speed must be > 0, not {speed}")
         selector.speed = speed
+        selector.loop = self
         self.speed = speed
         self._origin = time.monotonic()
         self._start = start
+        self._chores = []
+        self.behind = 0.0  # the most a timer due since `watch_behind` has been late
+        self._on_behind: Callable[[float], None] | None = None
+        self._watched_from: float | None = None
 
     def time(self) -> float:
         return self._start + (time.monotonic() - self._origin) * self.speed
+
+    def watch_behind(self, on_behind: Callable[[float], None]) -> None:
+        """From now on, call `on_behind(late)` once, the first time the loop comes to a timer
+        more than `BEHIND` seconds of its clock after it was due (`late`: by how much). Timers
+        due before now do not count: a lab's start is one long step, not a clock running away."""
+        self._on_behind = on_behind
+        self._watched_from = self.time()
+        self.behind = 0.0
+
+    def _check_behind(self) -> None:
+        """How late the earliest timer is (asyncio has dropped cancelled ones from the head)."""
+        scheduled: list[asyncio.TimerHandle] = self._scheduled  # type: ignore[attr-defined]
+        if self._watched_from is None or not scheduled:
+            return
+        due = scheduled[0].when()
+        late = self.time() - due
+        if due < self._watched_from or late <= self.behind:
+            return
+        self.behind = late
+        if late > BEHIND and self._on_behind is not None:
+            on_behind, self._on_behind = self._on_behind, None  # once
+            on_behind(late)
