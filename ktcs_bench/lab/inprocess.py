@@ -12,7 +12,9 @@ two ends of every link stands the tap a live lab puts there (`tap.wire.WireTap` 
 
 It keeps `events.jsonl` (every device's events, in the loop's time: each link going up and down
 among them, once a transition at each end, as that device logs it), a pcapng capture per link,
-and a summary. It is a `lab.access.LabAccess`.
+and a summary. Both files are flushed about every wall second (`FLUSH_EVERY`), so a run killed
+outright leaves events and captures that end at about the same time; a run stopped early
+(`interrupted`) says so in its summary. It is a `lab.access.LabAccess`.
 
     lab = InProcessLab("reference", seed=1, out=Path("run"))
     lab.run(lambda lab: lab.sleep(3600))       # up, the coroutine, down; on a fresh loop
@@ -43,13 +45,15 @@ from ktcs_bench.runtime import server_token, this_process
 from ktcs_bench.tap.runner import Tap
 from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.tap.wire import WireTap
-from ktcs_bench.timed.vloop import ScaledTimeLoop, VirtualTimeLoop
+from ktcs_bench.timed.vloop import MAX_SPEED, ScaledTimeLoop, VirtualTimeLoop
 from ktcs_bench.transport import jsonlines, memory, net
 from ktcs_bench.transport.memory import VIRTUAL_SCHEME, MemoryNetwork
 
 log = logging.getLogger("ktcs_bench.lab")
 T = TypeVar("T")
 CLOCKS = ("virtual", "scaled")
+FLUSH_EVERY = 1.0
+"""Wall seconds between flushes of events.jsonl and the captures during a run."""
 
 
 class InProcessLab:
@@ -72,6 +76,11 @@ class InProcessLab:
     ) -> None:
         if clock not in CLOCKS:
             raise UsageError(f"clock must be one of {', '.join(CLOCKS)}, not {clock!r}")
+        if clock == "scaled" and not 0 < speed <= MAX_SPEED:
+            raise UsageError(
+                f"a lab in one process runs at most {MAX_SPEED:g}x real time (above that this "
+                f"machine's devices cannot keep their links up), not {speed:g}x"
+            )
         self.topology = (
             lab_file
             if isinstance(lab_file, Lab)
@@ -103,6 +112,8 @@ class InProcessLab:
         self.crashed: dict[str, str] = {}
         self.notices: list[str] = []
         self.stop_requested = asyncio.Event()
+        # why the run ended early (a signal's name), for the summary; None: it ran its course
+        self.interrupted: str | None = None
         self.control_address = ""
         self.served: dict[str, str] = {}  # device -> the real address of its control port
         self._servers: list[net.Server] = []
@@ -115,12 +126,25 @@ class InProcessLab:
         self._virtual = 0.0
 
     # -- running it ---------------------------------------------------------------------------
-    def new_loop(self) -> asyncio.AbstractEventLoop:
-        return VirtualTimeLoop() if self.clock == "virtual" else ScaledTimeLoop(self.speed)
+    def new_loop(self) -> VirtualTimeLoop | ScaledTimeLoop:
+        if self.clock == "virtual":
+            return VirtualTimeLoop()
+        return ScaledTimeLoop(self.speed)
+
+    def _behind(self, late: float) -> None:
+        """The scaled clock runs ahead of what this machine does (said once: `watch_behind`)."""
+        log.warning(
+            "lab %s: this machine does not keep up with the clock at %gx real time (a timer "
+            "came %.1f s late on the lab's clock): links will time out and resync; a lower "
+            "--speed keeps up (said once)", self.topology.name, self.speed, late,
+        )  # fmt: skip
 
     def run(self, main: Callable[[InProcessLab], Awaitable[T]]) -> T:
-        """Up, `await main(self)`, down -- on a fresh loop of this lab's clock."""
+        """Up, `await main(self)`, down -- on a fresh loop of this lab's clock. Between the loop's
+        steps the files are flushed about every `FLUSH_EVERY` wall seconds."""
         loop = self.new_loop()
+        if self.out is not None:
+            loop.call_every_wall(FLUSH_EVERY, self.flush)
         try:
             return loop.run_until_complete(self._session(main))
         finally:
@@ -181,9 +205,15 @@ class InProcessLab:
         """The capture files as they stand now (what the taps wrote is flushed onto them)."""
         if self.out is None:
             return {}
+        self.flush()
+        return {lk.name: self._capture_path(lk) for lk in self.topology.links if lk.tap}
+
+    def flush(self) -> None:
+        """What the run wrote so far onto its files: events.jsonl and every capture."""
+        if self._events is not None:
+            self._events.flush()
         for flush in self._flushers:
             flush()
-        return {lk.name: self._capture_path(lk) for lk in self.topology.links if lk.tap}
 
     # -- start ---------------------------------------------------------------------------------
     async def up(self) -> None:
@@ -200,6 +230,8 @@ class InProcessLab:
                 raise UsageError(f"cannot write the run's output to {self.out}: {exc}") from None
         await start_in_order(self.topology, self, self.endpoints)
         await self._trains_to_ctc()
+        if isinstance(loop, ScaledTimeLoop):  # from here the clock should keep up (it is started)
+            loop.watch_behind(self._behind)
 
     async def type2_end(self, link: LinkSpec, index: int, ctc: tuple[str, int]) -> str:
         if not link.tap:
@@ -361,6 +393,10 @@ class InProcessLab:
             "speed_up": round(virtual / wall, 1) if wall > 0 else None,
             "trains": trains,
             "crashed": dict(sorted(self.crashed.items())),
+            # stopped early: by what, and at what time of the lab's clock (= virtual_s)
+            "interrupted": None
+            if self.interrupted is None
+            else {"by": self.interrupted, "virtual_s": round(virtual, 6)},
         }
 
     # -- stop --------------------------------------------------------------------------------------
