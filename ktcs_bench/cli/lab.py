@@ -13,6 +13,7 @@ from typing import Any
 from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
+from ktcs_bench.timed.vloop import MAX_SPEED
 from ktcs_bench.transport import jsonlines
 
 EPILOG = """\
@@ -24,7 +25,22 @@ examples:
   ktcs-bench lab down
   ktcs-bench lab simulate --for 3600 --seed 1 --out run1   # an hour of the lab in virtual time
   ktcs-bench lab up --in-process --speed 10                # one process, 10x real time, console
+
+Ctrl-C (or SIGTERM) stops `lab up` and `lab simulate`: exit 130 (143 on SIGTERM); a simulation
+writes its events, captures and summary up to that moment. `lab down`, or `--for` running out,
+ends `lab up` with exit 0.
 """
+
+
+def _speed(text: str) -> float:
+    """The argparse type of `--speed`: a positive number up to `MAX_SPEED`."""
+    value: float = positive(float, 0.001)(text)
+    if value > MAX_SPEED:
+        raise argparse.ArgumentTypeError(
+            f"at most {MAX_SPEED:g} (times real time), not {text!r}: above that a lab in one "
+            "process cannot keep its links up"
+        )
+    return value
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -48,8 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="every device in this one process on a scaled clock (the light way on a small "
         "machine), with the web console and control ports on real sockets",
     )  # fmt: skip
-    up.add_argument("--speed", type=positive(float, 0.001), default=1.0,
-                    help="--in-process: the clock's speed, times real time (default 1)")  # fmt: skip
+    up.add_argument("--speed", type=_speed, default=None,
+                    help=f"with --in-process: the clock's speed, times real time (default 1, at "
+                    f"most {MAX_SPEED:g}; a warning says when this machine does not keep up)")  # fmt: skip
     sim = lsub.add_parser(
         "simulate", help="run the whole lab in this process on a virtual clock, as fast as it goes",
         description="Run every device of the lab in this process on a virtual clock that jumps "
@@ -83,6 +100,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def run(args: argparse.Namespace) -> int:
     if args.lab_command == "up":
+        if args.speed is not None and not args.in_process:
+            raise UsageError("lab up: --speed sets the clock of a lab in one process: give "
+                             "--in-process too (a lab of processes runs on the wall clock)")  # fmt: skip
         return _up_in_process(args) if args.in_process else _up(args)
     if args.lab_command == "simulate":
         return _simulate(args)
@@ -159,10 +179,16 @@ def _up(args: argparse.Namespace) -> int:
     colour = args.colour
     runner = LabRunner(lab, unpaced=args.unpaced)
 
-    async def main() -> int:
+    stopped_by: list[int] = []  # the signal that stopped it (exit 128 + it), if one did
+
+    def on_signal(sig: int) -> None:
+        stopped_by.append(sig)
+        runner.stop_requested.set()
+
+    async def main() -> None:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
-            loop.add_signal_handler(sig, runner.stop_requested.set)
+            loop.add_signal_handler(sig, on_signal, sig)
         try:
             if not args.json:
                 print(
@@ -196,12 +222,12 @@ def _up(args: argparse.Namespace) -> int:
                         print(("\x1b[2J\x1b[H" + link_map_text(runner.link_map(), colour) + "\n\n"
                                if colour else "") + text, flush=True)  # fmt: skip
                         last = text
+                left = args.interval if end is None else min(args.interval, end - loop.time())
                 try:
-                    async with asyncio.timeout(args.interval):
+                    async with asyncio.timeout(max(0.0, left)):  # the status again, or --for ends
                         await runner.stop_requested.wait()
                 except TimeoutError:
                     pass
-            return 0
         finally:
             await runner.down()
             if not args.json:
@@ -209,7 +235,8 @@ def _up(args: argparse.Namespace) -> int:
                     f"lab {lab.name}: stopped; every device process ended and its ptys are closed"
                 )
 
-    return asyncio.run(main())
+    asyncio.run(main())
+    return 128 + stopped_by[0] if stopped_by else 0
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -217,40 +244,42 @@ def _simulate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ktcs_bench.lab.inprocess import InProcessLab
-    from ktcs_bench.timed.vloop import VirtualDeadlock
+    from ktcs_bench.timed.vloop import VirtualDeadlock, VirtualTimeLoop
 
     logging.basicConfig(level=logging.ERROR, stream=sys.stderr)
     if args.replay is not None:
         return _replay(args)
     if args.duration is None or args.out is None:
         raise UsageError("lab simulate: give --for DURATION and --out DIR (or --replay FILE)")
-    lab = InProcessLab(args.lab, seed=args.seed, out=Path(args.out))
     watched = sys.stderr.isatty()
-    # Ctrl-C ends the run at the next step, cleanly: what ran is written (the virtual loop never
-    # waits on its wake-up pipe, so the interrupt is a flag, not an asyncio signal handler)
-    interrupted: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append(1))
+    with _Stop() as stop:  # Ctrl-C and SIGTERM end the run at once, and what ran is written
+        lab = InProcessLab(args.lab, seed=args.seed, out=Path(args.out))
 
-    async def main(lab: InProcessLab) -> None:
-        step = max(1.0, args.duration / 50)
-        done = 0.0
-        while done < args.duration and not interrupted:
-            await lab.sleep(min(step, args.duration - done))
-            done = min(args.duration, done + step)
+        def progress() -> None:
+            s = lab.summary()
+            print(f"\rvirtual {s['virtual_s']:.0f} / {args.duration:g} s, wall {s['wall_s']:.1f} s "
+                  f"({s['speed_up']}x)", end="", file=sys.stderr, flush=True)  # fmt: skip
+
+        async def main(lab: InProcessLab) -> None:
+            loop = asyncio.get_running_loop()
+            if watched and isinstance(loop, VirtualTimeLoop):
+                loop.call_every_wall(0.5, progress)
+            try:
+                async with asyncio.timeout(args.duration):
+                    await stop.wait()
+            except TimeoutError:
+                pass
+            if stop.signum is not None:
+                lab.interrupted = signal.Signals(stop.signum).name
             if watched:
-                s = lab.summary()
-                print(f"\rvirtual {done:.0f} / {args.duration:g} s, wall {s['wall_s']:.1f} s "
-                      f"({s['speed_up']}x)", end="", file=sys.stderr, flush=True)  # fmt: skip
-        if watched:
-            print(file=sys.stderr)
+                progress()
+                print(file=sys.stderr)
 
-    try:
-        lab.run(main)
-    except VirtualDeadlock as exc:
-        print(f"ktcs-bench: the lab stalled: {exc}", file=sys.stderr)
-        return 3
-    finally:
-        signal.signal(signal.SIGINT, previous)
+        try:
+            lab.run(main)
+        except VirtualDeadlock as exc:
+            print(f"ktcs-bench: the lab stalled: {exc}", file=sys.stderr)
+            return 3
     summary = json.loads((Path(args.out) / "summary.json").read_text(encoding="utf-8"))
     if args.json:
         print(json.dumps(summary))
@@ -262,10 +291,51 @@ def _simulate(args: argparse.Namespace) -> int:
             print(f"  {name}: {json.dumps(train)}")
     for name, why in summary["crashed"].items():
         print(f"!! {name} crashed: {why}", file=sys.stderr)
-    if interrupted:
-        print(f"interrupted after {summary['virtual_s']:g} s of virtual time", file=sys.stderr)
-        return 130
+    if stop.signum is not None:
+        print(f"interrupted ({lab.interrupted}) after {summary['virtual_s']:g} s of virtual time; "
+              f"events, captures and summary are written up to there", file=sys.stderr)  # fmt: skip
+        return 128 + stop.signum
     return 3 if summary["crashed"] else 0
+
+
+class _Stop:
+    """SIGINT and SIGTERM as a request to end a lab in this process at once (`with _Stop() as
+    stop:` ... `await stop.wait()` on the lab's loop; `signum`: the first that came). Python's
+    own signal handlers, not the loop's: a virtual loop never waits on its wake-up pipe, where
+    asyncio sees its handlers' signals; and a signal while the lab starts, before `wait`, is kept
+    (`wait` returns at once)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._event: asyncio.Event | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> _Stop:
+        for sig in self.SIGNALS:
+            self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, previous in self._previous.items():
+            signal.signal(sig, previous)
+
+    def _handle(self, signum: int, frame: object) -> None:
+        if self.signum is None:
+            self.signum = signum
+        loop, event = self._loop, self._event
+        if loop is not None and event is not None and not loop.is_closed():
+            # between two steps of the loop, not inside the one this handler interrupted
+            loop.call_soon_threadsafe(event.set)
+
+    async def wait(self) -> None:
+        """Until a signal comes (at once if one has)."""
+        self._event = asyncio.Event()
+        self._loop = asyncio.get_running_loop()
+        if self.signum is None:
+            await self._event.wait()
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -304,13 +374,22 @@ def _up_in_process(args: argparse.Namespace) -> int:
         print(line, file=sys.stderr)
     private_dir(lab_dir(spec.name))
     token_file = server_token(lab_dir(spec.name) / "token")[1]
-    lab = InProcessLab(spec, clock="scaled", speed=args.speed, console=True, token_file=token_file)
+    speed = 1.0 if args.speed is None else args.speed
+    lab = InProcessLab(spec, clock="scaled", speed=speed, console=True, token_file=token_file)
     colour = args.colour
 
     async def main(lab: InProcessLab) -> None:
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            loop.add_signal_handler(sig, lab.stop_requested.set)
+        async def stop_on_signal() -> None:
+            await stop.wait()
+            lab.stop_requested.set()
+
+        watch = asyncio.create_task(stop_on_signal())
+        try:
+            await serve(lab)
+        finally:
+            watch.cancel()
+
+    async def serve(lab: InProcessLab) -> None:
         await lab.serve()
         links = lab.link_map()
         ctc = lab.ready.get(next((d.name for d in spec.of_kind("ctc")), ""), {})
@@ -319,7 +398,7 @@ def _up_in_process(args: argparse.Namespace) -> int:
                               "console": ctc.get("console")}), flush=True)  # fmt: skip
         else:
             print(link_map_text(links, colour))
-            print(f"lab {spec.name} is up in this process at {args.speed:g}x real time "
+            print(f"lab {spec.name} is up in this process at {speed:g}x real time "
                   f"(control {lab.control_address}"
                   + (f", console {ctc['console']}" if ctc.get("console") else "")
                   + "); Ctrl-C or `ktcs-bench lab down` stops it", flush=True)  # fmt: skip
@@ -336,13 +415,16 @@ def _up_in_process(args: argparse.Namespace) -> int:
                 if text != last:
                     print(text, flush=True)
                     last = text
+            period = args.interval * speed  # the lab's clock
+            left = period if end is None else min(period, end - lab.now())
             try:
-                async with asyncio.timeout(args.interval * args.speed):
+                async with asyncio.timeout(max(0.0, left)):  # the status again, or --for ends
                     await lab.stop_requested.wait()
             except TimeoutError:
                 pass
 
-    lab.run(main)
+    with _Stop() as stop:  # a signal while the lab starts stops it as soon as it is up
+        lab.run(main)
     if not args.json:
         print(f"lab {spec.name}: stopped")
-    return 0
+    return 0 if stop.signum is None else 128 + stop.signum
