@@ -41,7 +41,7 @@ examples:
 colour: on a terminal, unless NO_COLOR is set; --colour / --no-colour (any command) decide.
 
 exit codes: 0 ok, 1 a check failed (bad CRC, failed case), 2 usage/config error,
-            3 peer or I/O failure, 130 interrupted.
+            3 peer or I/O failure, 130 interrupted (143: stopped by SIGTERM).
 """
 
 

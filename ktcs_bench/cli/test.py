@@ -1,7 +1,7 @@
 """`ktcs-bench test run PROCEDURES...`: integration test procedures against a lab, with verdicts
 and reports (`ktcs_bench.procedure`). Exit codes: 0 every procedure passed, 1 one failed, 2 a bad
-procedure file, report path or usage, 3 the lab unreachable, 130 interrupted (SIGINT or SIGTERM:
-the faults set are cleared, the reports written)."""
+procedure file, report path or usage, 3 the lab unreachable, 130 interrupted by SIGINT, 143 by
+SIGTERM (the faults set are cleared, the reports written)."""
 
 from __future__ import annotations
 
@@ -33,8 +33,8 @@ ARS) and steps -- CTC commands in the `ctc` console's words, train actions, faul
 expectations with a time limit. The format: docs/procedures.md.
 
 exit codes: 0 every procedure passed, 1 a procedure failed, 2 a bad procedure file, report path
-or usage, 3 the lab unreachable, 130 interrupted by SIGINT or SIGTERM (every fault the run set is
-cleared first; the reports are written, the procedure it was in an error, the rest skipped).
+or usage, 3 the lab unreachable, 130 interrupted by SIGINT (Ctrl-C), 143 by SIGTERM (every fault the
+run set is cleared first; the reports are written, the procedure it was in an error, the rest skipped).
 """
 
 
@@ -238,7 +238,7 @@ def run(args: argparse.Namespace) -> int:
                             ("error", "in error"), ("skipped", "not run")) if counts[v])
                   + (" (interrupted)" if interrupted else ""), file=sys.stderr)  # fmt: skip
     if interrupted:
-        return 130
+        return 128 + stop.signum  # 130 Ctrl-C, 143 SIGTERM, as the shell reports a signal
     gone = next((r.lab_gone for r in results if r.lab_gone), "")
     if gone:
         raise PeerError(gone)
