@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import contextlib
 import signal
+import time
 from pathlib import Path
 
 from ktcs_bench.cli._common import duration, port
@@ -65,7 +66,9 @@ async def _serve(args: argparse.Namespace) -> None:
     model = CtcModel(line)
     ctc = CtcServer(sorted(line.stations), model.tables, host=args.host, port=args.ctc_port)
     await ctc.start()
-    console = ConsoleServer(Desk(model, ctc), taps=args.tap, host=args.host, port=args.port)
+    console = ConsoleServer(
+        Desk(model, ctc, clock=time.time), taps=args.tap, host=args.host, port=args.port
+    )
     await console.start()
     rigs = []
     if args.demo_ixls:

@@ -5,12 +5,15 @@ through the CTC's control port, or a click on the web console): the model turns 
 `Action` (or refuses it), the server sends the CONTROL and waits for its CONTROL_RESULT, and the
 command log records the command in the operator's words with what came of it. `outstanding`
 counts, per station, the controls sent and awaiting their CONTROL_RESULT (the console bounds it).
+
+The desk reads no clock of its own: `clock` is the lab's, given by whoever builds the desk (the
+CTC device passes its own, wall time live and the loop's virtual time in a lab in one process), so
+the log's times and durations are the lab's.
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -47,13 +50,20 @@ class Outcome:
 
 
 class Desk:
-    """Carries out operator commands for one CTC (`model` reads the tables `server` feeds)."""
+    """Carries out operator commands for one CTC (`model` reads the tables `server` feeds);
+    `clock` gives the lab's time, in seconds, for the command log."""
 
     def __init__(
-        self, model: CtcModel, server: CtcServer, *, timeout: float = CONTROL_TIMEOUT_S
+        self,
+        model: CtcModel,
+        server: CtcServer,
+        *,
+        clock: Callable[[], float],
+        timeout: float = CONTROL_TIMEOUT_S,
     ) -> None:
         self.model = model
         self.server = server
+        self.clock = clock
         self.timeout = timeout
         self.log = CommandLog()
         self.outstanding: dict[int, int] = {}  # station -> controls awaiting their result
@@ -66,7 +76,7 @@ class Desk:
     ) -> Outcome:
         """Carry out one command (see `CtcModel.action` for its words); `on_sent` is told as its
         CONTROL goes out."""
-        entry = self.log.record(time.time(), command, source)
+        entry = self.log.record(self.clock(), command, source)
         try:
             action = self.model.action(command)
         except UsageError as exc:
@@ -76,7 +86,7 @@ class Desk:
         entry["code"] = action.name
         if on_sent is not None:
             on_sent(action)
-        t0 = time.monotonic()
+        t0 = self.clock()
         st = action.station
         self.outstanding[st] = self.outstanding.get(st, 0) + 1
         try:
@@ -89,7 +99,7 @@ class Desk:
             why = answer.reason_name or f"reason {answer.reason}"
             outcome = Outcome(action, answer.accepted, None if answer.accepted else why,
                               answer.reason)  # fmt: skip
-            entry.update(result=outcome.result, seconds=round(time.monotonic() - t0, 4))
+            entry.update(result=outcome.result, seconds=round(self.clock() - t0, 4))
             log.info("station %d %s=%d -> %s", action.station, action.name, action.value,
                      outcome.result)  # fmt: skip
             return outcome

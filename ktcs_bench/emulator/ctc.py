@@ -143,7 +143,7 @@ class CtcDevice(Device):
             allowed_sources=list(allowed_sources) if allowed_sources else None,
             host=listen[0], port=listen[1], ssl=ssl,
         )  # fmt: skip
-        self.desk = Desk(self.model, self.server)
+        self.desk = Desk(self.model, self.server, clock=lambda: self.clock())  # the lab's time
         self.console_address = console
         self.console_origins = console_origins or []
         self.taps = taps or []

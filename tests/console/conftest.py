@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import tempfile
 import threading
+import time
 from collections.abc import Awaitable, Callable, Iterator
 from concurrent.futures import Future
 from pathlib import Path
@@ -75,7 +76,7 @@ class Bench:
     async def start(self) -> None:
         self.model = CtcModel(self.line)
         self.ctc = CtcServer(sorted(self.line.stations), self.model.tables)
-        desk = Desk(self.model, self.ctc)
+        desk = Desk(self.model, self.ctc, clock=time.time)
         await self.ctc.start()
         self.tap = TcpTap(("127.0.0.1", 0), ("127.0.0.1", self.ctc.port), names=("ixl", "ctc"))
         await asyncio.to_thread(self.tap.start)

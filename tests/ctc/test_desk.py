@@ -35,7 +35,7 @@ def test_commands_from_the_port_and_the_console_go_one_way_into_one_log() -> Non
                 answers.append(e)
 
         async with CtcServer(sorted(LINE.stations), model.tables, on_event=seen) as ctc:
-            desk = Desk(model, ctc, timeout=5.0)
+            desk = Desk(model, ctc, clock=asyncio.get_running_loop().time, timeout=5.0)
             rig = RigIxl(LINE, 18, mode=Mode.CENTER)
             rig.start("127.0.0.1", ctc.port)
             try:

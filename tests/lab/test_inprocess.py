@@ -124,6 +124,28 @@ def test_a_route_set_at_the_ctc_clears_the_signal_and_steps_the_atc_codes(
     run(main, empty_line)
 
 
+def test_the_ctc_command_log_is_stamped_with_the_labs_virtual_time(empty_line: Path) -> None:
+    """The desk takes the lab's clock: in a lab in one process the command log's times and
+    durations are virtual seconds, not the wall clock's."""
+
+    async def main(lab: InProcessLab) -> None:
+        await until(lab, "lab up", lambda: all_up(lab))
+        await lab.sleep(7.25)  # the log's time is the lab's, wherever its clock stands
+        before = lab.now()
+        answer = await lab.device(
+            "ctc", {"cmd": "route", "action": "set", "station": 18, "entry": "01", "exit": "11"}
+        )
+        after = lab.now()
+        assert answer["ok"] and answer["result"] == "accepted", answer
+        entries = (await lab.device("ctc", {"cmd": "log"}))["log"]
+        assert [e["command"] for e in entries] == ["route set 18 01 11"]
+        entry = entries[0]
+        assert before <= entry["time"] <= after, (before, entry, after)
+        assert 0 <= entry["seconds"] <= after - before
+
+    run(main, empty_line)
+
+
 async def _codes_if(lab: LabAccess, atc: str, ok: Callable[[dict[str, Any]], bool]) -> Any:
     codes = (await status(lab, atc))["codes"]
     return codes if codes and ok(codes) else None
