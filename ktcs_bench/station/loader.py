@@ -17,6 +17,7 @@ from typing import Any, TypeVar
 
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, excerpt
+from ktcs_bench.schema import convert
 from ktcs_bench.station.model import (
     ASPECT_ORDER,
     DIRECTIONS,
@@ -35,6 +36,18 @@ from ktcs_bench.station.model import (
     SpeedLimit,
     Station,
     TrackCircuit,
+)
+from ktcs_bench.station.shapes import (
+    AtcShape,
+    IntervalShape,
+    LineShape,
+    LineTrackCircuitShape,
+    PointShape,
+    RouteShape,
+    SettingShape,
+    SignalShape,
+    StationShape,
+    TrackCircuitShape,
 )
 
 T = TypeVar("T")
@@ -150,191 +163,222 @@ def _kind(value: object) -> str:
 # station files
 
 
+class _StationRefs:
+    """What the parts of one station file may refer to, filled in as they are read."""
+
+    def __init__(self, doc: _Doc, number: int, tracks: tuple[str, ...]) -> None:
+        self.doc = doc
+        self.number = number
+        self.tracks = tracks
+        self.tc_names: set[str] = set()
+        self.approach_names: set[str] = set()
+        self.points: dict[str, Point] = {}
+        self.signals: dict[str, Signal] = {}
+
+    def tc(self, name: str, place: str, allowed: set[str] | None = None) -> str:
+        if name not in (self.tc_names if allowed is None else allowed):
+            raise self.doc.fail(place, f"unknown track circuit {excerpt(name)}")
+        return name
+
+    def choice(self, value: str, place: str, allowed: Iterable[str]) -> str:
+        allowed = tuple(allowed)
+        if value not in allowed:
+            raise self.doc.fail(place, f"must be one of {', '.join(allowed)}, not {excerpt(value)}")
+        return value
+
+
+def _names(values: tuple[str | int, ...] | None) -> tuple[str, ...]:
+    return tuple(str(v) for v in values or ())
+
+
+def _track_circuit(s: _StationRefs, o: TrackCircuitShape, place: str) -> TrackCircuit:
+    lo, hi = o.from_m, o.to_m
+    if hi <= lo:
+        raise s.doc.fail(f"{place}.to_m", f"must be beyond from_m ({lo:g}), not {hi:g}")
+    length = hi - lo if o.length_m is None else o.length_m
+    if length <= 0:
+        raise s.doc.fail(f"{place}.length_m", "must be positive")
+    on = _names(o.tracks)
+    for i, t in enumerate(on):
+        if t not in s.tracks:
+            raise s.doc.fail(
+                f"{place}.tracks[{i}]", f"unknown track {excerpt(t)} (tracks: {s.tracks})"
+            )
+    return TrackCircuit(str(o.name), lo, hi, length, s.number, on)
+
+
+def _point(s: _StationRefs, o: PointShape, place: str) -> Point:
+    refs = _names(o.track_circuits)
+    if not refs:
+        raise s.doc.fail(f"{place}.track_circuits", "a point needs at least one track circuit")
+    for i, r in enumerate(refs):
+        s.tc(r, f"{place}.track_circuits[{i}]")
+    if o.throw_time_s <= 0:
+        raise s.doc.fail(f"{place}.throw_time_s", "must be positive")
+    return Point(str(o.name), refs, o.position_m, o.throw_time_s)
+
+
+def _signal(s: _StationRefs, o: SignalShape, place: str) -> Signal:
+    kind = s.choice(str(o.kind), f"{place}.kind", SIGNAL_KINDS)
+    up = s.choice(str(o.direction), f"{place}.direction", DIRECTIONS) == "up"
+    aspects = _names(o.aspects)
+    for i, a in enumerate(aspects):
+        if a not in ASPECT_ORDER:
+            raise s.doc.fail(
+                f"{place}.aspects[{i}]", f"unknown aspect {excerpt(a)} ({ASPECT_ORDER})"
+            )
+    if kind != "marker" and "R" not in aspects:
+        raise s.doc.fail(f"{place}.aspects", "a signal with lamps must be able to show R (stop)")
+    if kind == "marker" and aspects:
+        raise s.doc.fail(f"{place}.aspects", "a marker has no lamps")
+    track = None if o.track is None else str(o.track)
+    if track is not None and track not in s.tracks:
+        raise s.doc.fail(f"{place}.track", f"unknown track {excerpt(track)}")
+    direction: Direction = "up" if up else "down"
+    return Signal(str(o.name), kind, direction, o.position_m, aspects, track)
+
+
+def _settings(
+    s: _StationRefs, items: tuple[SettingShape, ...] | None, place: str
+) -> tuple[PointSetting, ...]:
+    out: list[PointSetting] = []
+    for i, m in enumerate(items or ()):
+        here = f"{place}[{i}]"
+        pt = str(m.point)
+        if pt not in s.points:
+            raise s.doc.fail(f"{here}.point", f"unknown point {excerpt(pt)}")
+        normal = s.choice(str(m.position), f"{here}.position", POINT_POSITIONS) == "normal"
+        position: PointPosition = "normal" if normal else "reverse"
+        out.append(PointSetting(pt, position))
+    return tuple(out)
+
+
+def _route_ends(s: _StationRefs, o: RouteShape, place: str) -> tuple[str, str, Direction]:
+    entry, exit_ = str(o.entry), str(o.exit)
+    for key, sig in (("entry", entry), ("exit", exit_)):
+        if sig not in s.signals:
+            raise s.doc.fail(f"{place}.{key}", f"unknown signal {excerpt(sig)}")
+    if not s.signals[entry].has_lamps:
+        raise s.doc.fail(
+            f"{place}.entry", f"signal {excerpt(entry)} is a marker and cannot start a route"
+        )
+    direction = s.signals[entry].direction
+    if s.signals[exit_].direction != direction:
+        raise s.doc.fail(
+            f"{place}.exit", f"signal {excerpt(exit_)} faces the other way from {excerpt(entry)}"
+        )
+    return entry, exit_, direction
+
+
+def _route_points(
+    s: _StationRefs, o: RouteShape, place: str, route_tcs: tuple[str, ...]
+) -> tuple[tuple[PointSetting, ...], tuple[str, ...], tuple[PointSetting, ...]]:
+    """The route's point settings, its overlap's track circuits and point settings."""
+    pts = _settings(s, o.points, f"{place}.points")
+    ov_tcs: tuple[str, ...] = ()
+    ov_pts: tuple[PointSetting, ...] = ()
+    if o.overlap is not None:
+        ov_tcs = _names(o.overlap.track_circuits)
+        for i, t in enumerate(ov_tcs):
+            s.tc(t, f"{place}.overlap.track_circuits[{i}]")
+        ov_pts = _settings(s, o.overlap.points, f"{place}.overlap.points")
+    for key, group, where in (("points", pts, route_tcs), ("overlap.points", ov_pts, ov_tcs)):
+        for i, setting in enumerate(group):
+            own = s.points[setting.point]
+            if not set(own.track_circuits) & set(where):
+                raise s.doc.fail(
+                    f"{place}.{key}[{i}].point",
+                    f"point {excerpt(setting.point)} lies in {', '.join(own.track_circuits)}, "
+                    f"which is not among the track circuits it is listed with",
+                )
+    seen_pts = [p.point for p in pts + ov_pts]
+    for i, p in enumerate(seen_pts):
+        if seen_pts.index(p) != i:
+            raise s.doc.fail(f"{place}.points", f"point {excerpt(p)} is listed twice")
+    return pts, ov_tcs, ov_pts
+
+
+def _release_sections(
+    s: _StationRefs, o: RouteShape, place: str, route_tcs: tuple[str, ...]
+) -> tuple[tuple[str, ...], ...]:
+    if not o.release_sections:
+        return tuple((t,) for t in route_tcs)
+    sections: list[tuple[str, ...]] = []
+    for i, sec in enumerate(o.release_sections):
+        if not isinstance(sec, list) or not sec:
+            raise s.doc.fail(
+                f"{place}.release_sections[{i}]", "must be a non-empty list of track circuits"
+            )
+        sections.append(tuple(str(t) for t in sec))
+    flat = tuple(t for sec in sections for t in sec)
+    if flat != route_tcs:
+        raise s.doc.fail(
+            f"{place}.release_sections",
+            f"must list the route's track circuits in order {list(route_tcs)}, not {list(flat)}",
+        )
+    return tuple(sections)
+
+
+def _route(s: _StationRefs, o: RouteShape, place: str) -> Route:
+    entry, exit_, direction = _route_ends(s, o, place)
+    route_tcs = _names(o.track_circuits)
+    if not route_tcs:
+        raise s.doc.fail(f"{place}.track_circuits", "a route needs at least one track circuit")
+    for i, t in enumerate(route_tcs):
+        s.tc(t, f"{place}.track_circuits[{i}]")
+    pts, ov_tcs, ov_pts = _route_points(s, o, place, route_tcs)
+    approach = _names(o.approach)
+    for i, t in enumerate(approach):
+        s.tc(t, f"{place}.approach[{i}]", s.approach_names)
+    sections = _release_sections(s, o, place, route_tcs)
+    signal = s.signals[entry]
+    aspect = str(o.aspect) if o.aspect is not None else "G" if signal.kind != "shunt" else "W"
+    if aspect not in signal.aspects or aspect == "R":
+        raise s.doc.fail(
+            f"{place}.aspect",
+            f"{excerpt(aspect)} is not a proceed aspect of signal {excerpt(entry)} {signal.aspects}",
+        )
+    return Route(
+        name=str(o.name),
+        entry=entry,
+        exit=exit_,
+        direction=direction,
+        points=pts,
+        track_circuits=route_tcs,
+        overlap_track_circuits=ov_tcs,
+        overlap_points=ov_pts,
+        conflicts=_names(o.conflicts),
+        approach=approach,
+        release_sections=sections,
+        aspect=aspect,
+        approach_release_s=o.approach_release_s,
+        overlap_release_s=o.overlap_release_s,
+        speed_limit_kmh=o.speed_limit_kmh,
+    )
+
+
 def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) -> Station:
     """Load one station file; `external_track_circuits` are plain-line names approaches may use."""
     doc = _Doc(path)
-    raw = load_mapping(path, "station")
-    number = doc.integer(raw, "station", "")
-    name = doc.string(raw, "name", "", f"Station {number}")
-    tracks = doc.strings(raw, "tracks", "")
-
-    def build_tc(o: dict[str, Any], place: str) -> TrackCircuit:
-        nm = doc.string(o, "name", place)
-        lo, hi = doc.number(o, "from_m", place), doc.number(o, "to_m", place)
-        if hi <= lo:
-            raise doc.fail(f"{place}.to_m", f"must be beyond from_m ({lo:g}), not {hi:g}")
-        length = doc.number(o, "length_m", place, hi - lo)
-        if length <= 0:
-            raise doc.fail(f"{place}.length_m", "must be positive")
-        on = doc.strings(o, "tracks", place, optional=True)
-        for i, t in enumerate(on):
-            if t not in tracks:
-                raise doc.fail(
-                    f"{place}.tracks[{i}]", f"unknown track {excerpt(t)} (tracks: {tracks})"
-                )
-        return TrackCircuit(nm, lo, hi, length, number, on)
-
-    tcs = doc.list_of(raw, "track_circuits", "", build_tc)
+    raw = convert(load_mapping(path, "station"), StationShape, path)
+    number = raw.station
+    s = _StationRefs(doc, number, _names(raw.tracks))
+    tcs = [_track_circuit(s, o, f"track_circuits[{i}]") for i, o in enumerate(raw.track_circuits)]
     doc.unique([t.name for t in tcs], "track_circuits", "track circuit")
-    tc_names = {t.name for t in tcs}
-    approach_names = tc_names | set(external_track_circuits)
-
-    def tc_ref(name: str, place: str, allowed: set[str] = tc_names) -> str:
-        if name not in allowed:
-            raise doc.fail(place, f"unknown track circuit {excerpt(name)}")
-        return name
-
-    def build_point(o: dict[str, Any], place: str) -> Point:
-        nm = doc.string(o, "name", place)
-        refs = doc.strings(o, "track_circuits", place)
-        if not refs:
-            raise doc.fail(f"{place}.track_circuits", "a point needs at least one track circuit")
-        for i, r in enumerate(refs):
-            tc_ref(r, f"{place}.track_circuits[{i}]")
-        throw = doc.number(o, "throw_time_s", place, 4.0)
-        if throw <= 0:
-            raise doc.fail(f"{place}.throw_time_s", "must be positive")
-        return Point(nm, refs, doc.number(o, "position_m", place), throw)
-
-    points = doc.list_of(raw, "points", "", build_point)
+    s.tc_names = {t.name for t in tcs}
+    s.approach_names = s.tc_names | set(external_track_circuits)
+    points = [_point(s, o, f"points[{i}]") for i, o in enumerate(raw.points)]
     doc.unique([p.name for p in points], "points", "point")
-    point_names = {p.name for p in points}
-
-    def build_signal(o: dict[str, Any], place: str) -> Signal:
-        nm = doc.string(o, "name", place)
-        kind = doc.choice(o, "kind", place, SIGNAL_KINDS)
-        direction: Direction = (
-            "up" if doc.choice(o, "direction", place, DIRECTIONS) == "up" else "down"
-        )
-        aspects = doc.strings(o, "aspects", place, optional=True)
-        for i, a in enumerate(aspects):
-            if a not in ASPECT_ORDER:
-                raise doc.fail(
-                    f"{place}.aspects[{i}]", f"unknown aspect {excerpt(a)} ({ASPECT_ORDER})"
-                )
-        if kind != "marker" and "R" not in aspects:
-            raise doc.fail(f"{place}.aspects", "a signal with lamps must be able to show R (stop)")
-        if kind == "marker" and aspects:
-            raise doc.fail(f"{place}.aspects", "a marker has no lamps")
-        track = doc.string(o, "track", place) if "track" in o else None
-        if track is not None and track not in tracks:
-            raise doc.fail(f"{place}.track", f"unknown track {excerpt(track)}")
-        return Signal(nm, kind, direction, doc.number(o, "position_m", place), aspects, track)
-
-    signals = doc.list_of(raw, "signals", "", build_signal)
-    doc.unique([s.name for s in signals], "signals", "signal")
-    by_signal = {s.name: s for s in signals}
-
-    def settings(o: dict[str, Any], key: str, place: str) -> tuple[PointSetting, ...]:
-        out: list[PointSetting] = []
-        for i, item in enumerate(doc.items(o, key, place, optional=True)):
-            here = f"{_join(place, key)}[{i}]"
-            m = doc.mapping(item, here)
-            pt = doc.string(m, "point", here)
-            if pt not in point_names:
-                raise doc.fail(f"{here}.point", f"unknown point {excerpt(pt)}")
-            pos: PointPosition = (
-                "normal"
-                if doc.choice(m, "position", here, POINT_POSITIONS) == "normal"
-                else "reverse"
-            )
-            out.append(PointSetting(pt, pos))
-        return tuple(out)
-
-    def build_route(o: dict[str, Any], place: str) -> Route:
-        nm = doc.string(o, "name", place)
-        entry = doc.string(o, "entry", place)
-        exit_ = doc.string(o, "exit", place)
-        for key, sig in (("entry", entry), ("exit", exit_)):
-            if sig not in by_signal:
-                raise doc.fail(f"{place}.{key}", f"unknown signal {excerpt(sig)}")
-        if not by_signal[entry].has_lamps:
-            raise doc.fail(
-                f"{place}.entry", f"signal {excerpt(entry)} is a marker and cannot start a route"
-            )
-        direction = by_signal[entry].direction
-        if by_signal[exit_].direction != direction:
-            raise doc.fail(
-                f"{place}.exit",
-                f"signal {excerpt(exit_)} faces the other way from {excerpt(entry)}",
-            )
-        pts = settings(o, "points", place)
-        route_tcs = doc.strings(o, "track_circuits", place)
-        if not route_tcs:
-            raise doc.fail(f"{place}.track_circuits", "a route needs at least one track circuit")
-        for i, t in enumerate(route_tcs):
-            tc_ref(t, f"{place}.track_circuits[{i}]")
-        ov_tcs: tuple[str, ...] = ()
-        ov_pts: tuple[PointSetting, ...] = ()
-        if o.get("overlap") is not None:
-            ov = doc.mapping(o["overlap"], f"{place}.overlap")
-            ov_tcs = doc.strings(ov, "track_circuits", f"{place}.overlap")
-            for i, t in enumerate(ov_tcs):
-                tc_ref(t, f"{place}.overlap.track_circuits[{i}]")
-            ov_pts = settings(ov, "points", f"{place}.overlap")
-        for key, group, where in (("points", pts, route_tcs), ("overlap.points", ov_pts, ov_tcs)):
-            for i, s in enumerate(group):
-                own = next(p for p in points if p.name == s.point)
-                if not set(own.track_circuits) & set(where):
-                    raise doc.fail(
-                        f"{place}.{key}[{i}].point",
-                        f"point {excerpt(s.point)} lies in {', '.join(own.track_circuits)}, "
-                        f"which is not among the track circuits it is listed with",
-                    )
-        seen_pts = [s.point for s in pts + ov_pts]
-        for i, p in enumerate(seen_pts):
-            if seen_pts.index(p) != i:
-                raise doc.fail(f"{place}.points", f"point {excerpt(p)} is listed twice")
-        approach = doc.strings(o, "approach", place)
-        for i, t in enumerate(approach):
-            tc_ref(t, f"{place}.approach[{i}]", approach_names)
-        sections: list[tuple[str, ...]] = []
-        raw_sections = doc.items(o, "release_sections", place, optional=True)
-        if raw_sections:
-            for i, sec in enumerate(raw_sections):
-                here = f"{place}.release_sections[{i}]"
-                if not isinstance(sec, list) or not sec:
-                    raise doc.fail(here, "must be a non-empty list of track circuits")
-                sections.append(tuple(str(t) for t in sec))
-            flat = tuple(t for sec in sections for t in sec)
-            if flat != route_tcs:
-                raise doc.fail(
-                    f"{place}.release_sections",
-                    f"must list the route's track circuits in order {list(route_tcs)}, "
-                    f"not {list(flat)}",
-                )
-        else:
-            sections = [(t,) for t in route_tcs]
-        aspect = doc.string(o, "aspect", place, "G" if by_signal[entry].kind != "shunt" else "W")
-        if aspect not in by_signal[entry].aspects or aspect == "R":
-            raise doc.fail(
-                f"{place}.aspect",
-                f"{excerpt(aspect)} is not a proceed aspect of signal {excerpt(entry)} {by_signal[entry].aspects}",
-            )
-        limit = doc.number(o, "speed_limit_kmh", place) if "speed_limit_kmh" in o else None
-        return Route(
-            name=nm,
-            entry=entry,
-            exit=exit_,
-            direction=direction,
-            points=pts,
-            track_circuits=route_tcs,
-            overlap_track_circuits=ov_tcs,
-            overlap_points=ov_pts,
-            conflicts=doc.strings(o, "conflicts", place, optional=True),
-            approach=approach,
-            release_sections=tuple(sections),
-            aspect=aspect,
-            approach_release_s=doc.number(o, "approach_release_s", place, 90.0),
-            overlap_release_s=doc.number(o, "overlap_release_s", place, 30.0),
-            speed_limit_kmh=limit,
-        )
-
-    routes = doc.list_of(raw, "routes", "", build_route)
+    s.points = {p.name: p for p in points}
+    signals = [_signal(s, o, f"signals[{i}]") for i, o in enumerate(raw.signals)]
+    doc.unique([g.name for g in signals], "signals", "signal")
+    s.signals = {g.name: g for g in signals}
+    routes = [_route(s, o, f"routes[{i}]") for i, o in enumerate(raw.routes)]
     doc.unique([r.name for r in routes], "routes", "route")
-    _check_conflicts(doc, routes, {p.name: p for p in points})
+    _check_conflicts(doc, routes, s.points)
+    name = str(raw.name) if raw.name is not None else f"Station {number}"
     return Station(
-        number, name, str(path), tracks, tuple(tcs), tuple(points), tuple(signals), tuple(routes)
+        number, name, str(path), s.tracks, tuple(tcs), tuple(points), tuple(signals), tuple(routes)
     )
 
 
@@ -430,45 +474,79 @@ def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
     """`load_line` from the files, each file's digest appended to `read` before it is parsed."""
     read.append((path, _digest(path)))
     doc = _Doc(path)
-    raw = load_mapping(path, "line")
-    name = doc.string(raw, "line", "")
-    start, end = doc.number(raw, "start_m", ""), doc.number(raw, "end_m", "")
-    if end <= start:
-        raise doc.fail("end_m", f"must be beyond start_m ({start:g})")
-
-    station_files: list[tuple[int, Path, str]] = []
-    for i, item in enumerate(doc.items(raw, "stations", "")):
-        here = f"stations[{i}]"
-        m = doc.mapping(item, here)
-        number = doc.integer(m, "number", here)
-        file = Path(os.path.normpath(path.parent / doc.string(m, "file", here)))
-        station_files.append((number, file, here))
-    numbers = [n for n, _, _ in station_files]
+    raw = convert(load_mapping(path, "line"), LineShape, path)
+    if raw.end_m <= raw.start_m:
+        raise doc.fail("end_m", f"must be beyond start_m ({raw.start_m:g})")
+    numbers = [s.number for s in raw.stations]
     for i, n in enumerate(numbers):
         if numbers.index(n) != i:
             raise doc.fail(f"stations[{i}].number", f"duplicate station {n}")
-
-    def build_tc(o: dict[str, Any], place: str) -> TrackCircuit:
-        nm = doc.string(o, "name", place)
-        lo, hi = doc.number(o, "from_m", place), doc.number(o, "to_m", place)
-        if hi <= lo:
-            raise doc.fail(f"{place}.to_m", f"must be beyond from_m ({lo:g}), not {hi:g}")
-        owner = doc.integer(o, "station", place)
-        if owner not in numbers:
-            raise doc.fail(f"{place}.station", f"unknown station {owner}")
-        return TrackCircuit(nm, lo, hi, doc.number(o, "length_m", place, hi - lo), owner)
-
-    plain = doc.list_of(raw, "track_circuits", "", build_tc)
+    plain = [_line_track_circuit(doc, o, f"track_circuits[{i}]", numbers)
+             for i, o in enumerate(raw.track_circuits)]  # fmt: skip
     doc.unique([t.name for t in plain], "track_circuits", "track circuit")
+    stations = _line_stations(path, raw, plain, read)
     plain_names = {t.name for t in plain}
+    intervals = [_interval(doc, o, f"intervals[{i}]", numbers, plain_names)
+                 for i, o in enumerate(raw.intervals)]  # fmt: skip
+    doc.unique([iv.name for iv in intervals], "intervals", "interval")
+    gradients = [Gradient(g.from_m, g.to_m, g.permille) for g in raw.gradients]
+    limits = [SpeedLimit(s.from_m, s.to_m, s.kmh) for s in raw.speed_limits]
+    for i, s in enumerate(raw.speed_limits):
+        if s.kmh <= 0:
+            raise doc.fail(f"speed_limits[{i}].kmh", "must be positive")
+    spans: list[tuple[str, float, float]] = [("gradients", g.from_m, g.to_m) for g in gradients]
+    spans += [("speed_limits", s.from_m, s.to_m) for s in limits]
+    counts: dict[str, int] = {}
+    for key, lo, hi in spans:
+        i = counts[key] = counts.get(key, -1) + 1
+        if hi <= lo:
+            raise doc.fail(f"{key}[{i}].to_m", f"must be beyond from_m ({lo:g})")
+    codes = _speed_codes(doc, raw.atc)
+    return Line(
+        name=str(raw.line),
+        file=str(path),
+        start_m=raw.start_m,
+        end_m=raw.end_m,
+        stations=stations,
+        track_circuits=tuple(plain),
+        intervals=tuple(intervals),
+        gradients=tuple(gradients),
+        speed_limits=tuple(limits),
+        speed_codes=tuple(sorted(codes, key=lambda c: (c.kmh, c.code))),
+        service_brake_mps2=raw.atc.service_brake_mps2,
+        tag_spacing_m=raw.tags.spacing_m,
+    )
 
+
+def _line_track_circuit(
+    doc: _Doc, o: LineTrackCircuitShape, place: str, numbers: list[int]
+) -> TrackCircuit:
+    """A plain-line track circuit (between stations, owned by one of them)."""
+    lo, hi = o.from_m, o.to_m
+    if hi <= lo:
+        raise doc.fail(f"{place}.to_m", f"must be beyond from_m ({lo:g}), not {hi:g}")
+    if o.station not in numbers:
+        raise doc.fail(f"{place}.station", f"unknown station {o.station}")
+    length = hi - lo if o.length_m is None else o.length_m
+    return TrackCircuit(str(o.name), lo, hi, length, o.station)
+
+
+def _line_stations(
+    path: Path, raw: LineShape, plain: list[TrackCircuit], read: list[tuple[Path, bytes | None]]
+) -> dict[int, Station]:
+    """The stations the line names, each file loaded and checked against the line: its number,
+    no track circuit twice on the line, approaches only over its own plain track circuits."""
+    plain_names = {t.name for t in plain}
     stations: dict[int, Station] = {}
-    for number, file, _place in station_files:
+    for ref in raw.stations:
+        file = Path(os.path.normpath(path.parent / str(ref.file)))
         read.append((file, _digest(file)))
         st = load_station(file, plain_names)
-        if st.number != number:
-            raise ConfigError(file, "station", f"is {st.number}, but {path} lists it as {number}")
-        stations[number] = st
+        if st.number != ref.number:
+            raise ConfigError(
+                file, "station", f"is {st.number}, but {path} lists it as {ref.number}"
+            )
+        stations[ref.number] = st
     owner_of = {t.name: f"track_circuits ({path.name})" for t in plain}
     for st in stations.values():
         for i, t in enumerate(st.track_circuits):
@@ -479,7 +557,6 @@ def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
                     f"duplicate track circuit {excerpt(t.name)} (also in {owner_of[t.name]})",
                 )
             owner_of[t.name] = st.file
-
     owned = {t.name: t.station for t in plain}
     for st in stations.values():
         for i, r in enumerate(st.routes):
@@ -490,80 +567,39 @@ def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
                         f"routes[{i}].approach[{j}]",
                         f"track circuit {excerpt(tc)} belongs to station {owned[tc]}, not {st.number}",
                     )
+    return stations
 
-    def build_interval(o: dict[str, Any], place: str) -> Interval:
-        nm = doc.string(o, "name", place)
-        west, east = doc.integer(o, "west", place), doc.integer(o, "east", place)
-        boundary = bool(o.get("boundary", False))
-        for key, n in (("west", west), ("east", east)):
-            if n not in numbers and not boundary:
-                raise doc.fail(f"{place}.{key}", f"unknown station {n} (not a boundary interval)")
-        refs = doc.strings(o, "track_circuits", place)
-        for i, t in enumerate(refs):
-            if t not in plain_names:
-                raise doc.fail(
-                    f"{place}.track_circuits[{i}]", f"unknown track circuit {excerpt(t)}"
-                )
-        lo, hi = doc.number(o, "from_m", place), doc.number(o, "to_m", place)
-        d = doc.choice(o, "default_direction", place, DIRECTIONS, "up")
-        return Interval(nm, west, east, lo, hi, refs, "up" if d == "up" else "down", boundary)
 
-    intervals = doc.list_of(raw, "intervals", "", build_interval)
-    doc.unique([iv.name for iv in intervals], "intervals", "interval")
-
-    def build_grad(o: dict[str, Any], place: str) -> Gradient:
-        return Gradient(
-            doc.number(o, "from_m", place),
-            doc.number(o, "to_m", place),
-            doc.number(o, "permille", place),
+def _interval(
+    doc: _Doc, o: IntervalShape, place: str, numbers: list[int], plain_names: set[str]
+) -> Interval:
+    for key, n in (("west", o.west), ("east", o.east)):
+        if n not in numbers and not o.boundary:
+            raise doc.fail(f"{place}.{key}", f"unknown station {n} (not a boundary interval)")
+    refs = _names(o.track_circuits)
+    for i, t in enumerate(refs):
+        if t not in plain_names:
+            raise doc.fail(f"{place}.track_circuits[{i}]", f"unknown track circuit {excerpt(t)}")
+    d = str(o.default_direction)
+    if d not in DIRECTIONS:
+        raise doc.fail(
+            f"{place}.default_direction",
+            f"must be one of {', '.join(DIRECTIONS)}, not {excerpt(d)}",
         )
+    direction: Direction = "up" if d == "up" else "down"
+    return Interval(str(o.name), o.west, o.east, o.from_m, o.to_m, refs, direction, o.boundary)
 
-    def build_limit(o: dict[str, Any], place: str) -> SpeedLimit:
-        kmh = doc.number(o, "kmh", place)
-        if kmh <= 0:
-            raise doc.fail(f"{place}.kmh", "must be positive")
-        return SpeedLimit(doc.number(o, "from_m", place), doc.number(o, "to_m", place), kmh)
 
-    gradients = doc.list_of(raw, "gradients", "", build_grad)
-    limits = doc.list_of(raw, "speed_limits", "", build_limit)
-    spans: list[tuple[str, float, float]] = [("gradients", g.from_m, g.to_m) for g in gradients]
-    spans += [("speed_limits", s.from_m, s.to_m) for s in limits]
-    counts: dict[str, int] = {}
-    for key, lo, hi in spans:
-        i = counts[key] = counts.get(key, -1) + 1
-        if hi <= lo:
-            raise doc.fail(f"{key}[{i}].to_m", f"must be beyond from_m ({lo:g})")
-
-    atc = doc.mapping(doc.get(raw, "atc", ""), "atc")
-
-    def build_code(o: dict[str, Any], place: str) -> SpeedCode:
-        kmh = doc.number(o, "kmh", place)
-        if kmh < 0:
-            raise doc.fail(f"{place}.kmh", "must not be negative")
-        return SpeedCode(doc.integer(o, "code", place), kmh)
-
-    codes = doc.list_of(atc, "codes", "atc", build_code)
-    code_numbers = [c.code for c in codes]
-    for i, c in enumerate(code_numbers):
-        if code_numbers.index(c) != i:
-            raise doc.fail(f"atc.codes[{i}].code", f"duplicate code {c}")
-    if not any(c.kmh == 0 for c in codes):
+def _speed_codes(doc: _Doc, atc: AtcShape) -> list[SpeedCode]:
+    for i, c in enumerate(atc.codes):
+        if c.kmh < 0:
+            raise doc.fail(f"atc.codes[{i}].kmh", "must not be negative")
+    code_numbers = [c.code for c in atc.codes]
+    for i, n in enumerate(code_numbers):
+        if code_numbers.index(n) != i:
+            raise doc.fail(f"atc.codes[{i}].code", f"duplicate code {n}")
+    if not any(c.kmh == 0 for c in atc.codes):
         raise doc.fail("atc.codes", "needs a stop code (kmh: 0), the most restrictive code")
-    brake = doc.number(atc, "service_brake_mps2", "atc", 0.5)
-    if brake <= 0:
+    if atc.service_brake_mps2 <= 0:
         raise doc.fail("atc.service_brake_mps2", "must be positive")
-    tags = doc.mapping(raw.get("tags", {}), "tags")
-    return Line(
-        name=name,
-        file=str(path),
-        start_m=start,
-        end_m=end,
-        stations=stations,
-        track_circuits=tuple(plain),
-        intervals=tuple(intervals),
-        gradients=tuple(gradients),
-        speed_limits=tuple(limits),
-        speed_codes=tuple(sorted(codes, key=lambda c: (c.kmh, c.code))),
-        service_brake_mps2=brake,
-        tag_spacing_m=doc.number(tags, "spacing_m", "tags", 100.0),
-    )
+    return [SpeedCode(c.code, c.kmh) for c in atc.codes]

@@ -1,0 +1,148 @@
+"""Declared shapes of the data files: a file's keys and their types are written once as msgspec
+Structs (`Shape`), and `convert` turns a parsed YAML document (from `datafiles.load_mapping`, which
+keeps its duplicate-key, size, depth and UTF-8 checks) into them.
+
+msgspec's one error -- ``Expected `int`, got `str` - at `$.routes[3].name` `` -- becomes one
+ConfigError naming the file, the key path in the project's style (`routes[3].name`) and the
+problem in the loaders' words ("must be an integer, not str"), with the line of the file when the
+path can be found in it (looked up only when there is an error: loading costs nothing more).
+What a shape cannot say -- references between parts, geometry, defaults that hang on other keys --
+the loaders check in plain code after the conversion.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any, TypeVar
+
+import msgspec
+
+from ktcs_bench.errors import ConfigError
+
+T = TypeVar("T")
+
+
+class Shape(msgspec.Struct, forbid_unknown_fields=True):
+    """A mapping of a data file: every key declared, any other key refused ("unknown key").
+    (Keys with a default come last in a shape: mypy reads a Struct as a dataclass.)"""
+
+
+_AT = re.compile(r"^(?P<problem>.*?)(?: - at `\$(?P<path>[^`]*)`)?$", re.S)
+_EXPECTED = re.compile(r"^Expected `(?P<want>[^`]+)`(?:, got `(?P<got>[^`]+)`)?(?P<rest>.*)$", re.S)
+_MISSING = re.compile(r"^Object missing required field `(?P<key>[^`]+)`$")
+_UNKNOWN = re.compile(r"^Object contains unknown field `(?P<key>[^`]+)`$")
+
+_WANT = {
+    "int": "an integer",
+    "float": "a number",
+    "str": "a string",
+    "bool": "true or false",
+    "array": "a list",
+    "object": "a mapping",
+    "null": "nothing",
+}
+_GOT = {"null": "nothing", "array": "list", "object": "dict"}
+_BOUNDS = {">=": "at least", "<=": "at most", ">": "greater than", "<": "less than"}
+
+
+def _want(types: str) -> str:
+    parts = [t.strip() for t in types.split("|")]
+    if "str" in parts:  # text where a number is taken as its digits (`tracks: [1, 2]`)
+        return "a string"
+    if "float" in parts:
+        return "a number"
+    return " or ".join(_WANT.get(p, p) for p in parts if p != "null")
+
+
+def _words(problem: str) -> tuple[str, str]:
+    """msgspec's problem -> (a key under the error's path or "", the problem in our words)."""
+    if m := _MISSING.match(problem):
+        return m["key"], "missing key"
+    if m := _UNKNOWN.match(problem):
+        return m["key"], "unknown key"
+    if m := _EXPECTED.match(problem):
+        want = _want(m["want"])
+        if m["got"]:
+            return "", f"must be {want}, not {_GOT.get(m['got'], m['got'])}"
+        rest = m["rest"].strip()
+        if rest.startswith("of length >= 1"):
+            return "", "must not be empty"
+        for op, words in _BOUNDS.items():
+            if rest.startswith(op):
+                return "", f"must be {words} {rest[len(op) :].strip()}"
+        return "", f"must be {want} {rest}".strip()
+    return "", problem
+
+
+def _steps(path: str) -> list[str | int]:
+    """`.routes[3].name` -> ["routes", 3, "name"] (`[...]`, a mapping's key msgspec does not
+    name, ends the walk)."""
+    out: list[str | int] = []
+    for name, index in re.findall(r"\.([^.\[]+)|\[([^\]]*)\]", path):
+        if name:
+            out.append(name)
+        elif index.isdigit():
+            out.append(int(index))
+        else:
+            break
+    return out
+
+
+def _place(steps: list[str | int]) -> str:
+    text = ""
+    for s in steps:
+        text += f"[{s}]" if isinstance(s, int) else (f".{s}" if text else s)
+    return text
+
+
+def line_of(file: str | Path, steps: list[str | int]) -> int | None:
+    """The line of `file` (1-based) where the value at the key path `steps` starts -- or, when
+    the last step is not there (a missing key), where the mapping that lacks it starts. None if
+    the file cannot be read again or the path is not in it."""
+    import yaml
+
+    try:
+        node: Any = yaml.compose(Path(file).read_text(encoding="utf-8"), Loader=yaml.SafeLoader)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return None
+    if node is None:
+        return None
+    for step in steps:
+        child = None
+        if isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                if isinstance(k, yaml.ScalarNode) and k.value == str(step):
+                    child = v
+        elif isinstance(node, yaml.SequenceNode) and isinstance(step, int):
+            child = node.value[step] if step < len(node.value) else None
+        if child is None:
+            break
+        node = child
+    return int(node.start_mark.line) + 1
+
+
+def error(file: str | Path, exc: msgspec.ValidationError, under: str = "") -> ConfigError:
+    """msgspec's ValidationError as the project's ConfigError (`under`: the key path of the part
+    converted, "" for the whole file)."""
+    m = _AT.match(str(exc))
+    assert m is not None  # the pattern matches any text
+    key, problem = _words(m["problem"])
+    steps = _steps(m["path"] or "")
+    if key:
+        steps.append(key)
+    inner = _place(steps)
+    place = (f"{under}{inner}" if inner.startswith("[") else f"{under}.{inner}") if under else inner
+    if under:  # the part's own steps come first when the line is looked up
+        steps = _steps("." + under) + steps
+    line = line_of(file, steps)
+    return ConfigError(file, place, f"{problem} (line {line})" if line else problem)
+
+
+def convert(raw: object, shape: type[T], file: str | Path, under: str = "") -> T:
+    """`raw` (parsed YAML) as `shape`, strictly (no text taken for a number); a mismatch is one
+    ConfigError naming `file`, the key path and the line."""
+    try:
+        return msgspec.convert(raw, shape, strict=True)
+    except msgspec.ValidationError as exc:
+        raise error(file, exc, under) from None
