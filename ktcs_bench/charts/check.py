@@ -10,11 +10,12 @@ number; and every code a core gives or takes must be one its link carries.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 
+from ktcs_bench import kinds
 from ktcs_bench.atc.wayside import WaysideAtc
 from ktcs_bench.binding import LinkBinding
 from ktcs_bench.charts.files import load_chart
@@ -97,46 +98,55 @@ class _End:
     core: frozenset[str] | None  # None: the end has no core of its own to compare (the CTC)
 
 
-def _ends(line: Line, station: int) -> dict[str, list[_End]]:
-    """Every station link's two ends, bound as the emulator processes bind them."""
-    view = line.view(station)
-    ixl, io, atc = Interlocking(view), Trackside(view), WaysideAtc(line, station)
-    ctc = StationModel(view)
-    ixl_atc = LinkBinding(*link_charts(view, "ixl_to_atc"), partial(ixl.full_state, "atc"))
-    ixl_io = LinkBinding(*link_charts(view, "ixl_to_io"), partial(ixl.full_state, "io"))
-    ixl_ctc = LinkBinding(*link_charts(view, "ixl_to_ctc"), partial(ixl.full_state, "ctc"))
-    atc_ixl = LinkBinding(*link_charts(view, "atc_to_ixl"), atc.full_state)
-    io_ixl = LinkBinding(*link_charts(view, "io_to_ixl"), io.full_state)
+@dataclass(frozen=True)
+class _Peer:
+    """The IXL's peer on one link as its emulator binds it: what it sends and reads there, and
+    what its core gives and takes (None: no core of its own to compare, the CTC)."""
 
-    def gives(binding: LinkBinding) -> frozenset[str]:
-        return frozenset(binding.state())
+    who: str
+    sends: CodeChart
+    gives: frozenset[str] | None
+    reads: CodeChart
+    takes: frozenset[str] | None
+
+
+def _peers(line: Line, station: int) -> dict[str, _Peer]:
+    """Each of the IXL's peers (`kinds.PEER_ROLES`) at `station`, by role."""
+    view = line.view(station)
+    ctc, io, atc = StationModel(view), Trackside(view), WaysideAtc(line, station)
+
+    def bound(
+        who: str, role: str, state: Callable[[], dict[str, int]], takes: Iterable[str]
+    ) -> _Peer:
+        binding = LinkBinding(*link_charts(view, kinds.chart_name(role, False)), state)
+        return _Peer(who, binding.tx, frozenset(binding.state()), binding.rx, frozenset(takes))
 
     return {
-        "ixl_to_ctc": [
-            _End("the IXL", "sends", ixl_ctc.tx, gives(ixl_ctc)),
-            _End("the CTC", "reads", ctc.indications, None),
-        ],
-        "ctc_to_ixl": [
-            _End("the CTC", "sends", ctc.controls, None),
-            _End("the IXL", "reads", ixl_ctc.rx, frozenset(ixl.control_names())),
-        ],
-        "ixl_to_atc": [
-            _End("the IXL", "sends", ixl_atc.tx, gives(ixl_atc)),
-            _End("the ATC", "reads", atc_ixl.rx, frozenset(atc.input_names())),
-        ],
-        "atc_to_ixl": [
-            _End("the ATC", "sends", atc_ixl.tx, gives(atc_ixl)),
-            _End("the IXL", "reads", ixl_atc.rx, frozenset(ixl.input_names("atc"))),
-        ],
-        "ixl_to_io": [
-            _End("the IXL", "sends", ixl_io.tx, gives(ixl_io)),
-            _End("the trackside", "reads", io_ixl.rx, frozenset(io.command_names())),
-        ],
-        "io_to_ixl": [
-            _End("the trackside", "sends", io_ixl.tx, gives(io_ixl)),
-            _End("the IXL", "reads", ixl_io.rx, frozenset(ixl.input_names("io"))),
-        ],
+        kinds.CTC: _Peer("the CTC", ctc.controls, None, ctc.indications, None),
+        kinds.ATC: bound("the ATC", kinds.ATC, atc.full_state, atc.input_names()),
+        kinds.IO: bound("the trackside", kinds.IO, io.full_state, io.command_names()),
     }
+
+
+def _ends(line: Line, station: int) -> dict[str, list[_End]]:
+    """Every station link's two ends, bound as the emulator processes bind them: the IXL and
+    each of its peers, one link each way."""
+    view = line.view(station)
+    ixl = Interlocking(view)
+    out: dict[str, list[_End]] = {}
+    for role, peer in _peers(line, station).items():
+        outward, inward = kinds.chart_name(role, True), kinds.chart_name(role, False)
+        ours = LinkBinding(*link_charts(view, outward), partial(ixl.full_state, role))
+        takes = ixl.control_names() if role == kinds.CTC else ixl.input_names(role)
+        out[outward] = [
+            _End("the IXL", "sends", ours.tx, frozenset(ours.state())),
+            _End(peer.who, "reads", peer.reads, peer.takes),
+        ]
+        out[inward] = [
+            _End(peer.who, "sends", peer.sends, peer.gives),
+            _End("the IXL", "reads", ours.rx, frozenset(takes)),
+        ]
+    return out
 
 
 def _check_emulators(line: Line, files: dict[str, tuple[Path, CodeChart]]) -> list[str]:

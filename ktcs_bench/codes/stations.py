@@ -13,20 +13,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ktcs_bench import kinds
 from ktcs_bench.codes.chart import Code, CodeChart
 from ktcs_bench.codes.names import CodeName
 from ktcs_bench.codes.names import Function as F
 from ktcs_bench.station.model import Line, StationView
 
-# (link, protocol, direction): the six links of a station, and the file stem suffix of each chart
-LINKS: tuple[tuple[str, str, str], ...] = (
-    ("ixl_to_ctc", "type2", "IXL->CTC"),
-    ("ctc_to_ixl", "type2", "CTC->IXL"),
-    ("ixl_to_atc", "type1", "IXL->ATC"),
-    ("atc_to_ixl", "type1", "ATC->IXL"),
-    ("ixl_to_io", "type1", "IXL->IO"),
-    ("io_to_ixl", "type1", "IO->IXL"),
-)
+# (link, protocol, direction): the links of a station, each of the IXL's peers each way
+# (`kinds.charts`), and the file stem suffix of each chart
+LINKS: tuple[tuple[str, str, str], ...] = kinds.charts()
 
 # the chart's status column: what state 1 (and 0) of each function means
 ONE_ZERO: dict[str, str] = {

@@ -11,15 +11,13 @@ from __future__ import annotations
 
 import argparse
 import ssl
+from dataclasses import dataclass
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.argtypes import host_port, positive
 from ktcs_bench.errors import UsageError
 from ktcs_bench.transport.endpoints import Endpoint, parse_links
-
-KINDS = ("ctc", "ixl", "atc", "trackside", "trackcircuit", "train")
-ROLE = {"atc": "atc", "trackside": "io", "ctc": "ctc", "ixl": "ixl"}
-"""The role a device of a kind plays on a link (`--link ROLE=...`)."""
 
 
 def device_namespace(argv: list[str]) -> argparse.Namespace:
@@ -38,7 +36,7 @@ def device_namespace(argv: list[str]) -> argparse.Namespace:
 
 def arguments(p: argparse.ArgumentParser) -> None:
     """The options of `ktcs-bench emulator`."""
-    p.add_argument("kind", choices=KINDS)
+    p.add_argument("kind", choices=kinds.NAMES)
     p.add_argument("--lab", help="lab file or shipped lab name (default: the reference lab)")
     p.add_argument("--station", type=positive(int), help="station number (ixl, atc, trackside)")
     p.add_argument("--name", help="device name (default: KIND + station)")
@@ -95,14 +93,11 @@ def _roles(links: dict[str, Endpoint], lab_devices: dict[str, str]) -> dict[str,
     """Peer names may be roles or lab device names; return {role: endpoint}."""
     out = {}
     for peer, ep in links.items():
-        role = (
-            peer
-            if peer in ("ctc", "ixl", "atc", "io", "rails")
-            else ROLE.get(lab_devices.get(peer, ""), "")
-        )
+        role = peer if peer in kinds.LINK_ROLES else kinds.role_of(lab_devices.get(peer, ""))
         if not role:
             raise UsageError(
-                f"--link {peer}=...: unknown peer (use ctc, ixl, atc, io, rails or a lab device)"
+                f"--link {peer}=...: unknown peer (use {', '.join(kinds.LINK_ROLES)}"
+                " or a lab device)"
             )
         out[role] = ep
     return out
@@ -130,66 +125,97 @@ def tls_context(args: argparse.Namespace, server: bool) -> ssl.SSLContext | None
 
 
 def build_device(args: argparse.Namespace, lab: Any):  # type: ignore[no-untyped-def]
-    """The device `args` describe, in `lab` (a `lab.topology.Lab`)."""
-    from ktcs_bench.ixl.modes import Mode
+    """The device `args` describe, in `lab` (a `lab.topology.Lab`): built by its kind's builder
+    (`kinds.KINDS`), one of the `build_KIND` functions below."""
     from ktcs_bench.type1 import LinkConfig
 
     line = lab.load_line()
     links = _roles(parse_links(args.link), {d.name: d.kind for d in lab.devices.values()})
-    control = args.control
-    kind = args.kind
+    kind = kinds.KINDS.get(args.kind)
+    if kind is None:
+        raise UsageError(f"unknown kind {args.kind}")
     from ktcs_bench.emulator import variants
 
-    faults = variants.check(getattr(args, "fault", []) or [], kind)
-    name = args.name or (f"{kind}{args.station}" if args.station else kind)
+    faults = variants.check(getattr(args, "fault", []) or [], kind.name)
+    name = args.name or (f"{kind.name}{args.station}" if args.station else kind.name)
     type1 = LinkConfig(
         line_rate=None if args.unpaced else lab.line_rate,
         longest_frame_data=lab.longest_frame_data,
     )
-    if kind in ("ixl", "atc", "trackside"):
+    if kind.station:
         if args.station is None:
-            raise UsageError(f"emulator {kind} needs --station (one of {lab.stations})")
+            raise UsageError(f"emulator {kind.name} needs --station (one of {lab.stations})")
         if args.station not in line.stations:
             raise UsageError(
                 f"station {args.station} is not on the line (stations {sorted(line.stations)})"
             )
-    if kind == "ixl":
-        from ktcs_bench.emulator.ixl import IxlDevice
+    return kind.build(Build(name, args, lab, line, links, type1, faults))
 
-        mode = Mode(args.mode or lab.ixl_mode)
-        return IxlDevice(name, line, args.station, links, mode=mode, type1=type1,
-                         type1_profile=lab.type1_profile, control=control, faults=faults,
-                         ssl=tls_context(args, server=False),
-                         server_hostname=args.tls_server_name,
-                         restarted=args.restarted)  # fmt: skip
-    if kind == "atc":
-        from ktcs_bench.emulator.atc import AtcDevice
 
-        return AtcDevice(name, line, args.station, links, type1=type1,
-                         type1_profile=lab.type1_profile, control=control,
-                         faults=faults)  # fmt: skip
-    if kind == "trackside":
-        from ktcs_bench.emulator.trackside import TracksideDevice
+@dataclass(frozen=True, slots=True)
+class Build:
+    """What a kind's builder is given: the device's name, its arguments, its lab and line, its
+    links by role, its Type I settings and its protocol faults."""
 
-        return TracksideDevice(name, line, args.station, links, type1=type1,
-                               type1_profile=lab.type1_profile, control=control,
-                               faults=faults)  # fmt: skip
-    if kind == "trackcircuit":
-        from ktcs_bench.emulator.trackcircuit import TrackCircuitDevice
+    name: str
+    args: argparse.Namespace
+    lab: Any
+    line: Any
+    links: dict[str, Endpoint]
+    type1: Any
+    faults: frozenset[str]
 
-        return TrackCircuitDevice(name, line, args.listen or ("127.0.0.1", 0), control)
-    if kind == "ctc":
-        from ktcs_bench.emulator.ctc import CtcDevice
 
-        listen = args.listen or ("127.0.0.1", lab.type2_port)
-        ars = lab.ars  # automatic route setting of the lab's timetable: the lab file's `ars:`
-        return CtcDevice(name, line, lab.stations, listen, control=control, console=args.console,
-                         console_origins=args.console_origin, taps=args.tap, faults=faults, allowed_sources=args.allow_source or None,
-                         ssl=tls_context(args, server=True),
-                         timetable=lab.load_timetable(line) if ars else None,
-                         ars_on=ars.start_on if ars else ())  # fmt: skip
-    if kind == "train":
-        from ktcs_bench.emulator.train import TrainDevice
+def build_ixl(b: Build):  # type: ignore[no-untyped-def]
+    from ktcs_bench.emulator.ixl import IxlDevice
+    from ktcs_bench.ixl.modes import Mode
 
-        return TrainDevice.from_args(name, lab, line, links, args.train, control)
-    raise UsageError(f"unknown kind {kind}")
+    args, lab = b.args, b.lab
+    mode = Mode(args.mode or lab.ixl_mode)
+    return IxlDevice(b.name, b.line, args.station, b.links, mode=mode, type1=b.type1,
+                     type1_profile=lab.type1_profile, control=args.control, faults=b.faults,
+                     ssl=tls_context(args, server=False),
+                     server_hostname=args.tls_server_name,
+                     restarted=args.restarted)  # fmt: skip
+
+
+def build_atc(b: Build):  # type: ignore[no-untyped-def]
+    from ktcs_bench.emulator.atc import AtcDevice
+
+    return AtcDevice(b.name, b.line, b.args.station, b.links, type1=b.type1,
+                     type1_profile=b.lab.type1_profile, control=b.args.control,
+                     faults=b.faults)  # fmt: skip
+
+
+def build_trackside(b: Build):  # type: ignore[no-untyped-def]
+    from ktcs_bench.emulator.trackside import TracksideDevice
+
+    return TracksideDevice(b.name, b.line, b.args.station, b.links, type1=b.type1,
+                           type1_profile=b.lab.type1_profile, control=b.args.control,
+                           faults=b.faults)  # fmt: skip
+
+
+def build_trackcircuit(b: Build):  # type: ignore[no-untyped-def]
+    from ktcs_bench.emulator.trackcircuit import TrackCircuitDevice
+
+    return TrackCircuitDevice(b.name, b.line, b.args.listen or ("127.0.0.1", 0), b.args.control)
+
+
+def build_ctc(b: Build):  # type: ignore[no-untyped-def]
+    from ktcs_bench.emulator.ctc import CtcDevice
+
+    args, lab = b.args, b.lab
+    listen = args.listen or ("127.0.0.1", lab.type2_port)
+    ars = lab.ars  # automatic route setting of the lab's timetable: the lab file's `ars:`
+    return CtcDevice(b.name, b.line, lab.stations, listen, control=args.control,
+                     console=args.console, console_origins=args.console_origin, taps=args.tap,
+                     faults=b.faults, allowed_sources=args.allow_source or None,
+                     ssl=tls_context(args, server=True),
+                     timetable=lab.load_timetable(b.line) if ars else None,
+                     ars_on=ars.start_on if ars else ())  # fmt: skip
+
+
+def build_train(b: Build):  # type: ignore[no-untyped-def]
+    from ktcs_bench.emulator.train import TrainDevice
+
+    return TrainDevice.from_args(b.name, b.lab, b.line, b.links, b.args.train, b.args.control)

@@ -10,12 +10,13 @@ import asyncio
 from functools import partial
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.binding import ControlLink, LinkBinding
 from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.device import Device
-from ktcs_bench.ixl.interlocking import Interlocking, IxlOutput
+from ktcs_bench.ixl.interlocking import LINKS, Interlocking, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.station.model import Line
@@ -26,7 +27,7 @@ from ktcs_bench.type2.ixl_client import IxlClient
 
 
 class IxlDevice(Device):
-    kind = "ixl"
+    kind = kinds.IXL
 
     def __init__(
         self,
@@ -48,13 +49,13 @@ class IxlDevice(Device):
         self.station = station
         view = line.view(station)
         # restarted in a running lab (a crash recovery): start-up locking (ixl.interlocking)
-        self.ixl = Interlocking(view, mode=mode, tc_sources=("atc",), startup_locking=restarted)
+        self.ixl = Interlocking(view, mode=mode, tc_sources=(kinds.ATC,), startup_locking=restarted)
         self.drive(self.ixl, lambda now, out: self.apply(out))
         self.ports: dict[str, CodePort] = {}
-        for role in ("atc", "io"):
+        for role in LINKS:  # the Type I peers: each link bound the one way
             if role in links:
                 state = partial(self.ixl.full_state, role)
-                binding = LinkBinding(*link_charts(view, f"ixl_to_{role}"), state)
+                binding = LinkBinding(*link_charts(view, kinds.chart_name(role, True)), state)
                 self.ports[role] = CodePort(
                     f"{name}-{role}", links[role], binding, self._codes_from(role),
                     self._link_of(role), type1_profile, type1, faults=faults,
@@ -63,10 +64,11 @@ class IxlDevice(Device):
                     self.ready_info.setdefault("ptys", {})[role] = self.ports[role].path
         # the application the Type II client serves: full states, controls by number
         self.ctc_link = ControlLink(
-            *link_charts(view, "ixl_to_ctc"), partial(self.ixl.full_state, "ctc"),
+            *link_charts(view, kinds.chart_name(kinds.CTC, True)),
+            partial(self.ixl.full_state, kinds.CTC),
             self._control, int(Reason.UNKNOWN_CODE), self._unknown_control,
         )  # fmt: skip
-        self.ctc_endpoint = links.get("ctc")
+        self.ctc_endpoint = links.get(kinds.CTC)
         self.client: IxlClient | None = None
         self.ctc_up = False  # the Type II link as this device last logged it
         self.faults, self.ssl, self.server_hostname = faults, ssl, server_hostname
@@ -95,11 +97,11 @@ class IxlDevice(Device):
         return handle
 
     def apply(self, out: IxlOutput) -> None:
-        for role, changes in (("atc", out.atc), ("io", out.io)):
-            if changes and role in self.ports:
+        for role, changes in out.changes.items():
+            if role in self.ports:
                 self.ports[role].update(changes)
-        if out.ctc:
-            items = self.ctc_link.send(out.ctc)
+        if ctc := out.of(kinds.CTC):
+            items = self.ctc_link.send(ctc)
             if items and self.client is not None:
                 self.client.indicate(items)
         for e in out.events:
@@ -146,7 +148,7 @@ class IxlDevice(Device):
             "station": self.station,
             "mode": ixl.modes.mode.value,
             "links": {r: p.up for r, p in self.ports.items()}
-            | {"ctc": bool(self.client and self.client.identified)},
+            | {kinds.CTC: bool(self.client and self.client.identified)},
             "routes": {n: ixl.route_status(n).value for n in ixl.routes},
             "held": {
                 n: sorted(rs.held_tcs | rs.held_points)

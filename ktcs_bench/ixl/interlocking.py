@@ -31,6 +31,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
+from ktcs_bench import kinds
 from ktcs_bench.codes import names as n
 from ktcs_bench.codes.names import Function as F
 from ktcs_bench.codes.stations import StationCodes
@@ -42,8 +43,10 @@ from ktcs_bench.ixl.signals import SignalState, downgrade, fit
 from ktcs_bench.station.loader import onward
 from ktcs_bench.station.model import Direction, Interval, PointPosition, Route, StationView
 
-LINKS = ("atc", "io")
-OUTPUTS = ("ctc", "atc", "io")  # the IXL->CTC, IXL->ATC and IXL->IO charts
+LINKS = kinds.TYPE1_ROLES
+"""The Type I links, by peer role: the ATC's and the trackside's."""
+OUTPUTS = kinds.PEER_ROLES
+"""Every peer role the IXL sends to, each on its own IXL->ROLE chart."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,11 +65,14 @@ class ControlResult:
 
 @dataclass
 class IxlOutput:
-    ctc: list[tuple[str, int]] = field(default_factory=list)  # IXL->CTC indication changes
-    atc: list[tuple[str, int]] = field(default_factory=list)  # IXL->ATC code changes
-    io: list[tuple[str, int]] = field(default_factory=list)  # IXL->trackside command changes
+    changes: dict[str, list[tuple[str, int]]] = field(default_factory=dict)
+    """Per peer role (`OUTPUTS`), the code changes of its IXL->ROLE chart (none: no entry)."""
     results: list[ControlResult] = field(default_factory=list)
     events: list[IxlEvent] = field(default_factory=list)
+
+    def of(self, role: str) -> list[tuple[str, int]]:
+        """The code changes for peer `role` (none: empty)."""
+        return self.changes.get(role, [])
 
 
 class Interlocking:
@@ -78,7 +84,7 @@ class Interlocking:
         *,
         mode: Mode = Mode.LOCAL,
         auto_grant_s: float | None = None,
-        tc_sources: Iterable[str] = ("atc",),
+        tc_sources: Iterable[str] = (kinds.ATC,),
         log_limit: int = 10_000,
         startup_locking: bool = False,
     ) -> None:
@@ -110,10 +116,7 @@ class Interlocking:
         self._noticed: set[str] = set()
         self.codes = StationCodes(view)
         self._controls = set(self.codes.names("ctc_to_ixl"))
-        self._inputs = {
-            "atc": set(self.codes.names("atc_to_ixl")),
-            "io": set(self.codes.names("io_to_ixl")),
-        }
+        self._inputs = {link: set(self.input_names(link)) for link in LINKS}
         self.log: list[IxlEvent] = []
         self._log_limit = log_limit
         self._events: list[IxlEvent] = []
@@ -136,7 +139,7 @@ class Interlocking:
 
     def control(self, name: str, value: int, now: float) -> IxlOutput:
         """A CTC control (Type II CONTROL item): the code's name and its value."""
-        self._results.append(self._control(name, value, now, source="ctc"))
+        self._results.append(self._control(name, value, now, source=kinds.CTC))
         return self._finish(now)
 
     def local_control(self, name: str, value: int, now: float) -> IxlOutput:
@@ -160,7 +163,7 @@ class Interlocking:
         return self._finish(now)
 
     def receive(self, link: str, codes: Mapping[str, int], now: float) -> IxlOutput:
-        """Code changes or a full state from a Type I peer: link "atc" or "io".
+        """Code changes or a full state from a Type I peer: one of `LINKS`.
 
         Codes that come while the link is in communication error are ignored: the IXL has gone
         fail-safe for that link and rebuilds its view from what comes after `link_state(up)`.
@@ -188,7 +191,7 @@ class Interlocking:
                 # What the link reported is stale from now on: after recovery each report is
                 # believed again only once the peer sends it (its ALL_INFO), not before.
                 self.tc_reports[link].clear()
-                if link == "atc":
+                if link == kinds.ATC:
                     self.izc.clear()
                 else:
                     for ps in self.points.values():
@@ -220,7 +223,7 @@ class Interlocking:
         return self.codes.names("ctc_to_ixl")
 
     def input_names(self, link: str) -> tuple[str, ...]:
-        return self.codes.names("atc_to_ixl" if link == "atc" else "io_to_ixl")
+        return self.codes.names(kinds.chart_name(link, outward=False))
 
     def occupied(self, tc: str) -> bool:
         """Occupancy as the interlocking takes it (fail-safe: unknown or link down = occupied)."""
@@ -230,7 +233,7 @@ class Interlocking:
         return False
 
     def detection(self, point: str) -> Detection:
-        if not self.link_up["io"]:
+        if not self.link_up[kinds.IO]:
             return "none"
         return self.points[point].reported
 
@@ -242,14 +245,11 @@ class Interlocking:
         return self.signals[signal].commanded
 
     def full_state(self, kind: str) -> dict[str, int]:
-        """Every code of the IXL->CTC ("ctc"), IXL->ATC ("atc") or IXL->IO ("io") chart."""
-        if kind == "ctc":
-            return self._ctc_state()
-        if kind == "atc":
-            return self._atc_state()
-        if kind == "io":
-            return self._io_state()
-        raise ValueError(f"unknown output {kind!r} (ctc, atc, io)")
+        """Every code of the IXL->ROLE chart of peer role `kind` (one of `OUTPUTS`)."""
+        states = {kinds.CTC: self._ctc_state, kinds.ATC: self._atc_state, kinds.IO: self._io_state}
+        if kind not in states:
+            raise ValueError(f"unknown output {kind!r} ({', '.join(OUTPUTS)})")
+        return states[kind]()
 
     # ------------------------------------------------------------------ controls
 
@@ -272,7 +272,7 @@ class Interlocking:
             if value and self.modes.mode is Mode.CENTER and self.modes.to_local():
                 self._event(now, "mode", "CTC handed the station back to local mode")
             return Reason.NONE
-        wanted = Mode.CENTER if source == "ctc" else Mode.LOCAL
+        wanted = Mode.CENTER if source == kinds.CTC else Mode.LOCAL
         if self.modes.mode is not wanted:
             return Reason.NOT_IN_CENTER_MODE
         if kind in (F.RSC, F.RCC):
@@ -404,7 +404,7 @@ class Interlocking:
         if kind is F.TC:
             self.tc_reports[link][name] = state
             return
-        if link == "atc":
+        if link == kinds.ATC:
             if kind is F.IZC:
                 before = self.izc.get(obj, 1)
                 self.izc[obj] = state
@@ -427,7 +427,7 @@ class Interlocking:
             lamp.lamp_reported = True
 
     def _interval_occupied(self, iv: Interval) -> bool:
-        if not self.link_up["atc"] or self.izc.get(iv.name, 1) != 0:
+        if not self.link_up[kinds.ATC] or self.izc.get(iv.name, 1) != 0:
             return True
         return any(self.occupied(tc) for tc in self.view.owned_half(iv))
 
@@ -455,7 +455,8 @@ class Interlocking:
             state = self.full_state(kind)
             last = self._sent[kind]
             changes = [(k, v) for k, v in state.items() if last.get(k) != v]
-            setattr(out, kind, changes)
+            if changes:
+                out.changes[kind] = changes
             self._sent[kind] = state
         self._results, self._events = [], []
         return out
@@ -707,7 +708,7 @@ class Interlocking:
             out[n.sli(st, name)] = int(name in locked)
             out[n.sfi(st, name)] = int(det == "none")
         for name, sig in self.signals.items():
-            shown = sig.shown() if self.link_up["io"] else "R"
+            shown = sig.shown() if self.link_up[kinds.IO] else "R"
             for a in sig.signal.aspects:
                 out[n.asp(st, name, a)] = int(shown == a)
             out[n.ssi(st, name)] = int(sig.stop_held)
@@ -733,7 +734,7 @@ class Interlocking:
             out[n.sni(st, name)] = int(det == "normal")
             out[n.sri(st, name)] = int(det == "reverse")
         for name, sig in self.signals.items():
-            out[n.sgp(st, name)] = int(sig.proceed and self.link_up["io"])
+            out[n.sgp(st, name)] = int(sig.proceed and self.link_up[kinds.IO])
         self._directions(out)
         return out
 

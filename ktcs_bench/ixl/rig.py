@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 
+from ktcs_bench import kinds
 from ktcs_bench.codes import names as n
 from ktcs_bench.field.trackside import Trackside
 from ktcs_bench.ixl.interlocking import ControlResult, Interlocking, IxlEvent, IxlOutput
@@ -39,14 +40,14 @@ class StationRig:
         self.io = Trackside(view)
         self.occupancy = {t.name: t.name in set(occupied) for t in view.track_circuits}
         self.io.set_occupancy(self.occupancy, now)
-        self.ctc = self.ixl.full_state("ctc")  # the CTC's picture, kept by indication changes
-        self.atc = self.ixl.full_state("atc")  # what the ATC is told
+        self.ctc = self.ixl.full_state(kinds.CTC)  # the CTC's picture, kept by indication changes
+        self.atc = self.ixl.full_state(kinds.ATC)  # what the ATC is told
         self.events: list[IxlEvent] = []
         self.on_ctc: Callable[[list[tuple[str, int]]], None] | None = None
         self.io.link_state(True, now)
-        self.take(self.ixl.link_state("io", True, now))
-        self.take(self.ixl.link_state("atc", True, now))
-        self.take(self.ixl.receive("io", self.io.full_state(), now))
+        self.take(self.ixl.link_state(kinds.IO, True, now))
+        self.take(self.ixl.link_state(kinds.ATC, True, now))
+        self.take(self.ixl.receive(kinds.IO, self.io.full_state(), now))
         self._report_occupancy()
 
     def control(self, name: str, value: int = 1) -> ControlResult:
@@ -67,7 +68,7 @@ class StationRig:
         if up:
             full = self.io.full_state() if link == "io" else None
             if full is not None:
-                self.take(self.ixl.receive("io", full, self.now))
+                self.take(self.ixl.receive(kinds.IO, full, self.now))
             else:
                 self._report_occupancy(full=True)
 
@@ -98,17 +99,18 @@ class StationRig:
         for iv in self.view.intervals:
             half = self.view.owned_half(iv)
             codes[n.izc(iv.name)] = int(any(self.occupancy[t] for t in half))
-        self.take(self.ixl.receive("atc", codes, self.now))
+        self.take(self.ixl.receive(kinds.ATC, codes, self.now))
 
     def from_field(self, changes: list[tuple[str, int]]) -> None:
         if changes:
-            self.take(self.ixl.receive("io", dict(changes), self.now))
+            self.take(self.ixl.receive(kinds.IO, dict(changes), self.now))
 
     def take(self, out: IxlOutput) -> None:
         self.events += out.events
-        self.ctc.update(out.ctc)
-        if out.ctc and self.on_ctc is not None:
-            self.on_ctc(out.ctc)
-        self.atc.update(out.atc)
-        if out.io:
-            self.from_field(self.io.receive(dict(out.io), self.now).changes)
+        ctc = out.of(kinds.CTC)
+        self.ctc.update(ctc)
+        if ctc and self.on_ctc is not None:
+            self.on_ctc(ctc)
+        self.atc.update(out.of(kinds.ATC))
+        if io := out.of(kinds.IO):
+            self.from_field(self.io.receive(dict(io), self.now).changes)

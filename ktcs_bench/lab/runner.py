@@ -24,11 +24,12 @@ from pathlib import Path
 from typing import Any, Protocol, TypeVar
 from urllib.parse import urlsplit
 
+from ktcs_bench import kinds
 from ktcs_bench.capture import open_writer
 from ktcs_bench.errors import KtcsError, UsageError
 from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
-from ktcs_bench.lab.topology import ROLE, Lab, LinkSpec
+from ktcs_bench.lab.topology import Lab, LinkSpec
 from ktcs_bench.runtime import private_dir, server_token, this_process
 from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.runner import Tap
@@ -69,9 +70,9 @@ def device_args(
         argv.append("--unpaced")
     for role, ep in endpoints.items():
         argv += ["--link", f"{role}={ep}"]
-    if d.kind == "trackcircuit":
+    if d.kind == kinds.TRACKCIRCUIT:
         argv += ["--listen", before.get("listen") or f"{d.host}:{d.options.get('port', 0)}"]
-    if d.kind == "ctc":
+    if d.kind == kinds.CTC:
         argv += ["--listen", before.get("listen") or f"{d.host}:{lab.type2_port}"]
         if lab.console_port is not None and console:
             url = urlsplit(str(before.get("console", "")))
@@ -79,10 +80,10 @@ def device_args(
             argv += ["--console", f"{d.host}:{port}"]
             argv += [arg for o in lab.console_origins for arg in ("--console-origin", o)]
             argv += [arg for lk in lab.links if lk.tap for arg in ("--tap", lk.name)]
-    if d.kind == "ixl" and before:  # restarted in a running lab: start-up locking
+    if d.kind == kinds.IXL and before:  # restarted in a running lab: start-up locking
         argv.append("--restarted")
-    if d.kind == "train" and "train" in d.options:
-        argv += ["--train", str(d.options["train"])]
+    if d.kind == kinds.TRAIN and kinds.TRAIN in d.options:
+        argv += ["--train", str(d.options[kinds.TRAIN])]
     return argv
 
 
@@ -129,19 +130,19 @@ async def start_in_order(
         peers = [peer for peer, lk in untapped.items() if lk.a == ixl]
         for peer in peers:
             role = lab.peer_role(untapped[peer], ixl)
-            endpoints.setdefault(peer, {})["ixl"] = ready["ptys"][role]
+            endpoints.setdefault(peer, {})[kinds.IXL] = ready["ptys"][role]
         await step(*(starter._start(p) for p in peers))
 
     ctc_address = None
-    first = list(lab.of_kind("trackcircuit"))
-    for ctc in lab.of_kind("ctc"):
+    first = list(lab.of_kind(kinds.TRACKCIRCUIT))
+    for ctc in lab.of_kind(kinds.CTC):
         if ctc.external is not None and ctc.external.address is not None:
             ctc_address = ctc.external.address  # a real CTC, serving there
         else:
             first.append(ctc)
     rails = None
     for d, ready in zip(first, await step(*(starter._start(d.name) for d in first)), strict=True):
-        if d.kind == "trackcircuit":
+        if d.kind == kinds.TRACKCIRCUIT:
             rails = ready["listen"]
         else:
             host, _, port = ready["listen"].rpartition(":")
@@ -164,13 +165,16 @@ async def start_in_order(
             untapped[b] = link
     if rails is not None:
         for d in lab.devices.values():
-            if d.kind in ("atc", "trackside", "train") and d.external is None:
-                endpoints.setdefault(d.name, {})["rails"] = f"tcp://{rails}"
+            if kinds.KINDS[d.kind].rails and d.external is None:
+                endpoints.setdefault(d.name, {})[kinds.RAILS] = f"tcp://{rails}"
     ours = [d.name for d in lab.devices.values() if d.external is None]
-    order = [n for n in ours if lab.devices[n].kind in ("atc", "trackside")]
-    await step(*(starter._start(n) for n in order if n not in untapped))
-    await step(*(ixl_and_peers(ixl.name) for ixl in lab.ours("ixl")))
-    await step(*(starter._start(d.name) for d in lab.of_kind("train")))
+    group = {n: kinds.KINDS[lab.devices[n].kind].start for n in ours}
+    ixl_group = kinds.KINDS[kinds.IXL].start
+    for g in sorted({g for g in group.values() if g}):
+        if g == ixl_group:  # each IXL followed by the peers on its untapped ptys
+            await step(*(ixl_and_peers(n) for n in ours if group[n] == g))
+        else:
+            await step(*(starter._start(n) for n in ours if group[n] == g and n not in untapped))
 
 
 async def _together(*starts: Awaitable[T]) -> list[T]:
@@ -321,10 +325,10 @@ class LabRunner:
 
     async def _trains_to_ctc(self) -> None:
         """Tell the CTC of every train process, whose curves its console draws."""
-        for ctc in self.lab.ours("ctc"):
+        for ctc in self.lab.ours(kinds.CTC):
             host, _, port = self.children[ctc.name].ready["control"].rpartition(":")
-            for d in self.lab.of_kind("train"):
-                train, ready = str(d.options.get("train", d.name)), self.children[d.name].ready
+            for d in self.lab.of_kind(kinds.TRAIN):
+                train, ready = str(d.options.get(kinds.TRAIN, d.name)), self.children[d.name].ready
                 await jsonlines.request(host, int(port),
                                         {"cmd": "add_train", "train": train, "control": ready["control"]},
                                         token=self.token)  # fmt: skip
@@ -387,14 +391,14 @@ class LabRunner:
         await asyncio.to_thread(child.stop)
         ready = await self._start(name)
         kind = self.lab.devices[name].kind
-        if kind == "ixl":
+        if kind == kinds.IXL:
             for lk in self.lab.links:
                 if lk.a == name and lk.type == "type1" and not lk.tap and lk.b in self.children:
                     role = self.lab.peer_role(lk, name)
-                    self.endpoints.setdefault(lk.b, {})["ixl"] = ready["ptys"][role]
+                    self.endpoints.setdefault(lk.b, {})[kinds.IXL] = ready["ptys"][role]
                     await asyncio.to_thread(self.children[lk.b].stop)
                     await self._start(lk.b)
-        if kind == "ctc":
+        if kind == kinds.CTC:
             await self._trains_to_ctc()
         self.notices.append(f"{name} restarted")
         self._write_state()
@@ -428,7 +432,9 @@ class LabRunner:
         names = list(self.children)
         results = await asyncio.gather(*(self.device_status(n) for n in names))
         devices = dict(zip(names, results, strict=True))
-        ctc = next((s for n, s in devices.items() if self.lab.devices[n].kind == "ctc" and s), None)
+        ctc = next(
+            (s for n, s in devices.items() if self.lab.devices[n].kind == kinds.CTC and s), None
+        )
         taps = {n: t.status() for n, t in self.taps.items()}
         out = {
             "lab": self.lab.name,
@@ -457,7 +463,7 @@ class LabRunner:
         or the CTC's to that station; between two external devices, the tap's connection."""
         a, b = self.lab.devices[link.a], self.lab.devices[link.b]
         if a.external is None:
-            return bool(((devices.get(a.name) or {}).get("links") or {}).get(ROLE[b.kind]))
+            return bool(((devices.get(a.name) or {}).get("links") or {}).get(kinds.role_of(b.kind)))
         stations = (devices.get(b.name) or {}).get("stations") or {}
         if b.external is None:
             summary = stations.get(a.station) or stations.get(str(a.station)) or {}
@@ -499,7 +505,7 @@ class LabRunner:
 
     # -- stop --------------------------------------------------------------------------------------
     async def down(self) -> None:
-        ixls = [n for n, c in self.children.items() if self.lab.devices[n].kind == "ixl"]
+        ixls = [n for n, c in self.children.items() if self.lab.devices[n].kind == kinds.IXL]
         others = [n for n in self.children if n not in ixls]
         await asyncio.gather(*(asyncio.to_thread(self.children[n].stop) for n in ixls))
         await asyncio.gather(*(asyncio.to_thread(self.children[n].stop) for n in others))

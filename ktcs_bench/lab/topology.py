@@ -23,19 +23,15 @@ from typing import Any
 
 import serial
 
+from ktcs_bench import kinds
 from ktcs_bench.datafiles import data_dir, load_mapping
-from ktcs_bench.emulator.build import KINDS as KINDS
-from ktcs_bench.emulator.build import ROLE as ROLE
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable, load_timetable
 from ktcs_bench.transport.endpoints import check_port, parse_endpoint, parse_host_port
 
-STATION_KINDS = ("ixl", "atc", "trackside")
 _ORIGIN = re.compile(r"https?://[^/\s:]+(:\d{1,5})?/?|https?://\[[0-9a-fA-F:]+\](:\d{1,5})?/?")
-# the kinds that may be external, and the key that says where the real one is
-EXTERNAL_KEY = {"atc": "serial", "trackside": "serial", "ctc": "address", "ixl": "address"}
 _HOST_PORT_URL = re.compile(r"(rfc2217|socket)://([^/?]*)")  # pyserial URLs that name HOST:PORT
 
 
@@ -113,7 +109,7 @@ class Lab:
 
     @property
     def stations(self) -> list[int]:
-        return sorted(d.station for d in self.of_kind("ixl") if d.station is not None)
+        return sorted(d.station for d in self.of_kind(kinds.IXL) if d.station is not None)
 
     def links_of(self, device: str) -> list[LinkSpec]:
         return [lk for lk in self.links if device in (lk.a, lk.b)]
@@ -121,7 +117,7 @@ class Lab:
     def peer_role(self, link: LinkSpec, device: str) -> str:
         """The role the other end plays for `device` (ctc, atc, io, ixl)."""
         other = link.b if link.a == device else link.a
-        return ROLE[self.devices[other].kind]
+        return kinds.role_of(self.devices[other].kind)
 
     def load_line(self) -> Line:
         return load_line(self.line_file)
@@ -196,10 +192,12 @@ def load_lab(path: str | Path | None = None) -> Lab:
         if not isinstance(spec, dict):
             raise fail(place, "must be a mapping with at least 'kind'")
         kind = spec.get("kind")
-        if kind not in KINDS:
-            raise fail(f"{place}.kind", f"must be one of {', '.join(KINDS)}, not {excerpt(kind)}")
+        if kind not in kinds.KINDS:
+            raise fail(
+                f"{place}.kind", f"must be one of {', '.join(kinds.NAMES)}, not {excerpt(kind)}"
+            )
         station = spec.get("station")
-        if kind in STATION_KINDS and not isinstance(station, int):
+        if kinds.KINDS[kind].station and not isinstance(station, int):
             raise fail(f"{place}.station", f"a {kind} needs its station number")
         host = spec.get("host", "127.0.0.1")
         if not isinstance(host, str):
@@ -213,7 +211,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         if "external" in spec:
             external = _external(spec["external"], str(kind), f"{place}.external", fail)
         devices[name] = DeviceSpec(name, kind, station, host, options, external)
-    for kind in ("ctc", "trackcircuit"):
+    for kind in (k.name for k in kinds.KINDS.values() if k.single):
         count = sum(1 for d in devices.values() if d.kind == kind)
         if count > 1:
             raise fail("devices", f"at most one {kind} device, found {count}")
@@ -232,7 +230,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         for end in ("a", "b"):
             if str(lk[end]) not in devices:
                 raise fail(f"{place}.{end}", f"unknown device {excerpt(lk[end])}")
-        if devices[a].kind != "ixl":
+        if devices[a].kind != kinds.IXL:
             raise fail(f"{place}.a", "end a of every link is an IXL")
         if devices[a].external is not None and typ == "type1":
             raise fail(f"{place}.a", f"{a} is external: its Type I peers are its own, not the "
@@ -241,22 +239,22 @@ def load_lab(path: str | Path | None = None) -> Lab:
             raise fail(f"{place}.tap", f"{a} is external: the link's tap serves the address it "
                        "connects to, so the tap must be there (tap: true)")  # fmt: skip
         peer = devices[b].kind
-        allowed = {"type1": ("atc", "trackside"), "type2": ("ctc",)}.get(typ)
-        if allowed is None:
+        allowed = tuple(k.name for k in kinds.IXL_PEERS if k.link == typ)
+        if typ not in (kinds.TYPE1, kinds.TYPE2):
             raise fail(f"{place}.type", f"must be type1 or type2, not {excerpt(typ)}")
         if peer not in allowed:
             raise fail(
                 f"{place}.b",
                 f"a {typ} link from an IXL goes to {' or '.join(allowed)}, not a {peer}",
             )
-        if peer != "ctc" and devices[b].station != devices[a].station:
+        if kinds.KINDS[peer].station and devices[b].station != devices[a].station:
             raise fail(
                 f"{place}.b",
                 f"{b} belongs to station {devices[b].station}, {a} to {devices[a].station}",
             )
-        role_key = (a, ROLE[peer])
+        role_key = (a, kinds.role_of(peer))
         if role_key in seen:
-            raise fail(place, f"{a} already has a {ROLE[peer]} link ({seen[role_key]})")
+            raise fail(place, f"{a} already has a {role_key[1]} link ({seen[role_key]})")
         seen[role_key] = str(lk["name"])
         links.append(LinkSpec(str(lk["name"]), typ, a, b, bool(lk.get("tap", True))))
     sections: dict[str, dict[str, Any]] = {}
@@ -298,7 +296,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
     )
     for d in devices.values():
         if d.external is not None and d.external.rails:
-            tc = lab.of_kind("trackcircuit")
+            tc = lab.of_kind(kinds.TRACKCIRCUIT)
             if not tc or tc[0].external is not None or not tc[0].options.get("port"):
                 raise fail(f"devices.{d.name}.external.rails", "a device that joins the lab's "
                            "rails itself must be told where they are before the lab starts: give "
@@ -310,10 +308,10 @@ def load_lab(path: str | Path | None = None) -> Lab:
                 f"devices.{d.name}.station", f"station {d.station} is not on the line {line.name}"
             )
     timetable = lab.load_timetable(line)
-    for d in lab.of_kind("train"):
-        if timetable is None or "train" not in d.options:
+    for d in lab.of_kind(kinds.TRAIN):
+        if timetable is None or kinds.TRAIN not in d.options:
             continue
-        train = str(d.options["train"])
+        train = str(d.options[kinds.TRAIN])
         if train not in {t.id for t in timetable.trains}:
             raise fail(
                 f"devices.{d.name}.train",
@@ -330,11 +328,10 @@ _Fail = Callable[[str, str], ConfigError]
 
 def _external(raw: Any, kind: str, place: str, fail: _Fail) -> External:
     """A device's `external` mapping, checked: the key for its kind, a usable endpoint."""
-    key = EXTERNAL_KEY.get(kind)
+    key = kinds.KINDS[kind].external
     if key is None:
-        raise fail(
-            place, f"a {kind} cannot be external (atc, trackside: serial; ctc, ixl: address)"
-        )
+        can = "; ".join(f"{', '.join(kinds.externals(k))}: {k}" for k in ("serial", "address"))
+        raise fail(place, f"a {kind} cannot be external ({can})")
     if not isinstance(raw, dict):
         raise fail(place, f"must be a mapping, e.g. {{{key}: {_EXAMPLE[key]}}}")
     allowed = (key, "rails") if key == "serial" else (key,)
@@ -353,7 +350,7 @@ def _external(raw: Any, kind: str, place: str, fail: _Fail) -> External:
         raise fail(f"{place}.rails", f"must be true or false, not {excerpt(rails)}")
     if key == "address":  # a CTC is connected to (a port); an IXL is served (0: any free port)
         try:
-            return External(address=parse_host_port(value, any_free=kind == "ixl"))
+            return External(address=parse_host_port(value, any_free=kind == kinds.IXL))
         except UsageError as exc:
             raise fail(f"{place}.address", str(exc)) from None
     return External(serial=_serial_url(value.strip(), f"{place}.serial", fail), rails=rails)
@@ -396,7 +393,7 @@ def _ars(section: object, lab: Lab, fail: _Fail) -> ArsSpec:
                        "stations where ARS starts on are `start_on`")  # fmt: skip
         if key not in ARS_KEYS:
             raise fail(f"ars.{key}", f"unknown key (ars takes {', '.join(ARS_KEYS)})")
-    if not lab.ours("ctc"):
+    if not lab.ours(kinds.CTC):
         raise fail("ars", "the lab runs no CTC to set routes (an external CTC sets its own)")
     if lab.timetable_file is None:
         raise fail("ars", "ARS sets the routes of the lab's timetable: give it (timetable: FILE)")

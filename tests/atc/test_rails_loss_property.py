@@ -67,10 +67,10 @@ class RailsLostMachine(RuleBasedStateMachine):
     # ---------------------------------------------------------------- wiring (perfect links)
 
     def from_ixl(self, out: IxlOutput) -> None:
-        if out.atc and self.links["atc"]:
-            self.from_atc(self.atc.receive(dict(out.atc), self.now))
-        if out.io and self.links["io"]:
-            self.from_io(self.io.receive(dict(out.io), self.now))
+        if out.of("atc") and self.links["atc"]:
+            self.from_atc(self.atc.receive(dict(out.of("atc")), self.now))
+        if out.of("io") and self.links["io"]:
+            self.from_io(self.io.receive(dict(out.of("io")), self.now))
 
     def from_atc(self, out: AtcOutput) -> None:
         if out.ixl and self.links["atc"]:

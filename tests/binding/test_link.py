@@ -29,8 +29,8 @@ def test_a_route_set_crosses_each_hop_as_the_core_s_changes_once(line: Line) -> 
     atc_end = LinkBinding(*link_charts(rig.view, "atc_to_ixl"), dict)
     io_end = LinkBinding(*link_charts(rig.view, "io_to_ixl"), dict)
     out = ixl.control("RSC180112", 1, rig.now)
-    assert out.io and out.atc  # point 31 demanded reverse; the route locked for the ATC
-    for binding, peer, changes in ((to_atc, atc_end, out.atc), (to_io, io_end, out.io)):
+    assert out.of("io") and out.of("atc")  # point 31 demanded reverse; the route locked for the ATC
+    for binding, peer, changes in ((to_atc, atc_end, out.of("atc")), (to_io, io_end, out.of("io"))):
         items = binding.send(changes)
         assert len(items) == len(changes)
         names, unknown = peer.received(items)

@@ -135,9 +135,9 @@ def test_center_local_modes_and_cmr_handshake(line: Line) -> None:
 def test_automatic_grant_keeps_cmr_visible(line: Line) -> None:
     ixl = Interlocking(line.view(22), auto_grant_s=1.0)
     out = ixl.control("CMQ22", 1, 10.0)
-    assert ("CMR22", 1) in out.ctc and ixl.next_deadline() == 11.0
+    assert ("CMR22", 1) in out.of("ctc") and ixl.next_deadline() == 11.0
     out = ixl.handle_timer(11.0)
-    assert set(out.ctc) >= {("CMR22", 0), ("CTC22", 1), ("LOC22", 0)}
+    assert set(out.of("ctc")) >= {("CMR22", 0), ("CTC22", 1), ("LOC22", 0)}
 
 
 def _run_train_into_track_2(rig: StationRig) -> None:
@@ -516,8 +516,8 @@ def test_a_restarted_interlocking_demands_each_point_where_it_lies(line: Line) -
     }
     bits |= {f"SNI20{p.name}": 1 for p in line.station(20).points} | {"SNI2031": 0, "SRI2031": 1}
     out = ixl.receive("io", bits, 1.0)
-    assert ("PRC2031", 1) in out.io and ("PNC2031", 1) not in out.io
-    assert ("PNC2032", 1) in out.io  # the others lie normal: demanded normal
+    assert ("PRC2031", 1) in out.of("io") and ("PNC2031", 1) not in out.of("io")
+    assert ("PNC2032", 1) in out.of("io")  # the others lie normal: demanded normal
     cold = Interlocking(line.view(20), mode=Mode.CENTER)  # a lab's start: normal, as ever
     assert cold.full_state("io")["PNC2031"] == 1
 

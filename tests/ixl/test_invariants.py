@@ -102,7 +102,7 @@ class InterlockingMachine(RuleBasedStateMachine):
         self.check_releases()
 
     def check_points(self, out: IxlOutput) -> None:
-        for name, value in out.io:
+        for name, value in out.of("io"):
             code = self.codes.parse_code(name)
             assert code is not None
             kind, obj = code.function, code.object
