@@ -102,6 +102,27 @@ class FrameProfile:
     def nak_reason_name(self, reason: int) -> str:
         return self.nak_reasons.get(reason, f"reason {reason}")
 
+    def nak_reason(self, meaning: str) -> int:
+        """The NAK reason number this profile gives `meaning` ("crc error", "frame timeout",
+        "length/format error", "unknown opcode"): the one its `nak_reasons` names so, a remark in
+        brackets aside ("frame timeout (ΔR)"). ConfigError when it names none."""
+        for number, name in self.nak_reasons.items():
+            if name.split(" (", 1)[0].strip().lower() == meaning:
+                return number
+        raise ConfigError(
+            self.source, "nak_reasons", f"profile {self.name} needs {meaning!r}, named none"
+        )
+
+    def items_per_frame(self, op_name: str) -> int:
+        """The most items one frame of `op_name` carries: what DATA holds after its fixed fields,
+        in items of its width."""
+        opcode = self.opcodes.by_name.get(op_name)
+        if opcode is None or not opcode.item_size:
+            raise ConfigError(
+                self.source, "opcodes", f"profile {self.name}: no {op_name} with items"
+            )
+        return (self.max_data - opcode.fixed_size) // opcode.item_size
+
 
 @cache
 def _crc_function(spec: CrcSpec) -> CrcFunction:

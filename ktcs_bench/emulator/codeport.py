@@ -33,7 +33,6 @@ from ktcs_bench.type1 import (
 
 log = logging.getLogger("ktcs_bench.emulator")
 REOPEN = 1.0  # s between attempts to reopen a failed serial endpoint
-MAX_ITEMS = 300  # CHANGE items a frame: 900 bytes, inside the default 1024-byte DATA limit
 
 
 class CodePort:
@@ -121,8 +120,9 @@ class CodePort:
     def _send_items(self, items: list[tuple[int, int]]) -> None:
         if not items or self.runner is None:
             return
-        for k in range(0, len(items), MAX_ITEMS):
-            chunk = [list(item) for item in items[k : k + MAX_ITEMS]]
+        per_frame = self.link.profile.items_per_frame("CHANGE")  # as wide as the profile's items
+        for k in range(0, len(items), per_frame):
+            chunk = [list(item) for item in items[k : k + per_frame]]
             self.runner.send(self.link.message("CHANGE", items=chunk))
 
     def _statuses(self, start: int, count: int) -> bytes:

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ktcs_bench.codec import Frame, FrameCodec, StreamDecoder
+from ktcs_bench.codec import Frame, FrameCodec, FrameProfile, StreamDecoder
 from ktcs_bench.conformance.timing import SuiteTiming
 from ktcs_bench.errors import UsageError
 from ktcs_bench.tap.tcp import TcpTap
@@ -210,23 +210,39 @@ def insertion(t: ThreatTarget) -> ThreatResult:
                         asked and answered, outcome, safe, ev)  # fmt: skip
 
 
+def corrupted_change(profile: FrameProfile, seq: int, code: int, value: int) -> bytes:
+    """A CHANGE of two items `code`=`value` with one bit of the second item's state flipped after
+    its CRC was computed: where that bit sits is read off the profile (header, fixed fields, the
+    items' width and the state's place in one)."""
+    opcode = profile.opcodes.by_name["CHANGE"]
+    frame = bytearray(FrameCodec(profile).encode_message(seq, "CHANGE",
+                                                         items=[[code, value], [code, value]]))  # fmt: skip
+    names = [f.name for f in opcode.items]
+    k = names.index("state")
+    state = sum(f.size for f in opcode.items[:k])  # its place in an item
+    low = 0 if profile.little else opcode.items[k].size - 1  # its least significant byte
+    at = profile.header_size + opcode.fixed_size + opcode.item_size + state + low
+    frame[at] ^= 0x02
+    return bytes(frame)
+
+
 def corruption(t: ThreatTarget) -> ThreatResult:
     profile = t.tap.profile
     code, value, _ = t.probe()
-    frame = bytearray(FrameCodec(profile).encode_message(0x77, "CHANGE",
-                                                         items=[[code, value], [code, value]]))  # fmt: skip
-    frame[profile.header_size + 5] ^= 0x02  # one bit of the second item's state
+    frame = corrupted_change(profile, 0x77, code, value)
+    crc_nak = bytes([profile.nak_reason("crc error")])
     before = t.app.inputs()
-    mark = t.tap.act(f"send {t.toward} {bytes(frame).hex()}")
-    nak = t.tap.wait_frame(mark, t.back, lambda f: t.op(f) == "NAK" and f.data[:1] == b"\x01", 2.0)
+    mark = t.tap.act(f"send {t.toward} {frame.hex()}")
+    nak = t.tap.wait_frame(mark, t.back, lambda f: t.op(f) == "NAK" and f.data[:1] == crc_nak, 2.0)
     time.sleep(0.3)
     acked = [f for f in t.tap.frames(mark, t.back) if t.op(f) == "ACK" and f.seq == 0x77]
     app_ok = None if before is None else t.app.inputs() == before
     outcome, safe = _outcome(app_ok, "nothing acted on: the IXL's inputs are unchanged",
                              "ACTED ON: the corrupted value was taken", "NAKed, not ACKed")  # fmt: skip
     return ThreatResult("corruption", t.link, f"tap: send {t.toward} (CHANGE, one bit flipped)",
-                        "CRC: NAK reason 1, frame discarded", nak and not acked, outcome, safe,
-                        [f"{t.dut} NAK reason 1: {'yes' if nak else 'no'}; ACK of its SEQ: "
+                        f"CRC: NAK reason {crc_nak[0]}, frame discarded", nak and not acked,
+                        outcome, safe,
+                        [f"{t.dut} NAK reason {crc_nak[0]}: {'yes' if nak else 'no'}; ACK of its SEQ: "
                          f"{'yes' if acked else 'no'}"])  # fmt: skip
 
 

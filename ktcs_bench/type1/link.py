@@ -64,9 +64,10 @@ from ktcs_bench.type1.events import (
 
 StateProvider = Callable[[int, int], bytes | Sequence[int]]
 
-NAK_CRC = 1
-NAK_FRAME_TIMEOUT = 2
-NAK_FORMAT = 3
+# The NAK reasons by their names in the profile's `nak_reasons`; the numbers are the profile's.
+NAK_CRC = "crc error"
+NAK_FRAME_TIMEOUT = "frame timeout"
+NAK_FORMAT = "length/format error"
 _NAK_FOR_ERROR = {"crc": NAK_CRC, "truncated": NAK_FRAME_TIMEOUT, "etx": NAK_FORMAT}
 
 
@@ -94,6 +95,10 @@ class Type1Link:
         }
         self._ack_op = self._op["ACK"].op
         self._nak_op = self._op["NAK"].op
+        self._nak_reason = {
+            meaning: self.profile.nak_reason(meaning)
+            for meaning in (NAK_CRC, NAK_FRAME_TIMEOUT, NAK_FORMAT)
+        }
         seq_modulo = self._codec.seq_modulo
         self._sender = Sender(seq_modulo, self.timers.max_transmissions, first_seq)
         self._receiver = Receiver(seq_modulo)
@@ -310,7 +315,10 @@ class Type1Link:
         self._sender.push(Message(opcode.op, opcode.build(values), opcode.name), front=front)
         self._last_request_all = now
 
-    def _nak(self, seq: int, reason: int, detail: str, raw: bytes, events: list[LinkEvent]) -> None:
+    def _nak(
+        self, seq: int, meaning: str, detail: str, raw: bytes, events: list[LinkEvent]
+    ) -> None:
+        reason = self._nak_reason[meaning]
         seq %= self._codec.seq_modulo
         self._control.append(self._codec.encode(seq, self._nak_op, bytes([reason])))
         events.append(NakSent(seq, reason, self.profile.nak_reason_name(reason), detail, raw))

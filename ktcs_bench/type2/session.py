@@ -29,9 +29,10 @@ from ktcs_bench.errors import UsageError
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.config import Type2Config
 
-NAK_CRC = 1
-NAK_FORMAT = 3
-NAK_UNKNOWN_OPCODE = 4
+# The NAK reasons by their names in the profile's `nak_reasons`; the numbers are the profile's.
+NAK_CRC = "crc error"
+NAK_FORMAT = "length/format error"
+NAK_UNKNOWN_OPCODE = "unknown opcode"
 
 OP_IDENT = 0x01
 OP_INDICATION = 0x10
@@ -63,9 +64,10 @@ class _Sent:
 
 
 class FrameRefused(Exception):
-    """Raised by a handler: the frame is not acted on and is NAKed with `reason`."""
+    """Raised by a handler: the frame is not acted on and is NAKed with `reason` (as the profile's
+    `nak_reasons` names it: `NAK_FORMAT`, ...)."""
 
-    def __init__(self, reason: int, detail: str) -> None:
+    def __init__(self, reason: str, detail: str) -> None:
         super().__init__(detail)
         self.reason = reason
         self.detail = detail
@@ -88,6 +90,10 @@ class Type2Session:
         self.profile = get_profile(self.config.profile)
         self.codec = FrameCodec(self.profile)
         self._decoder = StreamDecoder(self.profile)
+        self._nak_reason = {
+            meaning: self.profile.nak_reason(meaning)
+            for meaning in (NAK_CRC, NAK_FORMAT, NAK_UNKNOWN_OPCODE)
+        }
         ops = self.profile.opcodes.by_name
         self.op_indication: Opcode = ops["INDICATION"]
         self.op_control: Opcode = ops["CONTROL"]
@@ -139,9 +145,9 @@ class Type2Session:
             if self.closed:
                 break
             if isinstance(rec, Garbage):
-                self._bad(None, NAK_FORMAT, f"{len(rec.raw)} stray bytes", now)
+                self._bad(None, self._nak_reason[NAK_FORMAT], f"{len(rec.raw)} stray bytes", now)
             elif rec.error is not None:
-                reason = NAK_CRC if rec.error == "crc" else NAK_FORMAT
+                reason = self._nak_reason[NAK_CRC if rec.error == "crc" else NAK_FORMAT]
                 self._bad(rec.seq, reason, f"{rec.error} error", now)
             else:
                 self._good(rec, now)
@@ -276,7 +282,7 @@ class Type2Session:
         except SessionDropped:
             return
         except (FrameRefused, PayloadError) as exc:
-            reason = exc.reason if isinstance(exc, FrameRefused) else NAK_FORMAT
+            reason = self._nak_reason[exc.reason if isinstance(exc, FrameRefused) else NAK_FORMAT]
             self._rx_expected = seq
             self._awaiting = seq
             self._awaiting_reason = reason
