@@ -1,8 +1,9 @@
 """Load and schema-check station and line YAML (SPEC §6.2, §9: one clear message per bad file).
 
 Every problem raises `ConfigError(file, place, problem)` where `place` is a key path such as
-`routes[3].points[0].point`. Checks: missing keys, wrong types, duplicate names (across the whole
-line for track circuits), unknown references (track circuits, points, signals, routes), route
+`routes[3].points[0].point`. The files' shapes -- keys, types, defaults -- are declared in
+`shapes.py` and converted by `schema.convert` (missing, unknown and mistyped keys); then checked
+here: duplicate names (across the whole line for track circuits), unknown references (track circuits, points, signals, routes), route
 sections that disagree with the route, conflicts that are not mutual, and routes that share a
 track circuit or point without being declared conflicting.
 """
@@ -11,9 +12,8 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, TypeVar
 
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, excerpt
@@ -50,95 +50,17 @@ from ktcs_bench.station.shapes import (
     TrackCircuitShape,
 )
 
-T = TypeVar("T")
-
 DEFAULT_LINE = "lines/reference.yaml"
 
 
 class _Doc:
-    """Typed access to one parsed YAML document, raising ConfigError with the key path."""
+    """The checks of one file's converted shape: each mistake a ConfigError with the key path."""
 
     def __init__(self, file: str | Path) -> None:
         self.file = str(file)
 
     def fail(self, place: str, problem: str) -> ConfigError:
         return ConfigError(self.file, place, problem)
-
-    def mapping(self, value: object, place: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.fail(place, f"must be a mapping, not {_kind(value)}")
-        return value
-
-    def get(self, obj: dict[str, Any], key: str, place: str) -> object:
-        if key not in obj:
-            raise self.fail(_join(place, key), "missing key")
-        return obj[key]
-
-    def string(self, obj: dict[str, Any], key: str, place: str, default: str | None = None) -> str:
-        if key not in obj and default is not None:
-            return default
-        value = self.get(obj, key, place)
-        if isinstance(value, bool) or not isinstance(value, (str, int)):
-            raise self.fail(_join(place, key), f"must be a string, not {_kind(value)}")
-        return str(value)
-
-    def number(
-        self, obj: dict[str, Any], key: str, place: str, default: float | None = None
-    ) -> float:
-        if key not in obj and default is not None:
-            return default
-        value = self.get(obj, key, place)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(_join(place, key), f"must be a number, not {_kind(value)}")
-        return float(value)
-
-    def integer(self, obj: dict[str, Any], key: str, place: str) -> int:
-        value = self.get(obj, key, place)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(_join(place, key), f"must be an integer, not {_kind(value)}")
-        return value
-
-    def items(
-        self, obj: dict[str, Any], key: str, place: str, optional: bool = False
-    ) -> list[object]:
-        if optional and key not in obj:
-            return []
-        value = self.get(obj, key, place)
-        if value is None and optional:
-            return []
-        if not isinstance(value, list):
-            raise self.fail(_join(place, key), f"must be a list, not {_kind(value)}")
-        return value
-
-    def strings(
-        self, obj: dict[str, Any], key: str, place: str, optional: bool = False
-    ) -> tuple[str, ...]:
-        out: list[str] = []
-        for i, v in enumerate(self.items(obj, key, place, optional)):
-            if isinstance(v, bool) or not isinstance(v, (str, int)):
-                raise self.fail(f"{_join(place, key)}[{i}]", f"must be a string, not {_kind(v)}")
-            out.append(str(v))
-        return tuple(out)
-
-    def choice(
-        self, obj: dict[str, Any], key: str, place: str, allowed: Iterable[str], default: str = ""
-    ) -> str:
-        value = self.string(obj, key, place, default or None)
-        allowed = tuple(allowed)
-        if value not in allowed:
-            raise self.fail(
-                _join(place, key), f"must be one of {', '.join(allowed)}, not {excerpt(value)}"
-            )
-        return value
-
-    def list_of(
-        self, obj: dict[str, Any], key: str, place: str, build: Callable[[dict[str, Any], str], T]
-    ) -> list[T]:
-        out: list[T] = []
-        for i, item in enumerate(self.items(obj, key, place)):
-            here = f"{_join(place, key)}[{i}]"
-            out.append(build(self.mapping(item, here), here))
-        return out
 
     def unique(self, names: list[str], place: str, what: str) -> None:
         seen: dict[str, int] = {}
@@ -149,14 +71,6 @@ class _Doc:
                     f"duplicate {what} {excerpt(name)} (also {place}[{seen[name]}])",
                 )
             seen[name] = i
-
-
-def _join(place: str, key: str) -> str:
-    return f"{place}.{key}" if place else key
-
-
-def _kind(value: object) -> str:
-    return "nothing" if value is None else type(value).__name__
 
 
 # ---------------------------------------------------------------------------------------------

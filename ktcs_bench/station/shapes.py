@@ -6,6 +6,8 @@ other parts -- references, geometry, defaults computed from other keys -- `loade
 
 from __future__ import annotations
 
+from typing import Any
+
 import msgspec
 
 from ktcs_bench.schema import Shape
@@ -141,3 +143,43 @@ class LineShape(Shape):
     speed_limits: tuple[SpeedLimitShape, ...]
     atc: AtcShape
     tags: TagsShape = msgspec.field(default_factory=TagsShape)
+
+
+# -- timetable files ---------------------------------------------------------------------------
+
+
+class TrainDataShape(Shape):
+    length_m: float
+    max_speed_kmh: float
+    traction_kmh_per_s: float
+    service_brake_kmh_per_s: float
+    emergency_brake_kmh_per_s: float
+
+
+class StopShape(Shape):
+    station: int
+    track: Text
+    stop_m: float
+    dwell_s: float = 0.0
+
+
+class EntersShape(Shape):
+    track_circuit: Text
+    at_s: float = 0.0
+
+
+class TimetableTrainShape(Shape):
+    id: Text
+    train: Text
+    direction: Text
+    stops: tuple[StopShape, ...]
+    enters: EntersShape | None = None
+    leaves_lab: bool = False
+    depart_s: float = 0.0
+
+
+class TimetableShape(Shape):
+    timetable: Text
+    train_data: dict[Any, Any]  # name -> TrainDataShape, converted one by one (the path names it)
+    trains: tuple[TimetableTrainShape, ...]
+    line: Text | None = None

@@ -26,6 +26,7 @@ from typing import Any
 
 from ktcs_bench.datafiles import load_mapping
 from ktcs_bench.errors import excerpt
+from ktcs_bench.schema import convert
 from ktcs_bench.station.loader import _Doc
 from ktcs_bench.station.model import (
     DIRECTIONS,
@@ -35,6 +36,12 @@ from ktcs_bench.station.model import (
     Signal,
     Station,
     TrackCircuit,
+)
+from ktcs_bench.station.shapes import (
+    StopShape,
+    TimetableShape,
+    TimetableTrainShape,
+    TrainDataShape,
 )
 
 TRAIN_DATA_KEYS = (
@@ -164,173 +171,178 @@ def platform_circuits(station: Station, track: str) -> tuple[TrackCircuit, ...]:
     return tuple(t for t in station.track_circuits if t.tracks == (track,))
 
 
-def load_timetable(path: str | Path, line: Line) -> Timetable:
-    """Load and check a timetable against `line` (see the module docstring)."""
-    path = Path(path)
-    doc = _Doc(path)
-    raw = load_mapping(path, "timetable")
-    name = doc.string(raw, "timetable", "")
-    if "line" in raw:
-        runs_on = (path.parent / doc.string(raw, "line", "")).resolve()
-        if runs_on != Path(line.file).resolve():
-            raise doc.fail("line", f"the timetable runs on {runs_on}, not on {line.file}")
-    tcs = {t.name: t for t in line.all_track_circuits()}
+class _TimetableRefs:
+    """What a timetable's trains refer to: the line, its track circuits and the train data."""
 
-    def number(o: dict[str, Any], key: str, place: str, default: float | None = None) -> float:
-        value = doc.number(o, key, place, default)
+    def __init__(self, doc: _Doc, line: Line, data: dict[str, TrainData]) -> None:
+        self.doc = doc
+        self.line = line
+        self.tcs = {t.name: t for t in line.all_track_circuits()}
+        self.data = data
+
+    def number(self, value: float, place: str) -> float:
         if not math.isfinite(value) or value < 0:
-            raise doc.fail(
-                f"{place}.{key}", f"must be a finite number >= 0, not {excerpt(o.get(key))}"
-            )
+            raise self.doc.fail(place, f"must be a finite number >= 0, not {excerpt(value)}")
         return value
 
+
+def _train_data(doc: _Doc, r: _TimetableRefs, table: dict[Any, Any]) -> dict[str, TrainData]:
     data: dict[str, TrainData] = {}
-    table = doc.mapping(doc.get(raw, "train_data", ""), "train_data")
     for key, item in table.items():
         here = f"train_data.{key}"
-        o = doc.mapping(item, here)
-        values = [number(o, k, here) for k in TRAIN_DATA_KEYS]
+        o = convert(item, TrainDataShape, doc.file, here)
+        values = [r.number(getattr(o, k), f"{here}.{k}") for k in TRAIN_DATA_KEYS]
         for k, v in zip(TRAIN_DATA_KEYS, values, strict=True):
             if v <= 0:
                 raise doc.fail(f"{here}.{k}", "must be positive")
         data[str(key)] = TrainData(str(key), *values)
+    return data
 
-    def build_stop(
-        o: dict[str, Any],
-        here: str,
-        direction: Direction,
-        length: float,
-        i: int,
-        n: int,
-        leaves: bool,
-        starts_here: bool,
-    ) -> Stop:
-        number_ = doc.integer(o, "station", here)
-        if number_ not in line.stations:
-            raise doc.fail(f"{here}.station", f"station {number_} is not on the line {line.name}")
-        st = line.station(number_)
-        track = doc.string(o, "track", here)
-        if track not in st.tracks:
-            raise doc.fail(
-                f"{here}.track",
-                f"station {number_} has no track {excerpt(track)} (tracks: {', '.join(st.tracks)})",
-            )
-        stop_m = doc.number(o, "stop_m", here)
-        rear = stop_m - length if direction == "up" else stop_m + length
-        platform = platform_circuits(st, track)
-        if not any(t.covers(stop_m) and t.covers(rear) for t in platform):
-            where = ", ".join(f"{t.name} ({t.from_m:g}-{t.to_m:g} m)" for t in platform)
-            raise doc.fail(
-                f"{here}.stop_m",
-                f"a {length:g} m train stopping at {stop_m:g} m "
-                f"does not stand wholly on track {track}'s circuit {where or '(none)'}",
-            )
-        last = i == n - 1
-        start = start_route(line, st, direction, track)
-        if start is None and (not last or leaves):
-            raise doc.fail(
-                f"{here}.track", f"no {direction} route out of station {number_} from track {track}"
-            )
-        home = None if starts_here else home_route(st, direction, track)
-        if home is None and not starts_here:
-            raise doc.fail(
-                f"{here}.track",
-                f"no {direction} route from the home signal of "
-                f"station {number_} into track {track}",
-            )
-        return Stop(
-            number_,
-            track,
-            stop_m,
-            number(o, "dwell_s", here, 0.0),
-            None if home is None else home.name,
-            start.name if start is not None and (not last or leaves) else None,
-        )
 
-    def build_train(o: dict[str, Any], place: str) -> TimetableTrain:
-        train_id = doc.string(o, "id", place)
-        kind = doc.string(o, "train", place)
-        if kind not in data:
-            raise doc.fail(
-                f"{place}.train",
-                f"no train data {excerpt(kind)} under train_data ({', '.join(data) or 'none'})",
-            )
-        direction: Direction = (
-            "up" if doc.choice(o, "direction", place, DIRECTIONS) == "up" else "down"
+def _stop(
+    r: _TimetableRefs,
+    o: StopShape,
+    here: str,
+    train: tuple[Direction, float, bool],
+    last: bool,
+    starts_here: bool,
+) -> Stop:
+    """One stop of a train running `direction`, `length` m long, that `leaves` the lab or not."""
+    direction, length, leaves = train
+    line, number_ = r.line, o.station
+    if number_ not in line.stations:
+        raise r.doc.fail(f"{here}.station", f"station {number_} is not on the line {line.name}")
+    st = line.station(number_)
+    track = str(o.track)
+    if track not in st.tracks:
+        raise r.doc.fail(
+            f"{here}.track",
+            f"station {number_} has no track {excerpt(track)} (tracks: {', '.join(st.tracks)})",
         )
-        enters = None
-        if "enters" in o:
-            e = doc.mapping(o["enters"], f"{place}.enters")
-            where = doc.string(e, "track_circuit", f"{place}.enters")
-            if where not in tcs:
-                raise doc.fail(
-                    f"{place}.enters.track_circuit",
-                    f"no track circuit {excerpt(where)} on the line {line.name}",
+    stop_m = o.stop_m
+    rear = stop_m - length if direction == "up" else stop_m + length
+    platform = platform_circuits(st, track)
+    if not any(t.covers(stop_m) and t.covers(rear) for t in platform):
+        where = ", ".join(f"{t.name} ({t.from_m:g}-{t.to_m:g} m)" for t in platform)
+        raise r.doc.fail(
+            f"{here}.stop_m",
+            f"a {length:g} m train stopping at {stop_m:g} m "
+            f"does not stand wholly on track {track}'s circuit {where or '(none)'}",
+        )
+    start = start_route(line, st, direction, track)
+    if start is None and (not last or leaves):
+        raise r.doc.fail(
+            f"{here}.track", f"no {direction} route out of station {number_} from track {track}"
+        )
+    home = None if starts_here else home_route(st, direction, track)
+    if home is None and not starts_here:
+        raise r.doc.fail(
+            f"{here}.track",
+            f"no {direction} route from the home signal of station {number_} into track {track}",
+        )
+    return Stop(
+        number_,
+        track,
+        stop_m,
+        r.number(o.dwell_s, f"{here}.dwell_s"),
+        None if home is None else home.name,
+        start.name if start is not None and (not last or leaves) else None,
+    )
+
+
+def _stops(
+    r: _TimetableRefs, o: TimetableTrainShape, place: str, direction: Direction, kind: str
+) -> list[Stop]:
+    """A train's stops, each reached from the one before."""
+    if not o.stops:
+        raise r.doc.fail(f"{place}.stops", "a train stops at one station at least")
+    train = (direction, r.data[kind].length_m, o.leaves_lab)
+    stops: list[Stop] = []
+    for i, item in enumerate(o.stops):
+        here = f"{place}.stops[{i}]"
+        last, starts_here = i == len(o.stops) - 1, i == 0 and o.enters is None
+        stop = _stop(r, item, here, train, last, starts_here)
+        if stops:
+            before = stops[-1]
+            assert before.start_route is not None
+            prev = r.line.station(before.station).route(before.start_route)
+            reach = next_station(r.line, before.station, prev)
+            if reach != stop.station:
+                raise r.doc.fail(
+                    f"{here}.station",
+                    f"after station {before.station} a {direction} train reaches station "
+                    f"{reach}, not {stop.station}",
                 )
-            enters = Entry(where, number(e, "at_s", f"{place}.enters", 0.0))
-        leaves = o.get("leaves_lab", False)
-        if not isinstance(leaves, bool):
-            raise doc.fail(f"{place}.leaves_lab", f"must be true or false, not {excerpt(leaves)}")
-        raw_stops = doc.items(o, "stops", place)
-        if not raw_stops:
-            raise doc.fail(f"{place}.stops", "a train stops at one station at least")
-        stops: list[Stop] = []
-        length = data[kind].length_m
-        for i, item in enumerate(raw_stops):
-            here = f"{place}.stops[{i}]"
-            stop = build_stop(
-                doc.mapping(item, here),
-                here,
-                direction,
-                length,
-                i,
-                len(raw_stops),
-                leaves,
-                i == 0 and enters is None,
-            )
-            if stops:
-                before = stops[-1]
-                assert before.start_route is not None
-                prev = line.station(before.station).route(before.start_route)
-                reach = next_station(line, before.station, prev)
-                if reach != stop.station:
-                    raise doc.fail(
-                        f"{here}.station",
-                        f"after station {before.station} a "
-                        f"{direction} train reaches station {reach}, not "
-                        f"{stop.station}",
-                    )
-            stops.append(stop)
-        first = stops[0]
-        st = line.station(first.station)
-        if enters is None:
-            appears_on = next(
-                t.name for t in platform_circuits(st, first.track) if t.covers(first.stop_m)
-            )
-        else:
-            assert first.home_route is not None
-            signal_at = st.signal(st.route(first.home_route).entry).position_m
-            tc = tcs[enters.track_circuit]
-            behind = tc.to_m <= signal_at if direction == "up" else tc.from_m >= signal_at
-            if not behind:
-                raise doc.fail(
-                    f"{place}.enters.track_circuit",
-                    f"{tc.name} is not on the "
-                    f"approach to station {first.station} for an {direction} train",
-                )
-            appears_on = tc.name
-        return TimetableTrain(
-            id=train_id,
-            direction=direction,
-            data=data[kind],
-            stops=tuple(stops),
-            depart_s=number(o, "depart_s", place, 0.0),
-            enters=enters,
-            leaves_lab=leaves,
-            appears_on=appears_on,
-        )
+        stops.append(stop)
+    return stops
 
-    trains = doc.list_of(raw, "trains", "", build_train)
+
+def _appears_on(
+    r: _TimetableRefs, place: str, direction: Direction, first: Stop, enters: Entry | None
+) -> str:
+    """The track circuit where the train is first seen: its entry's, or its first platform's."""
+    st = r.line.station(first.station)
+    if enters is None:
+        return next(t.name for t in platform_circuits(st, first.track) if t.covers(first.stop_m))
+    assert first.home_route is not None
+    signal_at = st.signal(st.route(first.home_route).entry).position_m
+    tc = r.tcs[enters.track_circuit]
+    behind = tc.to_m <= signal_at if direction == "up" else tc.from_m >= signal_at
+    if not behind:
+        raise r.doc.fail(
+            f"{place}.enters.track_circuit",
+            f"{tc.name} is not on the approach to station {first.station} for an {direction} train",
+        )
+    return tc.name
+
+
+def _train(r: _TimetableRefs, o: TimetableTrainShape, place: str) -> TimetableTrain:
+    kind = str(o.train)
+    if kind not in r.data:
+        raise r.doc.fail(
+            f"{place}.train",
+            f"no train data {excerpt(kind)} under train_data ({', '.join(r.data) or 'none'})",
+        )
+    d = str(o.direction)
+    if d not in DIRECTIONS:
+        raise r.doc.fail(
+            f"{place}.direction", f"must be one of {', '.join(DIRECTIONS)}, not {excerpt(d)}"
+        )
+    direction: Direction = "up" if d == "up" else "down"
+    enters = None
+    if o.enters is not None:
+        where = str(o.enters.track_circuit)
+        if where not in r.tcs:
+            raise r.doc.fail(
+                f"{place}.enters.track_circuit",
+                f"no track circuit {excerpt(where)} on the line {r.line.name}",
+            )
+        enters = Entry(where, r.number(o.enters.at_s, f"{place}.enters.at_s"))
+    stops = _stops(r, o, place, direction, kind)
+    return TimetableTrain(
+        id=str(o.id),
+        direction=direction,
+        data=r.data[kind],
+        stops=tuple(stops),
+        depart_s=r.number(o.depart_s, f"{place}.depart_s"),
+        enters=enters,
+        leaves_lab=o.leaves_lab,
+        appears_on=_appears_on(r, place, direction, stops[0], enters),
+    )
+
+
+def load_timetable(path: str | Path, line: Line) -> Timetable:
+    """Load and check a timetable against `line` (see the module docstring)."""
+    path = Path(path)
+    doc = _Doc(path)
+    raw = convert(load_mapping(path, "timetable"), TimetableShape, path)
+    if raw.line is not None:
+        runs_on = (path.parent / str(raw.line)).resolve()
+        if runs_on != Path(line.file).resolve():
+            raise doc.fail("line", f"the timetable runs on {runs_on}, not on {line.file}")
+    r = _TimetableRefs(doc, line, {})
+    r.data = _train_data(doc, r, raw.train_data)
+    trains = [_train(r, o, f"trains[{i}]") for i, o in enumerate(raw.trains)]
     if not trains:
         raise doc.fail("trains", "a timetable runs one train at least")
     ids = [t.id for t in trains]
@@ -340,4 +352,4 @@ def load_timetable(path: str | Path, line: Line) -> Timetable:
                 f"trains[{i}].id",
                 f"duplicate train {excerpt(train_id)} (also trains[{ids.index(train_id)}])",
             )
-    return Timetable(name, str(path), tuple(trains))
+    return Timetable(str(raw.timetable), str(path), tuple(trains))

@@ -143,3 +143,33 @@ def test_a_key_given_twice_is_refused_with_its_line(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as err:
         load_timetable(path, LINE)
     assert "duplicate key 'direction'" in str(err.value) and str(path) in str(err.value)
+
+
+def test_a_key_nobody_reads_is_refused_with_its_line(tmp_path: Path) -> None:
+    """The timetable's shape is declared: a misspelt key is not silently ignored."""
+    text = REFERENCE.read_text(encoding="utf-8").replace(
+        "    direction: up\n", "    direction: up\n    dwel_s: 30\n", 1
+    )
+    text = text.replace("line: ../lines/reference.yaml", f"line: {Path(LINE.file).resolve()}")
+    path = tmp_path / "misspelt.yaml"
+    path.write_text(text, encoding="utf-8")
+    line = text.splitlines().index("    dwel_s: 30") + 1
+    with pytest.raises(ConfigError) as err:
+        load_timetable(path, LINE)
+    assert err.value.file == str(path)
+    assert err.value.place == "trains[0].dwel_s"
+    assert err.value.problem == f"unknown key (line {line})"
+
+
+def test_train_data_of_the_wrong_type_names_its_key_and_line(tmp_path: Path) -> None:
+    text = REFERENCE.read_text(encoding="utf-8")
+    text = text.replace("line: ../lines/reference.yaml", f"line: {Path(LINE.file).resolve()}")
+    assert "max_speed_kmh: 80," in text
+    text = text.replace("max_speed_kmh: 80,", "max_speed_kmh: fast,", 1)
+    path = tmp_path / "fast.yaml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError) as err:
+        load_timetable(path, LINE)
+    assert err.value.place == "train_data.seed001-table1.max_speed_kmh"
+    line = next(i for i, x in enumerate(text.splitlines(), 1) if "max_speed_kmh: fast" in x)
+    assert err.value.problem == f"must be a number, not str (line {line})"
