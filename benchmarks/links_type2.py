@@ -30,9 +30,9 @@ from typing import Any
 
 from ktcs_bench.codec.crc import crc_extension_in_use
 from ktcs_bench.ctc.tables import IndicationTables
+from ktcs_bench.transport.ctc_server import CtcServer
+from ktcs_bench.transport.ixl_client import IxlClient, StateTable
 from ktcs_bench.type2 import events as ev
-from ktcs_bench.type2.ctc_server import CtcServer
-from ktcs_bench.type2.ixl_client import IxlClient, StateTable
 
 FIRST_STATION = 100
 BATCH = 40  # changes per indicate() call by default: one full INDICATION message

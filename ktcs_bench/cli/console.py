@@ -58,7 +58,7 @@ async def _serve(args: argparse.Namespace) -> None:
     from ktcs_bench.ctc.desk import Desk
     from ktcs_bench.ctc.model import CtcModel
     from ktcs_bench.station.loader import load_line
-    from ktcs_bench.type2.ctc_server import CtcServer
+    from ktcs_bench.transport.ctc_server import CtcServer
 
     line = load_line(args.line)
     if args.throw_time is not None:

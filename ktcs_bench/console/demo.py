@@ -22,7 +22,7 @@ from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station.model import Line, Station
 from ktcs_bench.timed.aio import LoopTimer
-from ktcs_bench.type2.ixl_client import IxlClient
+from ktcs_bench.transport.ixl_client import IxlClient
 
 
 def with_throw_time(line: Line, seconds: float) -> Line:

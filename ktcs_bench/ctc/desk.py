@@ -21,7 +21,7 @@ from typing import Any
 from ktcs_bench.ctc.log import CommandLog
 from ktcs_bench.ctc.model import Action, CtcModel
 from ktcs_bench.errors import PeerError, UsageError
-from ktcs_bench.type2.ctc_server import CtcServer
+from ktcs_bench.transport.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")
 

@@ -1,6 +1,6 @@
 """What the CTC knows of each station: its indication table and the link it comes by (pure).
 
-`IndicationTables` is the CTC application the Type II server feeds (`type2.ctc_server.
+`IndicationTables` is the CTC application the Type II server feeds (`transport.ctc_server.
 CtcApplication`): link up/down, full states and change indications, per station. It keeps code
 numbers and states only; `ctc.model` reads them as the operator's picture.
 """

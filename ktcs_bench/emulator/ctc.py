@@ -37,8 +37,8 @@ from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable
 from ktcs_bench.train.speed_distance import SpeedDistance
 from ktcs_bench.transport import jsonlines
+from ktcs_bench.transport.ctc_server import CtcServer
 from ktcs_bench.type2 import events as ev
-from ktcs_bench.type2.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")
 

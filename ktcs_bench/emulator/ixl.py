@@ -21,9 +21,9 @@ from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
+from ktcs_bench.transport.ixl_client import IxlClient
 from ktcs_bench.type1 import LinkConfig
 from ktcs_bench.type2 import events as ev
-from ktcs_bench.type2.ixl_client import IxlClient
 
 
 class IxlDevice(Device):

@@ -18,13 +18,13 @@ from typing import Any
 from ktcs_bench.codec import FrameCodec
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.errors import UsageError
+from ktcs_bench.transport.ctc_server import CtcApplication, CtcServer
+from ktcs_bench.transport.ixl_client import IxlApplication, IxlClient
 from ktcs_bench.type1 import LinkConfig, StateProvider, Type1Link
 from ktcs_bench.type1.arq import Acceptance, Receiver
 from ktcs_bench.type1.events import LinkEvent
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.admission import ADMIT, AdmissionPolicy, Decision
-from ktcs_bench.type2.ctc_server import CtcApplication, CtcServer
-from ktcs_bench.type2.ixl_client import IxlApplication, IxlClient
 from ktcs_bench.type2.ixl_side import IxlSession
 
 

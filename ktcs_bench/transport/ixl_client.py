@@ -15,10 +15,10 @@ from typing import Protocol
 
 from ktcs_bench.errors import UsageError
 from ktcs_bench.transport import net
+from ktcs_bench.transport.type2_pump import EventCallback, SessionPump, Waitable
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.config import Type2Config
 from ktcs_bench.type2.ixl_side import IxlSession
-from ktcs_bench.type2.pump import EventCallback, SessionPump, Waitable
 
 log = logging.getLogger("ktcs_bench.type2")
 

@@ -29,7 +29,7 @@ from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import CycleInputs, LineData, TrainConfig, TrainEndpoint
 from ktcs_bench.train.mrsp import Restriction
 from ktcs_bench.train.units import kmh
-from ktcs_bench.type2.ctc_server import CtcServer
+from ktcs_bench.transport.ctc_server import CtcServer
 
 T = TypeVar("T")
 CHROMIUM = "/usr/bin/chromium"

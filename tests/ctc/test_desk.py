@@ -12,8 +12,8 @@ from ktcs_bench.ctc.desk import Desk
 from ktcs_bench.ctc.model import CtcModel
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.loader import load_line
+from ktcs_bench.transport.ctc_server import CtcServer
 from ktcs_bench.type2 import events as ev
-from ktcs_bench.type2.ctc_server import CtcServer
 
 LINE = load_line()
 

@@ -22,10 +22,10 @@ from ktcs_bench.faults import BitErrors, CorruptFrame, InsertGarbage
 from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.transport.aio import LinkRunner
+from ktcs_bench.transport.ctc_server import CtcServer
+from ktcs_bench.transport.ixl_client import IxlClient, StateTable
 from ktcs_bench.transport.serialport import SerialTransport
 from ktcs_bench.type1 import LinkConfig, LinkUp, Type1Link
-from ktcs_bench.type2.ctc_server import CtcServer
-from ktcs_bench.type2.ixl_client import IxlClient, StateTable
 
 from .harness import (
     Rec,

@@ -9,11 +9,11 @@ import random
 import pytest
 
 from ktcs_bench.ctc.tables import IndicationTables
+from ktcs_bench.transport.ctc_server import CtcServer
+from ktcs_bench.transport.ixl_client import IxlClient, StateTable
 from ktcs_bench.type2 import events as ev
 from ktcs_bench.type2.admission import AdmissionPolicy
 from ktcs_bench.type2.config import Type2Config
-from ktcs_bench.type2.ctc_server import CtcServer
-from ktcs_bench.type2.ixl_client import IxlClient, StateTable
 
 from .netutil import CUT, PROFILE, Proxy, damage, poll_until, run
 

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from ktcs_bench.ctc.tables import IndicationTables
-from ktcs_bench.type2.ctc_server import CtcServer
-from ktcs_bench.type2.ixl_client import IxlClient, StateTable
+from ktcs_bench.transport.ctc_server import CtcServer
+from ktcs_bench.transport.ixl_client import IxlClient, StateTable
 
 from .netutil import run
 
