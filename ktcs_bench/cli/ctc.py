@@ -13,6 +13,7 @@ from typing import Any
 from ktcs_bench.cli._common import host_port
 from ktcs_bench.ctc.log import parse_words
 from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.messages import Ars, Log, Show, Status
 from ktcs_bench.transport import jsonlines
 
 HELP_TEXT = """\
@@ -111,9 +112,9 @@ async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -
         if words and words[0].lower() == "help":
             print(HELP_TEXT)
             return
-        obj = parse_words(words)
+        message = parse_words(words)
         try:
-            answer = await jsonlines.request(host, port, obj, timeout=30)
+            answer = await jsonlines.request(host, port, message, timeout=30)
         except OSError as exc:
             raise PeerError(f"the CTC at {host}:{port} does not answer: {exc}") from None
         stamp = time.strftime("%H:%M:%S")
@@ -121,14 +122,14 @@ async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -
             print(
                 json.dumps({"time": time.time(), "command": " ".join(words), **answer}), flush=True
             )
-        elif obj["cmd"] == "show" and answer.get("ok"):
+        elif isinstance(message, Show) and answer.get("ok"):
             print(show_text(answer))
-        elif obj["cmd"] == "status" and answer.get("ok"):
+        elif isinstance(message, Status) and answer.get("ok"):
             for st in answer["status"].get("stations", {}).values():
                 print(show_text({"summary": st}))
-        elif obj["cmd"] == "ars" and answer.get("ok"):
+        elif isinstance(message, Ars) and answer.get("ok"):
             print(ars_text(answer))
-        elif obj["cmd"] == "log":
+        elif isinstance(message, Log):
             for e in answer.get("log", []):
                 at = time.strftime("%H:%M:%S", time.localtime(e["time"]))
                 by = f" (by {e['source'].upper()})" if e.get("source") == "ars" else ""
@@ -146,7 +147,7 @@ async def _session(args: argparse.Namespace, commands: list[list[str]] | None) -
                 f"{stamp} {' '.join(words)} -> {mark}{text}{reset}",
                 flush=True,
             )
-        if obj["cmd"] not in ("show", "status", "log") and not answer.get("ok"):
+        if not isinstance(message, Show | Status | Log) and not answer.get("ok"):
             failed = True
 
     if commands is not None:

@@ -41,6 +41,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from ktcs_bench import messages
 from ktcs_bench.ctc.describer import DescribedTrain, Describer
 from ktcs_bench.ctc.model import CtcModel, StationReading
 from ktcs_bench.station.model import Route, Station
@@ -63,15 +64,9 @@ class RouteRequest:
     exit: str
 
     @property
-    def command(self) -> dict[str, Any]:
-        """The request in the CTC desk's words (`CtcModel.action`)."""
-        return {
-            "cmd": "route",
-            "action": "set",
-            "station": self.station,
-            "entry": self.entry,
-            "exit": self.exit,
-        }
+    def command(self) -> messages.Route:
+        """The request as the CTC desk takes it (`CtcModel.action`)."""
+        return messages.Route(action="set", station=self.station, entry=self.entry, exit=self.exit)
 
     @property
     def text(self) -> str:

@@ -21,6 +21,7 @@ from typing import Any
 from ktcs_bench.ctc.log import CommandLog
 from ktcs_bench.ctc.model import Action, CtcModel
 from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.messages import OperatorCommand
 from ktcs_bench.transport.ctc_server import CtcServer
 
 log = logging.getLogger("ktcs_bench.ctc")
@@ -70,12 +71,12 @@ class Desk:
 
     async def operate(
         self,
-        command: Mapping[str, Any],
+        command: OperatorCommand | Mapping[str, Any],
         source: str = "ctc",
         on_sent: Callable[[Action], None] | None = None,
     ) -> Outcome:
-        """Carry out one command (see `CtcModel.action` for its words); `on_sent` is told as its
-        CONTROL goes out."""
+        """Carry out one command (a message, or its JSON object: `CtcModel.action`); `on_sent` is
+        told as its CONTROL goes out."""
         entry = self.log.record(self.clock(), command, source)
         try:
             action = self.model.action(command)

@@ -5,17 +5,32 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal
 
 from ktcs_bench.ctc.model import signal_name
 from ktcs_bench.errors import UsageError
+from ktcs_bench.messages import (
+    Ars,
+    Control,
+    Log,
+    Message,
+    Mode,
+    Point,
+    Route,
+    Show,
+    Signal,
+    Status,
+    encode,
+)
 
 KEEP = 10_000  # entries kept
 
 
-def command_words(command: Mapping[str, Any]) -> str:
+def command_words(command: Message | Mapping[str, Any]) -> str:
     """An operator command as the operator types it to `ktcs-bench ctc` ("route set 18 01 11");
     a command of another shape as its keys and values."""
+    if isinstance(command, Message):
+        command = encode(command)
     cmd, st = str(command.get("cmd", "?")), command.get("station", "?")
 
     def sig(key: str) -> str:
@@ -35,39 +50,36 @@ def command_words(command: Mapping[str, Any]) -> str:
     return " ".join([cmd, *(f"{k}={v}" for k, v in command.items() if k != "cmd")])
 
 
-def parse_words(words: list[str]) -> dict[str, Any]:
+def parse_words(words: list[str]) -> Message:
     """Operator words (as `ktcs-bench ctc` takes them: `route set 18 S1 S11`) -> the CTC control
-    port's command, the inverse of `command_words`. UsageError with a hint when malformed."""
+    port's message (`messages.CTC`), the inverse of `command_words`. UsageError with a hint when
+    malformed."""
     if not words:
         raise UsageError("empty command")
     w = [x.lower() for x in words]
     try:
         if w[0] == "route" and w[1] in ("set", "cancel") and len(w) == 5:
-            return {"cmd": "route", "action": w[1], "station": int(w[2]), "entry": words[3],
-                    "exit": words[4]}  # fmt: skip
+            action: Literal["set", "cancel"] = "set" if w[1] == "set" else "cancel"
+            return Route(action=action, station=int(w[2]), entry=words[3], exit=words[4])
         if w[0] == "point" and w[1] in ("normal", "reverse") and len(w) == 4:
-            return {"cmd": "point", "position": w[1], "station": int(w[2]), "point": words[3]}
+            return Point(position=w[1], station=int(w[2]), point=words[3])
         if w[0] == "signal" and w[1] in ("stop", "release") and len(w) == 4:
-            return {"cmd": "signal", "action": w[1], "station": int(w[2]), "signal": words[3]}
+            return Signal(action=w[1], station=int(w[2]), signal=words[3])
         if w[0] == "mode" and w[1] in ("center", "local") and len(w) == 3:
-            return {"cmd": "mode", "mode": w[1], "station": int(w[2])}
+            return Mode(mode=w[1], station=int(w[2]))
         if w[0] == "control" and len(w) in (3, 4):
             value = int(w[3], 0) if len(w) == 4 else 1
-            return {
-                "cmd": "control",
-                "station": int(w[1]),
-                "code": words[2].upper(),
-                "value": value,
-            }
+            return Control(station=int(w[1]), code=words[2].upper(), value=value)
         if w[0] == "show" and len(w) == 2:
-            return {"cmd": "show", "station": int(w[1])}
-        if w[0] in ("status", "log") and len(w) == 1:
-            return {"cmd": w[0]}
+            return Show(station=int(w[1]))
+        if w[0] == "status" and len(w) == 1:
+            return Status()
+        if w[0] == "log" and len(w) == 1:
+            return Log()
         if w[0] == "ars" and len(w) == 1:
-            return {"cmd": "ars"}
+            return Ars()
         if w[0] == "ars" and w[1] in ("on", "off") and len(w) in (2, 3):
-            switch: dict[str, Any] = {"cmd": "ars", "on": w[1] == "on"}
-            return switch if len(w) == 2 else {**switch, "station": int(w[2])}
+            return Ars(on=w[1] == "on", station=int(w[2]) if len(w) == 3 else None)
     except (IndexError, ValueError):
         pass
     raise UsageError(f"cannot read {' '.join(words)!r}; type `help`")
@@ -80,7 +92,9 @@ class CommandLog:
     def __init__(self, keep: int = KEEP) -> None:
         self.entries: deque[dict[str, Any]] = deque(maxlen=keep)
 
-    def record(self, time: float, command: Mapping[str, Any], source: str) -> dict[str, Any]:
+    def record(
+        self, time: float, command: Message | Mapping[str, Any], source: str
+    ) -> dict[str, Any]:
         entry: dict[str, Any] = {"time": time, "command": command_words(command), "source": source}
         self.entries.append(entry)
         return entry

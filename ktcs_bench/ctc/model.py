@@ -25,6 +25,7 @@ from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.codes.stations import station_chart
 from ktcs_bench.ctc.tables import IndicationTable, IndicationTables
 from ktcs_bench.errors import UsageError
+from ktcs_bench.messages import Control, Mode, OperatorCommand, Point, Route, Signal
 from ktcs_bench.station.model import Line, Station, StationView
 
 UNKNOWN = "unknown"  # what the CTC does not know now (link down, no full state yet, no indication)
@@ -353,32 +354,65 @@ class CtcModel:
     def named(self, station: int) -> dict[str, int]:
         return self.station(station).named(self.state(station))
 
-    def action(self, command: Mapping[str, Any]) -> Action:
-        """The Action of one operator command, in the CTC control port's words:
-        `{"cmd": "route", "action": "set"|"cancel", "station": 18, "entry": "S1", "exit": "S11"}`
-        (cancel without "exit": the route set from "entry"), `{"cmd": "point", "position":
-        "normal"|"reverse", "point": "31"}`, `{"cmd": "signal", "action": "stop"|"release",
-        "signal": "01"}`, `{"cmd": "mode", "mode": "center"|"local"}`, `{"cmd": "control",
-        "code": "RSC180111", "value": 1}`. UsageError when it cannot be carried out."""
-        cmd = command.get("cmd")
-        if cmd not in ("route", "point", "signal", "mode", "control"):
-            raise UsageError(f"unknown command {cmd!r}")
-        model = self.station(command.get("station"))
+    def action(self, command: OperatorCommand | Mapping[str, Any]) -> Action:
+        """The Action of one operator command (`messages.OperatorCommand`: route set/cancel, point,
+        signal, mode, control), or of its JSON object as the CTC control port takes it (read here
+        by `operator_command`). UsageError when it cannot be carried out."""
+        if not isinstance(command, Route | Point | Signal | Mode | Control):
+            command = operator_command(command)
+        model = self.station(command.station)
         try:
-            if cmd == "route":
-                entry, exit_ = str(command["entry"]), command.get("exit")
-                if command.get("action", "set") == "set":
-                    return model.set_route(entry, str(command["exit"]))
-                state = self.state(model.number)
-                return model.cancel_route(entry, state, None if exit_ is None else str(exit_))
-            if cmd == "point":
-                return model.move_point(str(command["point"]), str(command["position"]))
-            if cmd == "signal":
-                return model.signal(str(command["signal"]), str(command.get("action", "stop")))
-            if cmd == "mode":
-                return model.mode(str(command["mode"]))
-            return model.control(str(command["code"]), int(command.get("value", 1)))
-        except KeyError as exc:
-            raise UsageError(f"{cmd} command without {exc}") from None
+            match command:
+                case Route(action="set", entry=entry, exit=None):
+                    raise UsageError("route command without 'exit'")
+                case Route(action="set", entry=entry, exit=str(exit_)):
+                    return model.set_route(entry, exit_)
+                case Route(entry=entry, exit=exit_):
+                    return model.cancel_route(entry, self.state(model.number), exit_)
+                case Point(point=point, position=position):
+                    return model.move_point(point, position)
+                case Signal(signal=signal, action=action):
+                    return model.signal(signal, action)
+                case Mode(mode=mode):
+                    return model.mode(mode)
+                case Control(code=code, value=value):
+                    return model.control(code, value)
         except ValueError as exc:
-            raise UsageError(f"{cmd} command: {exc}") from None
+            raise UsageError(f"{command.cmd()} command: {exc}") from None
+        raise AssertionError(command)
+
+
+def operator_command(command: Mapping[str, Any]) -> OperatorCommand:
+    """An operator command's JSON object (`{"cmd": "route", "action": "set"|"cancel", "station":
+    18, "entry": "S1", "exit": "S11"}`, cancel without "exit": the route set from "entry";
+    `{"cmd": "point", "position": "normal"|"reverse", "point": "31"}`, `{"cmd": "signal",
+    "action": "stop"|"release", "signal": "01"}`, `{"cmd": "mode", "mode": "center"|"local"}`,
+    `{"cmd": "control", "code": "RSC180111", "value": 1}`) as its message, read leniently (a
+    number where a name is meant is its name). UsageError when it is none of them."""
+    cmd = command.get("cmd")
+    station = command.get("station")
+    at = station if station is None or isinstance(station, int | str) else str(station)
+    try:
+        if cmd == "route":
+            exit_ = command.get("exit")
+            action = command.get("action", "set")
+            if action not in ("set", "cancel"):
+                raise ValueError(f"route action must be set or cancel, not {action!r}")
+            return Route(action=action, station=at, entry=str(command["entry"]),
+                         exit=None if exit_ is None else str(exit_))  # fmt: skip
+        if cmd == "point":
+            return Point(station=at, point=str(command["point"]),
+                         position=str(command["position"]))  # fmt: skip
+        if cmd == "signal":
+            return Signal(station=at, signal=str(command["signal"]),
+                          action=str(command.get("action", "stop")))  # fmt: skip
+        if cmd == "mode":
+            return Mode(station=at, mode=str(command["mode"]))
+        if cmd == "control":
+            return Control(station=at, code=str(command["code"]),
+                           value=int(command.get("value", 1)))  # fmt: skip
+    except KeyError as exc:
+        raise UsageError(f"{cmd} command without {exc}") from None
+    except ValueError as exc:
+        raise UsageError(f"{cmd} command: {exc}") from None
+    raise UsageError(f"unknown command {cmd!r}")

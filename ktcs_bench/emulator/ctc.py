@@ -33,6 +33,23 @@ from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.messages import (
+    CTC,
+    AddTrain,
+    Control,
+    Log,
+    Message,
+    Mode,
+    OperatorCommand,
+    Point,
+    Route,
+    Show,
+    Signal,
+    TimedRoute,
+)
+from ktcs_bench.messages import (
+    Ars as ArsMessage,
+)
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable
 from ktcs_bench.train.speed_distance import SpeedDistance
@@ -111,6 +128,7 @@ class RemoteTrains:
 
 class CtcDevice(Device):
     kind = "ctc"
+    messages = CTC
 
     def __init__(
         self,
@@ -151,39 +169,40 @@ class CtcDevice(Device):
         self.remote_trains: RemoteTrains | None = None
 
     # -- operator commands -----------------------------------------------------------------------
-    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
-        cmd = obj.get("cmd")
-        if cmd == "show":
-            try:
-                st = self.model.station(obj.get("station")).number
-            except UsageError as exc:
-                return {"ok": False, "error": str(exc)}
-            return {"ok": True, "summary": self.model.summary(st), "state": self.model.named(st)}
-        if cmd == "log":
-            return {"ok": True, "log": self.desk.log.last(int(obj.get("last", 50)))}
-        if cmd in ("route", "point", "signal", "mode", "control"):
-            return await self.operate(obj)
-        if cmd == "ars":
-            return self.ars_command(obj)
-        if cmd == "timed_route":
-            return await self.timed_route(obj)
-        if cmd == "add_train":  # a train process the console may draw (the lab tells us)
-            if self.remote_trains is None:
-                return {"ok": False, "error": "this CTC serves no console"}
-            host, _, port = str(obj["control"]).rpartition(":")
-            self.remote_trains.add(str(obj["train"]), host, int(port))
-            return {"ok": True}
-        return await super().command(obj)
+    async def handle(self, message: Message) -> dict[str, Any]:
+        match message:
+            case Show(station=station):
+                try:
+                    st = self.model.station(station).number
+                except UsageError as exc:
+                    return {"ok": False, "error": str(exc)}
+                return {"ok": True, "summary": self.model.summary(st),
+                        "state": self.model.named(st)}  # fmt: skip
+            case Log(last=last):
+                return {"ok": True, "log": self.desk.log.last(last)}
+            case Route() | Point() | Signal() | Mode() | Control():
+                return await self.operate(message)
+            case ArsMessage():
+                return self.ars_command(message)
+            case TimedRoute():
+                return await self.timed_route(message)
+            case AddTrain(train=train, control=control):  # a train process the console may draw
+                if self.remote_trains is None:
+                    return {"ok": False, "error": "this CTC serves no console"}
+                host, _, port = control.rpartition(":")
+                self.remote_trains.add(train, host, int(port))
+                return {"ok": True}
+        return await super().handle(message)
 
-    async def operate(self, obj: dict[str, Any]) -> dict[str, Any]:
-        outcome = await self.carry_out(obj, "ctc")
+    async def operate(self, command: OperatorCommand) -> dict[str, Any]:
+        outcome = await self.carry_out(command, "ctc")
         action = outcome.action
         if action is None or not outcome.answered:  # refused by the CTC, or no answer
             return {"ok": False, "error": outcome.why}
         return {"ok": outcome.accepted, "code": action.name, "result": outcome.result,
                 "reason": outcome.reason}  # fmt: skip
 
-    async def carry_out(self, command: dict[str, Any], source: str) -> Outcome:
+    async def carry_out(self, command: OperatorCommand, source: str) -> Outcome:
         """One command through the desk (`source`: who gives it), its outcome in the events."""
         outcome = await self.desk.operate(command, source)
         action = outcome.action
@@ -212,23 +231,18 @@ class CtcDevice(Device):
         self.ars_update()
         return done
 
-    def ars_command(self, obj: dict[str, Any]) -> dict[str, Any]:
+    def ars_command(self, ars: ArsMessage) -> dict[str, Any]:
         """{"cmd": "ars"}: the state and the last `last` log entries; with "on": true/false
         (and "station", else every station) switch it first."""
         if self.ars is None:
             return {"ok": False, "error": "this CTC runs no timetable: ARS needs `ars:` in the "
                     "lab file"}  # fmt: skip
-        if "on" in obj:
-            on = obj["on"]
-            if not isinstance(on, bool):
-                return {"ok": False, "error": f"on must be true or false, not {on!r}"}
+        if ars.on is not None:
             try:
-                self.switch_ars(obj.get("station"), on)
+                self.switch_ars(ars.station, ars.on)
             except UsageError as exc:
                 return {"ok": False, "error": str(exc)}
-        last = obj.get("last", 20)
-        count = last if isinstance(last, int) and not isinstance(last, bool) else 20
-        return {"ok": True, "ars": self.ars.status(), "log": self.ars.last(count)}
+        return {"ok": True, "ars": self.ars.status(), "log": self.ars.last(ars.last)}
 
     def _ars_now(self) -> float:
         """ARS's time: seconds since the device started (the timetable's times count from it)."""
@@ -259,19 +273,19 @@ class CtcDevice(Device):
         if self.console is not None:
             self.console.note_ars(entry)
 
-    async def timed_route(self, obj: dict[str, Any]) -> dict[str, Any]:
+    async def timed_route(self, timed: TimedRoute) -> dict[str, Any]:
         """Set a route and time, in this process's clock, CONTROL sent -> CONTROL_RESULT -> the
         entry signal's proceed indication (the benchmark's end-to-end figure)."""
-        model = self.model.station(obj["station"])
-        entry = signal_name(str(obj["entry"]))
+        model = self.model.station(timed.station)
+        entry = signal_name(timed.entry)
         t0 = time.monotonic()
-        answer = await self.operate({**obj, "cmd": "route", "action": "set"})
+        route = Route(station=timed.station, entry=timed.entry, exit=timed.exit)
+        answer = await self.operate(route)
         t_result = time.monotonic() - t0
         if not answer.get("ok"):
             return answer
         await self.server.wait_until(
-            lambda: model.proceed_shown(entry, self.model.state(model.number)),
-            float(obj.get("timeout", 30.0)),
+            lambda: model.proceed_shown(entry, self.model.state(model.number)), timed.timeout
         )
         return {**answer, "result_s": t_result, "proceed_s": time.monotonic() - t0}
 

@@ -20,12 +20,13 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from functools import partial
-from typing import Any
+from typing import Any, ClassVar
 
 from ktcs_bench.binding import LinkBinding
 from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.rails import RailsClient
+from ktcs_bench.messages import DEVICE, BadMessage, Events, Message, Status, Stop, decode
 from ktcs_bench.runtime import server_token
 from ktcs_bench.station.model import Line
 from ktcs_bench.timed import Out, Sink, Timed
@@ -39,6 +40,7 @@ log = logging.getLogger("ktcs_bench.emulator")
 
 class Device:
     kind = "device"
+    messages: ClassVar[object] = DEVICE  # the commands its control port takes (a union)
 
     def __init__(self, name: str, control: tuple[str, int] = ("127.0.0.1", 0)) -> None:
         self.name = name
@@ -84,20 +86,31 @@ class Device:
     def status(self) -> dict[str, Any]:
         return {"name": self.name, "kind": self.kind}
 
-    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
-        """Override to add commands; the base knows status, events and stop."""
-        cmd = obj.get("cmd")
-        if cmd == "status":
-            return {"ok": True, "status": self.status()}
-        if cmd == "events":
-            n = int(obj.get("last", 50))
-            return {"ok": True, "events": list(self.events)[-n:]}
-        if cmd == "stop":
-            self.stop()
-            return {"ok": True}
-        return {"ok": False, "error": f"unknown command {cmd!r}"}
+    async def command(self, obj: Message | Mapping[str, object]) -> dict[str, Any]:
+        """One command: a message, or a JSON object decoded here, once, into one of the messages
+        this kind takes (`messages`); one that is none of them gets the one error answer."""
+        try:
+            message = obj if isinstance(obj, Message) else decode(obj, self.messages)
+        except BadMessage as exc:
+            return {"ok": False, "error": str(exc)}
+        return await self.handle(message)
 
-    async def _handle(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any]:
+    async def handle(self, message: Message) -> dict[str, Any]:
+        """Override to add commands (and name them in `messages`); the base knows status, events
+        and stop."""
+        match message:
+            case Status():
+                return {"ok": True, "status": self.status()}
+            case Events(last=n):
+                return {"ok": True, "events": list(self.events)[-n:]}
+            case Stop():
+                self.stop()
+                return {"ok": True}
+        return {"ok": False, "error": f"unknown command {message.cmd()!r}"}
+
+    async def _handle(
+        self, obj: Message | Mapping[str, object], peer: jsonlines.Peer
+    ) -> dict[str, Any]:
         try:
             return await self.command(obj)
         except Exception as exc:  # a bad command must never take the device down

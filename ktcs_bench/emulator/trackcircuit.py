@@ -9,12 +9,14 @@ from typing import Any
 from ktcs_bench.atc.codes import AtcCode
 from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
 from ktcs_bench.emulator.device import Device
+from ktcs_bench.messages import TRACK_CIRCUITS, Clear, Fail, Message, Place, Remove
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport import jsonlines, net
 
 
 class TrackCircuitDevice(Device):
     kind = "trackcircuit"
+    messages = TRACK_CIRCUITS
 
     def __init__(
         self,
@@ -83,7 +85,7 @@ class TrackCircuitDevice(Device):
                 return {"error": "position needs head and tail in metres"}
             self._broadcast(self.model.update(list(self.model.trains.values())))
             return None
-        return await self.command(obj)
+        return await self._handle(obj, peer)
 
     def _closed(self, peer: jsonlines.Peer) -> None:
         self.peers.pop(peer, None)
@@ -93,25 +95,23 @@ class TrackCircuitDevice(Device):
             self.model.trains.pop(str(train), None)
             self._broadcast(self.model.update(list(self.model.trains.values())))
 
-    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
-        """{"cmd": "fail", "tc", "kind"}, {"cmd": "clear", "tc"?}, {"cmd": "place", "train",
-        "head", "tail", "track"?} (a train with no process of its own), {"cmd": "remove", "train"}."""
-        cmd = obj.get("cmd")
+    async def handle(self, message: Message) -> dict[str, Any]:
+        """fail (tc, kind), clear (tc, else every one), place (train, head, tail, track: a train
+        with no process of its own), remove (train)."""
         try:
-            if cmd == "fail":
-                self._broadcast(self.model.fail(obj["tc"], obj["kind"]))
-            elif cmd == "clear":
-                self._broadcast(self.model.clear_fault(obj.get("tc")))
-            elif cmd == "place":
-                t = TrainPosition(str(obj["train"]), float(obj["head"]), float(obj["tail"]),
-                                  str(obj.get("track", "1")))  # fmt: skip
-                self.model.trains[t.train] = t
-                self._broadcast(self.model.update(list(self.model.trains.values())))
-            elif cmd == "remove":
-                self.model.trains.pop(str(obj["train"]), None)
-                self._broadcast(self.model.update(list(self.model.trains.values())))
-            else:
-                return await super().command(obj)
+            match message:
+                case Fail(tc=tc, kind=kind):
+                    self._broadcast(self.model.fail(tc, kind))
+                case Clear(tc=tc):
+                    self._broadcast(self.model.clear_fault(tc))
+                case Place(train=train, head=head, tail=tail, track=track):
+                    self.model.trains[train] = TrainPosition(train, head, tail, track)
+                    self._broadcast(self.model.update(list(self.model.trains.values())))
+                case Remove(train=train):
+                    self.model.trains.pop(train, None)
+                    self._broadcast(self.model.update(list(self.model.trains.values())))
+                case _:
+                    return await super().handle(message)
         except (KeyError, ValueError) as exc:
             return {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
         return {"ok": True}

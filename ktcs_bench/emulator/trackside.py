@@ -8,12 +8,21 @@ from typing import Any
 
 from ktcs_bench.emulator.device import IxlPeerDevice
 from ktcs_bench.field.trackside import FieldOutput, Trackside
+from ktcs_bench.messages import (
+    TRACKSIDE,
+    ClearFaults,
+    FailLamp,
+    FailPoint,
+    FailTrackCircuit,
+    Message,
+)
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
 
 
 class TracksideDevice(IxlPeerDevice):
     kind = "trackside"
+    messages = TRACKSIDE
     tx_chart = "io_to_ixl"
 
     def __init__(
@@ -64,22 +73,22 @@ class TracksideDevice(IxlPeerDevice):
             },  # fmt: skip
         }
 
-    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
-        """Faults: {"cmd": "fail_point", "point", "kind"}, fail_lamp (signal, aspect),
-        fail_track_circuit (tc, kind), clear_faults."""
-        cmd, now = obj.get("cmd"), self.now()
+    async def handle(self, message: Message) -> dict[str, Any]:
+        """Faults: fail_point (point, kind), fail_lamp (signal, aspect), fail_track_circuit (tc,
+        kind), clear_faults."""
+        now = self.now()
         try:
-            if cmd == "fail_point":
-                self.apply(self.io.fail_point(obj["point"], obj["kind"], now))
-            elif cmd == "fail_lamp":
-                self.apply(self.io.fail_lamp(obj["signal"], obj["aspect"], now))
-            elif cmd == "fail_track_circuit":
-                self.apply(self.io.fail_track_circuit(obj["tc"], obj["kind"], now))
-            elif cmd == "clear_faults":
-                self.apply(self.io.clear_faults(now))
-            else:
-                answer: dict[str, Any] = await super().command(obj)
-                return answer
+            match message:
+                case FailPoint(point=point, kind=kind):
+                    self.apply(self.io.fail_point(point, kind, now))
+                case FailLamp(signal=signal, aspect=aspect):
+                    self.apply(self.io.fail_lamp(signal, aspect, now))
+                case FailTrackCircuit(tc=tc, kind=kind):
+                    self.apply(self.io.fail_track_circuit(tc, kind, now))
+                case ClearFaults():
+                    self.apply(self.io.clear_faults(now))
+                case _:
+                    return await super().handle(message)
         except (KeyError, ValueError) as exc:
             return {"ok": False, "error": str(exc)}
         return {"ok": True}

@@ -30,6 +30,16 @@ from typing import Any
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.errors import ConfigError, UsageError
+from ktcs_bench.messages import (
+    TRAIN,
+    Dispatch,
+    Hold,
+    Message,
+    ReleaseEb,
+    RunTo,
+    SpeedDistance,
+    TrainOrder,
+)
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import TimetableTrain
 from ktcs_bench.train.deceleration import GradientProfile
@@ -138,6 +148,7 @@ def _code_fields(wire: Any) -> tuple[float, float, float] | None:
 
 class TrainDevice(Device):
     kind = "train"
+    messages = TRAIN
 
     def __init__(
         self,
@@ -306,32 +317,31 @@ class TrainDevice(Device):
             "target_point": None if self.last is None else self.last.target_point,
         }
 
-    def _order(self, obj: dict[str, Any]) -> dict[str, Any]:
+    def _order(self, order: TrainOrder) -> dict[str, Any]:
         """The operator's orders to the ATO: hold, dispatch [now], run_to AT (m on the line)."""
         now = 0.0 if self.origin is None else self.now() - self.origin
-        ep, cmd = self.endpoint, obj["cmd"]
+        ep = self.endpoint
         try:
-            if cmd == "hold":
-                text = ep.hold(now)
-            elif cmd == "dispatch":
-                text = ep.dispatch(now, at_once=obj.get("now") is True)
-            else:
-                at = obj.get("at")
-                if not isinstance(at, (int, float)) or isinstance(at, bool):
-                    return {"ok": False, "error": f"run_to: 'at' is a place in m, not {at!r}"}
-                text = ep.run_to(now, float(at))
+            match order:
+                case Hold():
+                    text = ep.hold(now)
+                case Dispatch(now=at_once):
+                    text = ep.dispatch(now, at_once=at_once)
+                case RunTo(at=at):
+                    text = ep.run_to(now, at)
         except UsageError as exc:
             return {"ok": False, "error": str(exc)}
-        self.note(cmd, text)
+        self.note(order.cmd(), text)
         return {"ok": True, "result": text}
 
-    async def command(self, obj: dict[str, Any]) -> dict[str, Any]:
-        if obj.get("cmd") == "release_eb":
-            self.release = True
-            return {"ok": True}
-        if obj.get("cmd") in ("hold", "dispatch", "run_to"):
-            return self._order(obj)
-        if obj.get("cmd") == "speed_distance":  # for the CTC console's speed-distance panel
-            sd = endpoint_speed_distance(self.config.train_id, self.endpoint)
-            return {"ok": True, "data": sd.to_json()}
-        return await super().command(obj)
+    async def handle(self, message: Message) -> dict[str, Any]:
+        match message:
+            case ReleaseEb():
+                self.release = True
+                return {"ok": True}
+            case Hold() | Dispatch() | RunTo():
+                return self._order(message)
+            case SpeedDistance():  # for the CTC console's speed-distance panel
+                sd = endpoint_speed_distance(self.config.train_id, self.endpoint)
+                return {"ok": True, "data": sd.to_json()}
+        return await super().handle(message)

@@ -14,10 +14,12 @@ straight to the objects.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
 from ktcs_bench.errors import PeerError
+from ktcs_bench.messages import Message
 
 
 class LabGone(PeerError):
@@ -45,8 +47,9 @@ class LabAccess(Protocol):
         """Let the lab run for `seconds` of its clock."""
         ...
 
-    async def device(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:
-        """A device's control-port command and its answer (`{"ok": ..., ...}`)."""
+    async def device(self, name: str, obj: Message | Mapping[str, object]) -> dict[str, Any]:
+        """A device's control-port command (a message, `ktcs_bench.messages`, or its JSON object)
+        and its answer (`{"ok": ..., ...}`)."""
         ...
 
     async def link(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:

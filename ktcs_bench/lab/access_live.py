@@ -9,12 +9,14 @@ connection); a device that was restarted is reached again at the address the sta
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.lab.access import LabGone
 from ktcs_bench.lab.state import attach
+from ktcs_bench.messages import Message, encode
 from ktcs_bench.runtime import read_token
 from ktcs_bench.transport import jsonlines
 
@@ -77,14 +79,15 @@ class LiveLabAccess:
                 return str(e["tap"])
         raise UsageError(f"lab {self.name} has no tapped link {name!r}")
 
-    async def device(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:
+    async def device(self, name: str, obj: Message | Mapping[str, object]) -> dict[str, Any]:
+        sent = encode(obj) if isinstance(obj, Message) else dict(obj)
         try:
-            return await self._request(self._device_address(name), obj)
+            return await self._request(self._device_address(name), sent)
         except LabGone:
             raise
         except (OSError, TimeoutError, PeerError):
             self._refresh()  # restarted elsewhere? try once more where the state says it is
-            return await self._request(self._device_address(name), obj)
+            return await self._request(self._device_address(name), sent)
 
     async def link(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:
         return await self._request(self._link_address(name), obj)

@@ -29,7 +29,7 @@ import json
 import logging
 import secrets
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from functools import partial
 from pathlib import Path
 from typing import IO, Any, TypeVar
@@ -41,6 +41,7 @@ from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.runner import device_args, lab_command, start_in_order
 from ktcs_bench.lab.state import read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec, load_lab, resolve_lab_path
+from ktcs_bench.messages import Message
 from ktcs_bench.runtime import server_token, this_process
 from ktcs_bench.tap.runner import Tap
 from ktcs_bench.tap.tcp import TcpTap
@@ -173,11 +174,13 @@ class InProcessLab:
     async def sleep(self, seconds: float) -> None:
         await asyncio.sleep(seconds)
 
-    async def device(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:
+    async def device(self, name: str, obj: Message | Mapping[str, object]) -> dict[str, Any]:
         self._spec(name)
         device = self.objects.get(name)
         if device is None:
             return {"ok": False, "error": f"{name} is not running ({self._why_not(name)})"}
+        if isinstance(obj, Message):  # as its port would have decoded it
+            return _as_on_the_wire(await device._handle(obj, _NO_PEER))
         if not isinstance(obj, dict) or not isinstance(obj.get("cmd"), str):
             return {"ok": False, "error": 'a command is a JSON object {"cmd": ...}'}
         return _as_on_the_wire(await device._handle(dict(obj), _NO_PEER))

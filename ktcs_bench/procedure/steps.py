@@ -30,10 +30,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from ktcs_bench import messages as msg
 from ktcs_bench.argtypes import seconds
 from ktcs_bench.ctc.log import parse_words
 from ktcs_bench.errors import UsageError, excerpt, kind_of
 from ktcs_bench.lab.access import LabAccess
+from ktcs_bench.messages import Message
 from ktcs_bench.procedure.expect import Expectation, Observer, parse_expectation
 from ktcs_bench.procedure.names import LabNames, StepError
 from ktcs_bench.tap.control import parse_command
@@ -148,7 +150,7 @@ class Step:
 # -- actions -------------------------------------------------------------------------------------
 @dataclass
 class CtcStep(Step):
-    command: dict[str, Any] = field(default_factory=dict)
+    command: Message = field(default_factory=msg.Status)
     refused: str | None = None
     ctc: str = "ctc"
 
@@ -169,7 +171,7 @@ class CtcStep(Step):
 @dataclass
 class LocalStep(Step):
     device: str = ""
-    command: dict[str, Any] = field(default_factory=dict)
+    command: msg.Local | msg.LocalControl = field(default_factory=lambda: msg.Local(action=""))
 
     async def run(self, ctx: Context) -> Outcome:
         answer = await ctx.access.device(self.device, self.command)
@@ -188,7 +190,7 @@ class TrainStep(Step):
     length: float | None = None
     track: str | None = None
     device: str | None = None  # a train device: `command` is its command
-    command: dict[str, Any] = field(default_factory=dict)
+    command: Message = field(default_factory=msg.Status)
 
     async def run(self, ctx: Context) -> Outcome:
         if self.device is not None:
@@ -210,7 +212,7 @@ class TrainStep(Step):
         if self.verb == "remove":
             del ctx.ghosts[self.train]
             tc = ctx.names.device_of("trackcircuit")
-            await ctx.access.device(tc, {"cmd": "remove", "train": self.train})
+            await ctx.access.device(tc, msg.Remove(train=self.train))
             await ctx.action_done()
             return Outcome("pass", "removed")
         # run to `at` at `kmh`, one move per sample period of the lab's clock
@@ -376,16 +378,16 @@ def _train_step(names: LabNames, base: dict[str, Any], text: str) -> TrainStep:
                     "(place AT [length M] [track N], run to AT [at KMH], remove)")  # fmt: skip
 
 
-def _device_order(
-    names: LabNames, train: str, device: str, verb: str, rest: list[str]
-) -> dict[str, Any]:
+def _device_order(names: LabNames, train: str, device: str, verb: str, rest: list[str]) -> Message:
     """The command a train device takes for `train ID VERB REST...`."""
-    if verb in ("hold", "release_eb") and not rest:
-        return {"cmd": verb}
+    if verb == "hold" and not rest:
+        return msg.Hold()
+    if verb == "release_eb" and not rest:
+        return msg.ReleaseEb()
     if verb == "dispatch" and rest in ([], ["now"]):
-        return {"cmd": verb, "now": bool(rest)}
+        return msg.Dispatch(now=bool(rest))
     if verb == "run" and len(rest) == 2 and rest[0] == "to":
-        return {"cmd": "run_to", "at": _place(names, rest[1])}
+        return msg.RunTo(at=_place(names, rest[1]))
     if verb == "run" and rest[:1] == ["to"] and len(rest) > 2:
         raise StepError(f"train {train} runs as device {device}: its ATO sets the speed "
                         "(run to AT, without at KMH)")  # fmt: skip
@@ -426,19 +428,19 @@ def _fault_step(names: LabNames, base: dict[str, Any], text: str) -> FaultStep:
         if w[3] not in POINT_FAULTS:
             raise StepError(f"point fault {w[3]!r}: one of {', '.join(POINT_FAULTS)}")
         return FaultStep(**base, target="point", name=names.device_of("trackside", st),
-                         command={"cmd": "fail_point", "point": point, "kind": w[3]})  # fmt: skip
+                         command=msg.encode(msg.FailPoint(point=point, kind=w[3])))  # fmt: skip
     if what == "relay" and len(w) == 3:
         tc = names.track_circuit(w[1])
         if w[2] not in RELAY_FAULTS:
             raise StepError(f"relay fault {w[2]!r}: one of {', '.join(RELAY_FAULTS)}")
         return FaultStep(**base, target="relay", name=names.device_of("trackside", tc.station),
-                         command={"cmd": "fail_track_circuit", "tc": tc.name, "kind": w[2]})  # fmt: skip
+                         command=msg.encode(msg.FailTrackCircuit(tc=tc.name, kind=w[2])))  # fmt: skip
     if what == "tc" and len(w) == 3:
         tc = names.track_circuit(w[1])
         if w[2] not in TC_FAULTS:
             raise StepError(f"track-circuit fault {w[2]!r}: one of {', '.join(TC_FAULTS)}")
         return FaultStep(**base, target="tc", name=names.device_of("trackcircuit"),
-                         command={"cmd": "fail", "tc": tc.name, "kind": w[2]})  # fmt: skip
+                         command=msg.encode(msg.Fail(tc=tc.name, kind=w[2])))  # fmt: skip
     if what in ("kill", "restart") and len(w) == 2:
         return FaultStep(**base, target=what, name=names.device(w[1]))
     raise StepError(f"cannot read fault {text!r} (link NAME WORDS, point ST P KIND, relay TC "
@@ -452,14 +454,14 @@ def _local_step(names: LabNames, base: dict[str, Any], text: str) -> LocalStep:
     st = names.station(w[0])
     ixl = names.device_of("ixl", st)
     if w[1].lower() in LOCAL_ACTIONS and len(w) == 2:
-        return LocalStep(**base, device=ixl, command={"cmd": "local", "action": w[1].lower()})
+        return LocalStep(**base, device=ixl, command=msg.Local(action=w[1].lower()))
     if w[1].lower() == "control" and len(w) in (3, 4):
         try:
             value = int(w[3], 0) if len(w) == 4 else 1
         except ValueError:
             raise StepError(f"control value {w[3]!r} is not a number") from None
         return LocalStep(**base, device=ixl,
-                         command={"cmd": "control", "code": w[2].upper(), "value": value})  # fmt: skip
+                         command=msg.LocalControl(code=w[2].upper(), value=value))  # fmt: skip
     raise StepError(f"local: cannot read {text!r} ({', '.join(LOCAL_ACTIONS)}, control CODE [V])")
 
 
@@ -490,8 +492,9 @@ def parse_step(index: int, raw: object, names: LabNames) -> Step:
             command = parse_words(text.split())
         except UsageError as exc:
             raise StepError(f"ctc: {exc}") from None
-        if "station" in command:
-            names.station(str(command["station"]))
+        station = getattr(command, "station", None)
+        if station is not None:
+            names.station(str(station))
         refused = raw.get("refused")
         if refused is not None and not isinstance(refused, str):
             raise StepError(f"refused: give the reason's words as text, not {excerpt(refused)}")

@@ -16,10 +16,11 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
 from ktcs_bench.errors import PeerError
+from ktcs_bench.messages import Message, encode
 from ktcs_bench.runtime import client_token, token_matches
 from ktcs_bench.transport import memory, net
 from ktcs_bench.transport.tcp import open_tcp
@@ -40,7 +41,7 @@ class Peer:
         peer = writer.get_extra_info("peername")
         self.address = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
 
-    def send(self, obj: dict[str, Any]) -> None:
+    def send(self, obj: Mapping[str, object]) -> None:
         if not self.writer.is_closing():
             self.writer.write(json.dumps(obj, separators=(",", ":")).encode() + b"\n")
 
@@ -134,18 +135,23 @@ async def connect(host: str, port: int) -> Peer:
 
 
 async def request(
-    host: str, port: int, obj: dict[str, Any], timeout: float = 10.0, token: str | None = None
+    host: str,
+    port: int,
+    obj: Message | Mapping[str, object],
+    timeout: float = 10.0,
+    token: str | None = None,
 ) -> dict[str, Any]:
-    """One command to a control port, one answer back. The token presented is `token`, else the
-    one `runtime.client_token` finds for the address (on a lab's memory network, the lab's); a
-    refusal is a PeerError."""
+    """One command (a message, `ktcs_bench.messages`, or its JSON object) to a control port, one
+    answer back. The token presented is `token`, else the one `runtime.client_token` finds for the
+    address (on a lab's memory network, the lab's); a refusal is a PeerError."""
+    sent = encode(obj) if isinstance(obj, Message) else dict(obj)
     if token is None:
         lab = memory.network_of(asyncio.get_running_loop())  # a lab in one process: its token
         token = lab.token if lab is not None else client_token((host, port))
     async with asyncio.timeout(timeout):
         peer = await connect(host, port)
         try:
-            peer.send({**obj, "token": token} if token else obj)
+            peer.send({**sent, "token": token} if token else sent)
             answer = await peer.read()
         finally:
             peer.close()
