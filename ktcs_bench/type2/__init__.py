@@ -1,8 +1,8 @@
 """Type II link (SPEC §4): CTC <-> IXL over TCP.
 
 Owns: the sans-I/O sessions of both ends (`session`, `ixl_side`, `ctc_side`), their events and
-settings, the CTC's admission policy, and the asyncio adapters: `pump` (one session on one stream),
-`ctc_server` (accept, TLS, admission, one link per station), `ixl_client` (connect, back-off).
+settings, and the CTC's admission policy -- no I/O and no clock anywhere in it. Its asyncio adapters
+(the session pump, the CTC's server, the IXL's client) are `ktcs_bench.transport`'s, beside Type I's.
 Must not import: the interlocking or the CTC's application (`ixl`, `ctc`: they plug in through the
 `IxlApplication` / `CtcApplication` protocols), `emulator`, `console` or `ktcs_bench/transport/`.
 """
