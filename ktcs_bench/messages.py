@@ -184,7 +184,7 @@ class ClearFaults(Message, tag="clear_faults"):
 
 
 class Fail(Message, tag="fail"):
-    """A track circuit failed: `kind` as `atc.track_circuits` names them (dead, failed_occupied)."""
+    """A track circuit failed: `kind` as `atc.track_circuits` names them (failed_occupied, ...)."""
 
     tc: str
     kind: str
