@@ -153,110 +153,14 @@ def load_lab(path: str | Path | None = None) -> Lab:
     def fail(place: str, problem: str) -> ConfigError:
         return ConfigError(file, place, problem)
 
-    def port(section: dict[str, Any], place: str) -> int | None:
-        """A port the lab serves on: 0..65535 (0: any free port), or None when not given."""
-        value = section.get("port")
-        try:
-            return None if value is None else check_port(value, any_free=True)
-        except UsageError as exc:
-            raise fail(place, str(exc)) from None
-
-    def number(section: dict[str, Any], key: str, default: float, place: str) -> float | None:
-        """A positive setting (a rate, a size), whole where the default is; null stays None."""
-        if key in section and section[key] is None:
-            return None
-        value = section.get(key, default)
-        whole = isinstance(default, int)
-        if isinstance(value, bool) or not isinstance(value, int if whole else (int, float)):
-            value = None
-        if value is None or not math.isfinite(value) or value <= 0:
-            what = "a positive whole number" if whole else "a positive number"
-            raise fail(place, f"must be {what}, not {excerpt(section.get(key))}")
-        return float(value)
-
-    def whole(value: float | None) -> int | None:
-        return None if value is None else int(value)
-
     for key in ("lab", "line", "devices", "links"):
         if key not in raw:
             raise fail(key, "missing key")
     line_file = (file.parent / str(raw["line"])).resolve()
     if not line_file.is_file():
         raise fail("line", f"no such line file: {line_file}")
-    devices: dict[str, DeviceSpec] = {}
-    if not isinstance(raw["devices"], dict) or not raw["devices"]:
-        raise fail("devices", "must be a mapping NAME -> {kind, station, host}")
-    for dname, spec in raw["devices"].items():
-        name = str(dname)
-        place = f"devices.{name}"
-        if not isinstance(spec, dict):
-            raise fail(place, "must be a mapping with at least 'kind'")
-        kind = spec.get("kind")
-        if kind not in kinds.KINDS:
-            raise fail(
-                f"{place}.kind", f"must be one of {', '.join(kinds.NAMES)}, not {excerpt(kind)}"
-            )
-        station = spec.get("station")
-        if kinds.KINDS[kind].station and not isinstance(station, int):
-            raise fail(f"{place}.station", f"a {kind} needs its station number")
-        host = spec.get("host", "127.0.0.1")
-        if not isinstance(host, str):
-            raise fail(f"{place}.host", "must be an address")
-        options = {
-            k: v for k, v in spec.items() if k not in ("kind", "station", "host", "external")
-        }
-        if "port" in options:
-            options["port"] = port(spec, f"{place}.port")
-        external = None
-        if "external" in spec:
-            external = _external(spec["external"], str(kind), f"{place}.external", fail)
-        devices[name] = DeviceSpec(name, kind, station, host, options, external)
-    for kind in (k.name for k in kinds.KINDS.values() if k.single):
-        count = sum(1 for d in devices.values() if d.kind == kind)
-        if count > 1:
-            raise fail("devices", f"at most one {kind} device, found {count}")
-    links: list[LinkSpec] = []
-    if not isinstance(raw["links"], list):
-        raise fail("links", "must be a list of {name, type, a, b, tap}")
-    seen: dict[tuple[str, str], str] = {}
-    for i, lk in enumerate(raw["links"]):
-        place = f"links[{i}]"
-        if not isinstance(lk, dict):
-            raise fail(place, "must be a mapping {name, type, a, b, tap}")
-        for key in ("name", "type", "a", "b"):
-            if key not in lk:
-                raise fail(f"{place}.{key}", "missing key")
-        a, b, typ = str(lk["a"]), str(lk["b"]), lk["type"]
-        for end in ("a", "b"):
-            if str(lk[end]) not in devices:
-                raise fail(f"{place}.{end}", f"unknown device {excerpt(lk[end])}")
-        if devices[a].kind != kinds.IXL:
-            raise fail(f"{place}.a", "end a of every link is an IXL")
-        if devices[a].external is not None and typ == "type1":
-            raise fail(f"{place}.a", f"{a} is external: its Type I peers are its own, not the "
-                       "lab's (list only its Type II link)")  # fmt: skip
-        if devices[a].external is not None and lk.get("tap", True) is not True:
-            raise fail(f"{place}.tap", f"{a} is external: the link's tap serves the address it "
-                       "connects to, so the tap must be there (tap: true)")  # fmt: skip
-        peer = devices[b].kind
-        allowed = tuple(k.name for k in kinds.IXL_PEERS if k.link == typ)
-        if typ not in (kinds.TYPE1, kinds.TYPE2):
-            raise fail(f"{place}.type", f"must be type1 or type2, not {excerpt(typ)}")
-        if peer not in allowed:
-            raise fail(
-                f"{place}.b",
-                f"a {typ} link from an IXL goes to {' or '.join(allowed)}, not a {peer}",
-            )
-        if kinds.KINDS[peer].station and devices[b].station != devices[a].station:
-            raise fail(
-                f"{place}.b",
-                f"{b} belongs to station {devices[b].station}, {a} to {devices[a].station}",
-            )
-        role_key = (a, kinds.role_of(peer))
-        if role_key in seen:
-            raise fail(place, f"{a} already has a {role_key[1]} link ({seen[role_key]})")
-        seen[role_key] = str(lk["name"])
-        links.append(LinkSpec(str(lk["name"]), typ, a, b, bool(lk.get("tap", True))))
+    devices = _devices(raw["devices"], fail)
+    links = _links(raw["links"], devices, fail)
     sections: dict[str, dict[str, Any]] = {}
     for key in ("type1", "type2", "console"):
         section = raw.get(key) or {}
@@ -284,17 +188,149 @@ def load_lab(path: str | Path | None = None) -> Lab:
         devices=devices,
         links=tuple(links),
         type1_profile=str(t1.get("profile", "ktcs-type1")),
-        line_rate=number(t1, "line_rate", 9600.0, "type1.line_rate"),  # null: unpaced
+        line_rate=_number(t1, "line_rate", 9600.0, "type1.line_rate", fail),  # null: unpaced
         # null: the profile's maximum DATA length
-        longest_frame_data=whole(number(t1, "longest_frame_data", 132, "type1.longest_frame_data")),
+        longest_frame_data=_whole(
+            _number(t1, "longest_frame_data", 132, "type1.longest_frame_data", fail)
+        ),
         type2_profile=str(t2.get("profile", "ktcs-type2")),
-        type2_port=port(t2, "type2.port") or 0,
-        console_port=port(console, "console.port"),
+        type2_port=_port(t2, "type2.port", fail) or 0,
+        console_port=_port(console, "console.port", fail),
         console_origins=tuple(origins),
         ixl_mode=mode,
         timetable_file=timetable_file,
     )
-    for d in devices.values():
+    _check_lab(lab, fail)
+    if raw.get("ars") is not None:
+        lab = replace(lab, ars=_ars(raw["ars"], lab, fail))
+    return lab
+
+
+_Fail = Callable[[str, str], ConfigError]
+
+
+def _port(section: dict[str, Any], place: str, fail: _Fail) -> int | None:
+    """A port the lab serves on: 0..65535 (0: any free port), or None when not given."""
+    value = section.get("port")
+    try:
+        return None if value is None else check_port(value, any_free=True)
+    except UsageError as exc:
+        raise fail(place, str(exc)) from None
+
+
+def _number(
+    section: dict[str, Any], key: str, default: float, place: str, fail: _Fail
+) -> float | None:
+    """A positive setting (a rate, a size), whole where the default is; null stays None."""
+    if key in section and section[key] is None:
+        return None
+    value = section.get(key, default)
+    whole = isinstance(default, int)
+    if isinstance(value, bool) or not isinstance(value, int if whole else (int, float)):
+        value = None
+    if value is None or not math.isfinite(value) or value <= 0:
+        what = "a positive whole number" if whole else "a positive number"
+        raise fail(place, f"must be {what}, not {excerpt(section.get(key))}")
+    return float(value)
+
+
+def _whole(value: float | None) -> int | None:
+    return None if value is None else int(value)
+
+
+def _devices(section: object, fail: _Fail) -> dict[str, DeviceSpec]:
+    """The lab file's `devices:` (NAME -> {kind, station, host, external, options...})."""
+    devices: dict[str, DeviceSpec] = {}
+    if not isinstance(section, dict) or not section:
+        raise fail("devices", "must be a mapping NAME -> {kind, station, host}")
+    for dname, spec in section.items():
+        name = str(dname)
+        place = f"devices.{name}"
+        if not isinstance(spec, dict):
+            raise fail(place, "must be a mapping with at least 'kind'")
+        kind = spec.get("kind")
+        if kind not in kinds.KINDS:
+            raise fail(
+                f"{place}.kind", f"must be one of {', '.join(kinds.NAMES)}, not {excerpt(kind)}"
+            )
+        station = spec.get("station")
+        if kinds.KINDS[kind].station and not isinstance(station, int):
+            raise fail(f"{place}.station", f"a {kind} needs its station number")
+        host = spec.get("host", "127.0.0.1")
+        if not isinstance(host, str):
+            raise fail(f"{place}.host", "must be an address")
+        options = {
+            k: v for k, v in spec.items() if k not in ("kind", "station", "host", "external")
+        }
+        if "port" in options:
+            options["port"] = _port(spec, f"{place}.port", fail)
+        external = None
+        if "external" in spec:
+            external = _external(spec["external"], str(kind), f"{place}.external", fail)
+        devices[name] = DeviceSpec(name, kind, station, host, options, external)
+    for kind in (k.name for k in kinds.KINDS.values() if k.single):
+        count = sum(1 for d in devices.values() if d.kind == kind)
+        if count > 1:
+            raise fail("devices", f"at most one {kind} device, found {count}")
+    return devices
+
+
+def _links(section: object, devices: dict[str, DeviceSpec], fail: _Fail) -> list[LinkSpec]:
+    """The lab file's `links:`, each from an IXL to a peer of its station, one per role."""
+    links: list[LinkSpec] = []
+    if not isinstance(section, list):
+        raise fail("links", "must be a list of {name, type, a, b, tap}")
+    seen: dict[tuple[str, str], str] = {}
+    for i, lk in enumerate(section):
+        place = f"links[{i}]"
+        if not isinstance(lk, dict):
+            raise fail(place, "must be a mapping {name, type, a, b, tap}")
+        for key in ("name", "type", "a", "b"):
+            if key not in lk:
+                raise fail(f"{place}.{key}", "missing key")
+        a, b, typ = str(lk["a"]), str(lk["b"]), lk["type"]
+        for end in ("a", "b"):
+            if str(lk[end]) not in devices:
+                raise fail(f"{place}.{end}", f"unknown device {excerpt(lk[end])}")
+        _check_link(lk, place, devices[a], devices[b], fail)
+        role_key = (a, kinds.role_of(devices[b].kind))
+        if role_key in seen:
+            raise fail(place, f"{a} already has a {role_key[1]} link ({seen[role_key]})")
+        seen[role_key] = str(lk["name"])
+        links.append(LinkSpec(str(lk["name"]), typ, a, b, bool(lk.get("tap", True))))
+    return links
+
+
+def _check_link(
+    lk: dict[str, Any], place: str, ixl: DeviceSpec, peer: DeviceSpec, fail: _Fail
+) -> None:
+    """One link's ends: an IXL (not an external one on Type I, nor without a tap) and a peer
+    the link's type reaches, of the IXL's station."""
+    a, b, typ = ixl.name, peer.name, lk["type"]
+    if ixl.kind != kinds.IXL:
+        raise fail(f"{place}.a", "end a of every link is an IXL")
+    if ixl.external is not None and typ == "type1":
+        raise fail(f"{place}.a", f"{a} is external: its Type I peers are its own, not the "
+                   "lab's (list only its Type II link)")  # fmt: skip
+    if ixl.external is not None and lk.get("tap", True) is not True:
+        raise fail(f"{place}.tap", f"{a} is external: the link's tap serves the address it "
+                   "connects to, so the tap must be there (tap: true)")  # fmt: skip
+    allowed = tuple(k.name for k in kinds.IXL_PEERS if k.link == typ)
+    if typ not in (kinds.TYPE1, kinds.TYPE2):
+        raise fail(f"{place}.type", f"must be type1 or type2, not {excerpt(typ)}")
+    if peer.kind not in allowed:
+        raise fail(
+            f"{place}.b",
+            f"a {typ} link from an IXL goes to {' or '.join(allowed)}, not a {peer.kind}",
+        )
+    if kinds.KINDS[peer.kind].station and peer.station != ixl.station:
+        raise fail(f"{place}.b", f"{b} belongs to station {peer.station}, {a} to {ixl.station}")
+
+
+def _check_lab(lab: Lab, fail: _Fail) -> None:
+    """The lab as a whole: external devices on the rails can be told where they are; every
+    station is on the line; every train device's train is in the timetable."""
+    for d in lab.devices.values():
         if d.external is not None and d.external.rails:
             tc = lab.of_kind(kinds.TRACKCIRCUIT)
             if not tc or tc[0].external is not None or not tc[0].options.get("port"):
@@ -302,7 +338,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
                            "rails itself must be told where they are before the lab starts: give "
                            "the track-circuit emulator a port (tc: {kind: trackcircuit, port: N})")  # fmt: skip
     line = lab.load_line()
-    for d in devices.values():
+    for d in lab.devices.values():
         if d.station is not None and d.station not in line.stations:
             raise fail(
                 f"devices.{d.name}.station", f"station {d.station} is not on the line {line.name}"
@@ -318,12 +354,6 @@ def load_lab(path: str | Path | None = None) -> Lab:
                 f"train {excerpt(train)} is not in the timetable {timetable.file} "
                 f"({', '.join(t.id for t in timetable.trains)})",
             )
-    if raw.get("ars") is not None:
-        lab = replace(lab, ars=_ars(raw["ars"], lab, fail))
-    return lab
-
-
-_Fail = Callable[[str, str], ConfigError]
 
 
 def _external(raw: Any, kind: str, place: str, fail: _Fail) -> External:
