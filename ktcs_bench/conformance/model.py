@@ -14,7 +14,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ktcs_bench import kinds
 from ktcs_bench.conformance.timing import MeasuredTiming, SuiteTiming
 from ktcs_bench.conformance.wire import Evidence, Type1Wire, Type2Wire
 
@@ -90,7 +89,7 @@ class Case:
     title: str
     rule: str  # the SPEC section and rule it checks
     run: CaseFunction
-    roles: tuple[str, ...] = kinds.CONFORMANCE_KINDS
+    roles: tuple[str, ...] = ("ixl", "atc", "trackside", "ctc")
 
 
 @dataclass

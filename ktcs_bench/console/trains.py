@@ -15,7 +15,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from ktcs_bench import kinds
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.train.speed_distance import SpeedDistance, endpoint_speed_distance
 from ktcs_bench.train.units import to_kmh
@@ -35,7 +34,7 @@ class TrainPosition:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            kinds.TRAIN: self.train,
+            "train": self.train,
             "head_m": round(self.head_m, 1),
             "tail_m": round(self.tail_m, 1),
             "speed_kmh": round(self.speed_kmh, 1),

@@ -18,7 +18,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from ktcs_bench import kinds
 from ktcs_bench.ctc.log import CommandLog
 from ktcs_bench.ctc.model import Action, CtcModel
 from ktcs_bench.errors import PeerError, UsageError
@@ -73,7 +72,7 @@ class Desk:
     async def operate(
         self,
         command: OperatorCommand | Mapping[str, Any],
-        source: str = kinds.CTC,
+        source: str = "ctc",
         on_sent: Callable[[Action], None] | None = None,
     ) -> Outcome:
         """Carry out one command (a message, or its JSON object: `CtcModel.action`); `on_sent` is

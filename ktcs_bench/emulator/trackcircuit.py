@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from ktcs_bench import kinds
 from ktcs_bench.atc.codes import AtcCode
 from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
 from ktcs_bench.emulator.device import Device
@@ -16,7 +15,7 @@ from ktcs_bench.transport import jsonlines, net
 
 
 class TrackCircuitDevice(Device):
-    kind = kinds.TRACKCIRCUIT
+    kind = "trackcircuit"
     messages = TRACK_CIRCUITS
 
     def __init__(
@@ -42,7 +41,7 @@ class TrackCircuitDevice(Device):
         if changes:
             msg = {"occupancy": self._occ(changes)}
             for p in self.peers:
-                if p.info.get("role") in (kinds.ATC, kinds.TRACKSIDE, "observer"):
+                if p.info.get("role") in ("atc", "trackside", "observer"):
                     p.send(msg)
             self.note("occupancy", ", ".join(f"{k}={int(v)}" for k, v in sorted(changes.items())))
         self._codes_to_trains()
@@ -62,8 +61,8 @@ class TrackCircuitDevice(Device):
         if "hello" in obj and isinstance(obj["hello"], dict):
             peer.info.update(obj["hello"])
             self.peers[peer] = None
-            if peer.info.get("role") == kinds.TRAIN and peer.info.get(kinds.TRAIN):
-                self.trains[str(peer.info[kinds.TRAIN])] = peer
+            if peer.info.get("role") == "train" and peer.info.get("train"):
+                self.trains[str(peer.info["train"])] = peer
             return {"occupancy": self._occ(), "full": True}
         if "codes" in obj and isinstance(obj["codes"], dict):
             codes = {}
@@ -76,7 +75,7 @@ class TrackCircuitDevice(Device):
             self._codes_to_trains()
             return None
         if "position" in obj and isinstance(obj["position"], dict):
-            train = str(peer.info.get(kinds.TRAIN, peer.address))
+            train = str(peer.info.get("train", peer.address))
             pos = obj["position"]
             try:
                 self.model.trains[train] = TrainPosition(
@@ -90,7 +89,7 @@ class TrackCircuitDevice(Device):
 
     def _closed(self, peer: jsonlines.Peer) -> None:
         self.peers.pop(peer, None)
-        train = peer.info.get(kinds.TRAIN)
+        train = peer.info.get("train")
         if train is not None and self.trains.get(str(train)) is peer:
             del self.trains[str(train)]
             self.model.trains.pop(str(train), None)

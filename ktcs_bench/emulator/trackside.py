@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from ktcs_bench import kinds
 from ktcs_bench.emulator.device import IxlPeerDevice
 from ktcs_bench.field.trackside import FieldOutput, Trackside
 from ktcs_bench.messages import (
@@ -22,7 +21,7 @@ from ktcs_bench.transport.endpoints import Endpoint
 
 
 class TracksideDevice(IxlPeerDevice):
-    kind = kinds.TRACKSIDE
+    kind = "trackside"
     messages = TRACKSIDE
     tx_chart = "io_to_ixl"
 

@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ktcs_bench import kinds
 from ktcs_bench.datafiles import YamlReader, load_mapping
 from ktcs_bench.errors import UsageError, excerpt, say_seconds
 from ktcs_bench.train.deceleration import GradientProfile
@@ -239,7 +238,7 @@ def load_scenario(path: str | Path) -> Scenario:
                 f"{place}.{kind}", f"unknown assertion (one of {', '.join(ASSERTION_KINDS)})"
             )
         args_m = r.mapping(args, f"{place}.{kind}")
-        for key in (kinds.TRAIN, "follower", "leader"):
+        for key in ("train", "follower", "leader"):
             if key in args_m and r.word(args_m[key], f"{place}.{kind}.{key}") not in ids:
                 raise r.fail(
                     f"{place}.{kind}.{key}", f"no train {excerpt(args_m[key])} (trains: {ids})"

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from ktcs_bench import kinds
 from ktcs_bench.codec import Frame
 from ktcs_bench.errors import UsageError
 from ktcs_bench.type2 import events as ev
@@ -37,7 +36,7 @@ from ktcs_bench.type2.session import (
 class CtcConnection(Type2Session):
     """One accepted TCP connection at the CTC, before and after its IXL has identified."""
 
-    role = kinds.CTC
+    role = "ctc"
 
     def __init__(self, now: float, config: Type2Config | None = None) -> None:
         super().__init__(now, config)
