@@ -18,6 +18,7 @@ from ktcs_bench.codec.crc import CrcFunction, CrcSpec
 from ktcs_bench.codec.opcodes import FieldSpec, Opcode, OpcodeTable
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
+from ktcs_bench.schema import Shape, convert
 
 HEADER_FIELDS = ("len", "seq", "op", "sub")
 _SIZE_FMT = {1: "B", 2: "H", 4: "I"}
@@ -180,18 +181,10 @@ class _Reader:
             raise self.fail(f"{place}.{key}", f"must be {low:#x}..{high:#x}, not {value:#x}")
         return value
 
-    def byte(self, m: Mapping[str, Any], key: str, place: str) -> int:
-        value = self.get(m, key, place, int)
-        if not 0 <= value <= 255:
-            raise self.fail(f"{place}.{key}", f"must be a byte value 0..255, not {value}")
-        return int(value)
-
 
 _KIND_NAMES = {int: "an integer", str: "a string", bool: "true or false", list: "a list",
                dict: "a mapping"}  # fmt: skip
 _CRC_KEYS = ("poly", "reflect", "init", "xor_out", "check")
-_PROFILE_KEYS = ("description", "stx", "etx", "byte_order", "header", "length_counts", "max_len",
-                 "crc", "opcode_overrides")  # fmt: skip
 _OPCODE_KEYS = ("op", "name", "fields", "items", "statuses", "control", "subs", "reasons")
 # CRC widths crcmod computes that fit the largest CRC field (4 bytes)
 CRC_WIDTHS = (8, 16, 24, 32)
@@ -337,113 +330,149 @@ def _opcode_table(
     return OpcodeTable.of(o for _, o in table.values())
 
 
+class _HeaderFieldShape(Shape):
+    name: str
+    size: int
+
+
+class _CrcUseShape(Shape):
+    algorithm: str
+    covers: list[str]
+    size: int
+    pad: int | None = None
+
+
+class _ProfileShape(Shape):
+    """One profile under `profiles:` (converted one by one, so a message names it)."""
+
+    stx: int
+    header: list[_HeaderFieldShape]
+    length_counts: list[str]
+    max_len: int
+    crc: _CrcUseShape
+    description: str | None = None
+    etx: int | None = None
+    byte_order: str = "little"
+    opcode_overrides: object = None  # a list of opcodes: `_opcode_list` reads it
+
+
+class _ProtocolShape(Shape):
+    protocol: str
+    crc_algorithms: dict[Any, Any]  # NAME -> {poly, reflect, init, xor_out, check}: `_crc_spec`
+    profiles: dict[Any, Any]  # NAME -> _ProfileShape
+    opcodes: list[Any]  # `_opcode_list`
+    nak_reasons: object = None  # `_int_names`
+
+
 def load_profiles(path: str | Path) -> dict[str, FrameProfile]:
     """Every profile defined in one protocol YAML file, checked whole: every key known, every
     number in range, no opcode number or name twice. A problem is one ConfigError naming the file
     and the key."""
     file = Path(path)
     r = _Reader(file)
-    top = r.mapping(
-        load_mapping(file, "protocol"),
-        "",
-        ("protocol", "crc_algorithms", "profiles", "opcodes", "nak_reasons"),
-    )
-    protocol = r.get(top, "protocol", "", str)
-    if protocol not in ("type1", "type2"):
-        raise r.fail("protocol", f"must be type1 or type2, not {excerpt(protocol)}")
-    crcs: dict[str, CrcSpec] = {}
-    for cname, craw in r.mapping(r.get(top, "crc_algorithms", "", dict), "crc_algorithms").items():
-        crcs[str(cname)] = _crc_spec(r, str(cname), craw)
-    nak_reasons = _int_names(r, top.get("nak_reasons"), "nak_reasons", 0xFF)
-    raw_opcodes = r.get(top, "opcodes", "", list)
+    top = convert(load_mapping(file, "protocol"), _ProtocolShape, file)
+    if top.protocol not in ("type1", "type2"):
+        raise r.fail("protocol", f"must be type1 or type2, not {excerpt(top.protocol)}")
+    crcs = {str(name): _crc_spec(r, str(name), raw) for name, raw in top.crc_algorithms.items()}
+    nak_reasons = _int_names(r, top.nak_reasons, "nak_reasons", 0xFF)
     profiles: dict[str, FrameProfile] = {}
-    for pname, praw in r.mapping(r.get(top, "profiles", "", dict), "profiles").items():
+    for pname, praw in top.profiles.items():
         place = f"profiles.{pname}"
-        pm = r.mapping(praw, place, _PROFILE_KEYS)
-        order = pm.get("byte_order", "little")
-        if order not in ("little", "big"):
-            raise r.fail(f"{place}.byte_order", f"must be little or big, not {excerpt(order)}")
-        little = order == "little"
-        header: list[tuple[str, int]] = []
-        for i, h in enumerate(r.get(pm, "header", place, list)):
-            hp = f"{place}.header[{i}]"
-            hm = r.mapping(h, hp, ("name", "size"))
-            hname = r.get(hm, "name", hp, str)
-            size = r.get(hm, "size", hp, int)
-            if hname not in HEADER_FIELDS:
-                raise r.fail(f"{hp}.name", f"must be one of {', '.join(HEADER_FIELDS)}")
-            if size not in _SIZE_FMT:
-                raise r.fail(f"{hp}.size", f"must be 1, 2 or 4, not {size}")
-            if any(n == hname for n, _ in header):
-                raise r.fail(f"{hp}.name", f"field {excerpt(hname)} appears twice")
-            header.append((hname, size))
-        for needed in ("len", "seq", "op"):
-            if all(n != needed for n, _ in header):
-                raise r.fail(f"{place}.header", f"needs a {excerpt(needed)} field")
-        counts = r.get(pm, "length_counts", place, list)
-        for i, c in enumerate(counts):
-            if c != "data" and all(n != c for n, _ in header if n != "len"):
-                parts = ", ".join([n for n, _ in header if n != "len"] + ["data"])
-                raise r.fail(
-                    f"{place}.length_counts[{i}]", f"must be one of {parts}, not {excerpt(c)}"
-                )
-            if c in counts[:i]:
-                raise r.fail(f"{place}.length_counts[{i}]", f"{excerpt(c)} appears twice")
-        if "data" not in counts:
-            raise r.fail(f"{place}.length_counts", "LEN must count data")
-        max_len = r.get(pm, "max_len", place, int)
-        if not 1 <= max_len <= MAX_LEN_CEILING:
-            raise r.fail(f"{place}.max_len", f"must be 1..{MAX_LEN_CEILING}, not {max_len}")
-        len_size = dict(header)["len"]
-        if max_len >= 1 << (8 * len_size):
-            raise r.fail(f"{place}.max_len", f"does not fit the {len_size}-byte len field")
-        fixed = sum(size for n, size in header if n in counts)
-        if max_len < fixed:
+        pm = convert(praw, _ProfileShape, file, place)
+        if pm.byte_order not in ("little", "big"):
             raise r.fail(
-                f"{place}.max_len", f"must be at least the {fixed} header bytes LEN counts"
+                f"{place}.byte_order", f"must be little or big, not {excerpt(pm.byte_order)}"
             )
-        crc = r.mapping(r.get(pm, "crc", place, dict), f"{place}.crc",
-                        ("algorithm", "covers", "size", "pad"))  # fmt: skip
-        algo = r.get(crc, "algorithm", f"{place}.crc", str)
-        if algo not in crcs:
-            raise r.fail(f"{place}.crc.algorithm", f"unknown algorithm {excerpt(algo)}")
-        covers = r.get(crc, "covers", f"{place}.crc", list)
-        names = ("stx", *(n for n, _ in header), "data")
-        if len(covers) != 2 or any(c not in names for c in covers):
-            raise r.fail(f"{place}.crc.covers", f"must be [first, last] from {', '.join(names)}")
-        if names.index(covers[0]) > names.index(covers[1]) or covers[0] == "data":
-            raise r.fail(f"{place}.crc.covers", "first must come before last")
-        crc_size = r.get(crc, "size", f"{place}.crc", int)
-        if crc_size not in (1, 2, 4) or crcs[algo].width_bits > 8 * crc_size:
-            raise r.fail(f"{place}.crc.size", f"cannot carry a {crcs[algo].width_bits}-bit CRC")
-        pad = r.optional(crc, "pad", f"{place}.crc", int, 0)
-        if not 0 <= pad <= MAX_CRC_PAD:
-            raise r.fail(f"{place}.crc.pad", f"must be 0..{MAX_CRC_PAD} zero bytes, not {pad}")
-        etx = pm.get("etx")
-        if etx is not None:
-            etx = r.byte(pm, "etx", place)
-        base = _opcode_list(r, raw_opcodes, "opcodes", little)
-        overrides = _opcode_list(r, pm.get("opcode_overrides"), f"{place}.opcode_overrides", little)
+        little = pm.byte_order == "little"
+        header = _header(r, pm, place)
+        crc_spec, covers = _crc_use(r, pm.crc, f"{place}.crc", crcs, header)
+        if pm.etx is not None and not 0 <= pm.etx <= 255:
+            raise r.fail(f"{place}.etx", f"must be a byte value 0..255, not {pm.etx}")
+        if not 0 <= pm.stx <= 255:
+            raise r.fail(f"{place}.stx", f"must be a byte value 0..255, not {pm.stx}")
+        base = _opcode_list(r, top.opcodes, "opcodes", little)
+        overrides = _opcode_list(r, pm.opcode_overrides, f"{place}.opcode_overrides", little)
         profiles[str(pname)] = FrameProfile(
             name=str(pname),
-            protocol=protocol,
-            description=str(r.optional(pm, "description", place, str, "")),
+            protocol=top.protocol,
+            description=pm.description or "",
             source=str(file),
-            stx=r.byte(pm, "stx", place),
-            etx=etx,
+            stx=pm.stx,
+            etx=pm.etx,
             little=little,
             header=tuple(header),
-            length_counts=frozenset(counts),
-            max_len=max_len,
-            crc_spec=crcs[algo],
+            length_counts=frozenset(pm.length_counts),
+            max_len=pm.max_len,
+            crc_spec=crc_spec,
             crc_first=covers[0],
             crc_last=covers[1],
-            crc_size=crc_size,
-            crc_pad=pad,
+            crc_size=pm.crc.size,
+            crc_pad=pm.crc.pad or 0,
             opcodes=_opcode_table(r, base, overrides, dict(header)),
             nak_reasons=nak_reasons,
         )
     return profiles
+
+
+def _header(r: _Reader, pm: _ProfileShape, place: str) -> list[tuple[str, int]]:
+    """A profile's header fields (name, size), what LEN counts and the longest frame, checked."""
+    header: list[tuple[str, int]] = []
+    for i, h in enumerate(pm.header):
+        hp = f"{place}.header[{i}]"
+        if h.name not in HEADER_FIELDS:
+            raise r.fail(f"{hp}.name", f"must be one of {', '.join(HEADER_FIELDS)}")
+        if h.size not in _SIZE_FMT:
+            raise r.fail(f"{hp}.size", f"must be 1, 2 or 4, not {h.size}")
+        if any(n == h.name for n, _ in header):
+            raise r.fail(f"{hp}.name", f"field {excerpt(h.name)} appears twice")
+        header.append((h.name, h.size))
+    for needed in ("len", "seq", "op"):
+        if all(n != needed for n, _ in header):
+            raise r.fail(f"{place}.header", f"needs a {excerpt(needed)} field")
+    counts = pm.length_counts
+    for i, c in enumerate(counts):
+        if c != "data" and all(n != c for n, _ in header if n != "len"):
+            parts = ", ".join([n for n, _ in header if n != "len"] + ["data"])
+            raise r.fail(f"{place}.length_counts[{i}]", f"must be one of {parts}, not {excerpt(c)}")
+        if c in counts[:i]:
+            raise r.fail(f"{place}.length_counts[{i}]", f"{excerpt(c)} appears twice")
+    if "data" not in counts:
+        raise r.fail(f"{place}.length_counts", "LEN must count data")
+    max_len = pm.max_len
+    if not 1 <= max_len <= MAX_LEN_CEILING:
+        raise r.fail(f"{place}.max_len", f"must be 1..{MAX_LEN_CEILING}, not {max_len}")
+    len_size = dict(header)["len"]
+    if max_len >= 1 << (8 * len_size):
+        raise r.fail(f"{place}.max_len", f"does not fit the {len_size}-byte len field")
+    fixed = sum(size for n, size in header if n in counts)
+    if max_len < fixed:
+        raise r.fail(f"{place}.max_len", f"must be at least the {fixed} header bytes LEN counts")
+    return header
+
+
+def _crc_use(
+    r: _Reader,
+    crc: _CrcUseShape,
+    place: str,
+    crcs: dict[str, CrcSpec],
+    header: list[tuple[str, int]],
+) -> tuple[CrcSpec, tuple[str, str]]:
+    """A profile's `crc:` -- which algorithm, over which span, how wide on the wire, padded."""
+    if crc.algorithm not in crcs:
+        raise r.fail(f"{place}.algorithm", f"unknown algorithm {excerpt(crc.algorithm)}")
+    covers = crc.covers
+    names = ("stx", *(n for n, _ in header), "data")
+    if len(covers) != 2 or any(c not in names for c in covers):
+        raise r.fail(f"{place}.covers", f"must be [first, last] from {', '.join(names)}")
+    if names.index(covers[0]) > names.index(covers[1]) or covers[0] == "data":
+        raise r.fail(f"{place}.covers", "first must come before last")
+    spec = crcs[crc.algorithm]
+    if crc.size not in (1, 2, 4) or spec.width_bits > 8 * crc.size:
+        raise r.fail(f"{place}.size", f"cannot carry a {spec.width_bits}-bit CRC")
+    pad = crc.pad or 0
+    if not 0 <= pad <= MAX_CRC_PAD:
+        raise r.fail(f"{place}.pad", f"must be 0..{MAX_CRC_PAD} zero bytes, not {pad}")
+    return spec, (covers[0], covers[1])
 
 
 @cache

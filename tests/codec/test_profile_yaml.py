@@ -188,3 +188,14 @@ def test_cli_reports_broken_profile_without_traceback(
     assert "Traceback" not in out.stderr
     assert f"{path}: {place}: " in out.stderr and problem in out.stderr, out.stderr
     assert out.stderr.count("\n") == 1, "one message"
+
+
+def test_a_profile_key_of_the_wrong_type_names_its_line(tmp_path: Path) -> None:
+    """A profile's shape is declared: a mistyped value is refused at its key, on its line (the
+    line looked up in the file as written, past the profile's comment lines)."""
+    path = write(tmp_path, VENDOR.replace("    max_len: 200", "    # how long\n    max_len: long"))
+    with pytest.raises(ConfigError) as info:
+        load_profiles(path)
+    assert info.value.place == "profiles.vendor-x.max_len"
+    line = path.read_text().splitlines().index("    max_len: long") + 1
+    assert info.value.problem == f"must be an integer, not str (line {line})"
