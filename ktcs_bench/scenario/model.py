@@ -82,119 +82,42 @@ class Scenario:
     assertions: list[Assertion] = field(default_factory=list)
 
 
+_SCENARIO_KEYS = {
+    "name",
+    "description",
+    "duration_s",
+    "dt_s",
+    "line",
+    "trains",
+    "resource_manager",
+    "assertions",
+    "stop_when_all_stopped",
+}
+_LINE_KEYS = {
+    "length_m",
+    "tags",
+    "gradients",
+    "speed_limits",
+    "protection_zones",
+    "stations",
+    "track_circuits",
+}
+
+
 def load_scenario(path: str | Path) -> Scenario:
     p = Path(path)
     r = YamlReader(p)
     doc = load_mapping(p, "scenario")
-    r.known(
-        doc,
-        {
-            "name",
-            "description",
-            "duration_s",
-            "dt_s",
-            "line",
-            "trains",
-            "resource_manager",
-            "assertions",
-            "stop_when_all_stopped",
-        },
-        "",
-    )
+    r.known(doc, _SCENARIO_KEYS, "")
     line_m = r.mapping(doc.get("line"), "line")
-    r.known(
-        line_m,
-        {
-            "length_m",
-            "tags",
-            "gradients",
-            "speed_limits",
-            "protection_zones",
-            "stations",
-            "track_circuits",
-        },
-        "line",
-    )
+    r.known(line_m, _LINE_KEYS, "line")
     length = r.num(line_m, "length_m", "line", minimum=1.0, maximum=MAX_LENGTH_M)
-    tags: list[float] = []
-    if "tags" in line_m:
-        tm = r.mapping(line_m["tags"], "line.tags")
-        r.known(tm, {"spacing_m", "first_m", "at_m", "extra_m"}, "line.tags")
-        if "at_m" in tm:
-            tags = [
-                r.value(x, f"line.tags.at_m[{i}]")
-                for i, x in enumerate(r.seq(tm["at_m"], "line.tags.at_m"))
-            ]
-        else:
-            spacing = r.num(tm, "spacing_m", "line.tags", minimum=1.0)
-            first = r.num(tm, "first_m", "line.tags", default=0.0)
-            n = int(math.floor((length - first) / spacing + 1e-9)) + 1
-            tags = [first + i * spacing for i in range(n)]
-        extra = [
-            r.value(x, f"line.tags.extra_m[{i}]")
-            for i, x in enumerate(r.seq(tm.get("extra_m", []), "line.tags.extra_m"))
-        ]
-        tags = sorted(set(tags) | set(extra))
-    grads: list[tuple[float, float]] = []
-    for i, g in enumerate(r.seq(line_m.get("gradients", []), "line.gradients")):
-        gm = r.mapping(g, f"line.gradients[{i}]")
-        grads.append(
-            (
-                r.num(gm, "from_m", f"line.gradients[{i}]"),
-                r.num(gm, "permille", f"line.gradients[{i}]"),
-            )
-        )
-    grads.sort()
-    try:
-        gradient = GradientProfile(tuple(g[0] for g in grads), tuple(g[1] for g in grads))
-    except UsageError as exc:
-        raise r.fail("line.gradients", str(exc)) from None
-    restrictions = []
-    for i, s in enumerate(r.seq(line_m.get("speed_limits", []), "line.speed_limits")):
-        place = f"line.speed_limits[{i}]"
-        sm = r.mapping(s, place)
-        start, end = r.num(sm, "from_m", place), r.num(sm, "to_m", place)
-        if end <= start:
-            raise r.fail(f"{place}.to_m", f"must lie after from_m ({start})")
-        restrictions.append(Restriction(start, end, kmh(r.num(sm, "speed_kmh", place, minimum=0))))
-    zones = []
-    for i, z in enumerate(r.seq(line_m.get("protection_zones", []), "line.protection_zones")):
-        place = f"line.protection_zones[{i}]"
-        zm = r.mapping(z, place)
-        zones.append(
-            Zone(
-                r.num(zm, "from_m", place),
-                r.num(zm, "to_m", place),
-                r.num(zm, "active_from_s", place, default=0.0),
-                r.num(zm, "active_until_s", place, default=math.inf, infinite=True),
-            )
-        )
-    stations = []
-    for i, s in enumerate(r.seq(line_m.get("stations", []), "line.stations")):
-        place = f"line.stations[{i}]"
-        sm = r.mapping(s, place)
-        stations.append(
-            Station(
-                r.text(sm, "name", place),
-                r.num(sm, "stop_mark_m", place),
-                r.num(sm, "dwell_s", place, default=20.0, minimum=0.0),
-            )
-        )
-    stations.sort(key=lambda s: s.stop_mark)
-    tcs = []
-    for i, t in enumerate(r.seq(line_m.get("track_circuits", []), "line.track_circuits")):
-        place = f"line.track_circuits[{i}]"
-        tm = r.mapping(t, place)
-        td = tm.get("target_distance_m")
-        tcs.append(
-            TrackCircuit(
-                r.text(tm, "id", place, default=f"TC{i + 1}"),
-                r.num(tm, "from_m", place),
-                r.num(tm, "to_m", place),
-                kmh(r.num(tm, "code_kmh", place, minimum=0.0)),
-                None if td is None else r.num(tm, "target_distance_m", place),
-            )
-        )
+    tags = _tags(r, line_m, length)
+    gradient = _gradient(r, line_m)
+    restrictions = _restrictions(r, line_m)
+    zones = _zones(r, line_m)
+    stations = _stations(r, line_m)
+    tcs = _track_circuits(r, line_m)
     line = LineData(length, tags, gradient, restrictions, stations)
     trains = []
     for i, t in enumerate(r.seq(doc.get("trains"), "trains")):
@@ -206,44 +129,8 @@ def load_scenario(path: str | Path) -> Scenario:
         raise r.fail("trains", "train ids must be unique")
     resources = None
     if "resource_manager" in doc:
-        rm = r.mapping(doc["resource_manager"], "resource_manager")
-        size = r.num(rm, "resource_length_m", "resource_manager", minimum=10.0)
-        points = {}
-        for i, pt in enumerate(r.seq(rm.get("points", []), "resource_manager.points")):
-            place = f"resource_manager.points[{i}]"
-            pm = r.mapping(pt, place)
-            points[r.num(pm, "at_m", place)] = (
-                r.text(pm, "id", place),
-                r.text(pm, "required", place, default="reverse"),
-            )
-        resources = []
-        x, k = 0.0, 1
-        while x < length:
-            end = min(x + size, length)
-            pt_here = [(at, v) for at, v in points.items() if x <= at < end]
-            res = Resource(f"R{k}", x, end)
-            if pt_here:
-                res.point, res.required = pt_here[0][1]
-            resources.append(res)
-            x, k = end, k + 1
-    assertions = []
-    for i, a in enumerate(r.seq(doc.get("assertions", []), "assertions")):
-        place = f"assertions[{i}]"
-        am = r.mapping(a, place)
-        if len(am) != 1:
-            raise r.fail(place, f"one assertion per item, one of {', '.join(ASSERTION_KINDS)}")
-        kind, args = next(iter(am.items()))
-        if kind not in ASSERTION_KINDS:
-            raise r.fail(
-                f"{place}.{kind}", f"unknown assertion (one of {', '.join(ASSERTION_KINDS)})"
-            )
-        args_m = r.mapping(args, f"{place}.{kind}")
-        for key in ("train", "follower", "leader"):
-            if key in args_m and r.word(args_m[key], f"{place}.{kind}.{key}") not in ids:
-                raise r.fail(
-                    f"{place}.{kind}.{key}", f"no train {excerpt(args_m[key])} (trains: {ids})"
-                )
-        assertions.append(Assertion(kind, args_m, f"{place}.{kind}"))
+        resources = _resources(r, doc["resource_manager"], length)
+    assertions = _assertions(r, doc, ids)
     duration = r.num(doc, "duration_s", "", minimum=0.1, maximum=MAX_DURATION_S)
     dt = r.num(doc, "dt_s", "", default=0.1, minimum=0.001)
     if duration / dt > MAX_CYCLES:
@@ -266,6 +153,157 @@ def load_scenario(path: str | Path) -> Scenario:
         stop_when_all_stopped=r.flag(doc, "stop_when_all_stopped", "", False),
         assertions=assertions,
     )
+
+
+def _tags(r: YamlReader, line_m: dict[str, Any], length: float) -> list[float]:
+    """Where the balise tags lie: listed (`at_m`) or every `spacing_m` from `first_m`, with any
+    `extra_m` besides."""
+    if "tags" not in line_m:
+        return []
+    tm = r.mapping(line_m["tags"], "line.tags")
+    r.known(tm, {"spacing_m", "first_m", "at_m", "extra_m"}, "line.tags")
+    if "at_m" in tm:
+        tags = [
+            r.value(x, f"line.tags.at_m[{i}]")
+            for i, x in enumerate(r.seq(tm["at_m"], "line.tags.at_m"))
+        ]
+    else:
+        spacing = r.num(tm, "spacing_m", "line.tags", minimum=1.0)
+        first = r.num(tm, "first_m", "line.tags", default=0.0)
+        n = int(math.floor((length - first) / spacing + 1e-9)) + 1
+        tags = [first + i * spacing for i in range(n)]
+    extra = [
+        r.value(x, f"line.tags.extra_m[{i}]")
+        for i, x in enumerate(r.seq(tm.get("extra_m", []), "line.tags.extra_m"))
+    ]
+    return sorted(set(tags) | set(extra))
+
+
+def _gradient(r: YamlReader, line_m: dict[str, Any]) -> GradientProfile:
+    grads: list[tuple[float, float]] = []
+    for i, g in enumerate(r.seq(line_m.get("gradients", []), "line.gradients")):
+        gm = r.mapping(g, f"line.gradients[{i}]")
+        grads.append(
+            (
+                r.num(gm, "from_m", f"line.gradients[{i}]"),
+                r.num(gm, "permille", f"line.gradients[{i}]"),
+            )
+        )
+    grads.sort()
+    try:
+        return GradientProfile(tuple(g[0] for g in grads), tuple(g[1] for g in grads))
+    except UsageError as exc:
+        raise r.fail("line.gradients", str(exc)) from None
+
+
+def _restrictions(r: YamlReader, line_m: dict[str, Any]) -> list[Restriction]:
+    restrictions = []
+    for i, s in enumerate(r.seq(line_m.get("speed_limits", []), "line.speed_limits")):
+        place = f"line.speed_limits[{i}]"
+        sm = r.mapping(s, place)
+        start, end = r.num(sm, "from_m", place), r.num(sm, "to_m", place)
+        if end <= start:
+            raise r.fail(f"{place}.to_m", f"must lie after from_m ({start})")
+        restrictions.append(Restriction(start, end, kmh(r.num(sm, "speed_kmh", place, minimum=0))))
+    return restrictions
+
+
+def _zones(r: YamlReader, line_m: dict[str, Any]) -> list[Zone]:
+    zones = []
+    for i, z in enumerate(r.seq(line_m.get("protection_zones", []), "line.protection_zones")):
+        place = f"line.protection_zones[{i}]"
+        zm = r.mapping(z, place)
+        zones.append(
+            Zone(
+                r.num(zm, "from_m", place),
+                r.num(zm, "to_m", place),
+                r.num(zm, "active_from_s", place, default=0.0),
+                r.num(zm, "active_until_s", place, default=math.inf, infinite=True),
+            )
+        )
+    return zones
+
+
+def _stations(r: YamlReader, line_m: dict[str, Any]) -> list[Station]:
+    stations = []
+    for i, s in enumerate(r.seq(line_m.get("stations", []), "line.stations")):
+        place = f"line.stations[{i}]"
+        sm = r.mapping(s, place)
+        stations.append(
+            Station(
+                r.text(sm, "name", place),
+                r.num(sm, "stop_mark_m", place),
+                r.num(sm, "dwell_s", place, default=20.0, minimum=0.0),
+            )
+        )
+    stations.sort(key=lambda s: s.stop_mark)
+    return stations
+
+
+def _track_circuits(r: YamlReader, line_m: dict[str, Any]) -> list[TrackCircuit]:
+    tcs = []
+    for i, t in enumerate(r.seq(line_m.get("track_circuits", []), "line.track_circuits")):
+        place = f"line.track_circuits[{i}]"
+        tm = r.mapping(t, place)
+        td = tm.get("target_distance_m")
+        tcs.append(
+            TrackCircuit(
+                r.text(tm, "id", place, default=f"TC{i + 1}"),
+                r.num(tm, "from_m", place),
+                r.num(tm, "to_m", place),
+                kmh(r.num(tm, "code_kmh", place, minimum=0.0)),
+                None if td is None else r.num(tm, "target_distance_m", place),
+            )
+        )
+    return tcs
+
+
+def _resources(r: YamlReader, section: object, length: float) -> list[Resource]:
+    """The resource manager's resources: the line cut every `resource_length_m`, each holding
+    the point (and the position it needs) that lies in it."""
+    rm = r.mapping(section, "resource_manager")
+    size = r.num(rm, "resource_length_m", "resource_manager", minimum=10.0)
+    points = {}
+    for i, pt in enumerate(r.seq(rm.get("points", []), "resource_manager.points")):
+        place = f"resource_manager.points[{i}]"
+        pm = r.mapping(pt, place)
+        points[r.num(pm, "at_m", place)] = (
+            r.text(pm, "id", place),
+            r.text(pm, "required", place, default="reverse"),
+        )
+    resources = []
+    x, k = 0.0, 1
+    while x < length:
+        end = min(x + size, length)
+        pt_here = [(at, v) for at, v in points.items() if x <= at < end]
+        res = Resource(f"R{k}", x, end)
+        if pt_here:
+            res.point, res.required = pt_here[0][1]
+        resources.append(res)
+        x, k = end, k + 1
+    return resources
+
+
+def _assertions(r: YamlReader, doc: dict[str, Any], ids: list[str]) -> list[Assertion]:
+    assertions = []
+    for i, a in enumerate(r.seq(doc.get("assertions", []), "assertions")):
+        place = f"assertions[{i}]"
+        am = r.mapping(a, place)
+        if len(am) != 1:
+            raise r.fail(place, f"one assertion per item, one of {', '.join(ASSERTION_KINDS)}")
+        kind, args = next(iter(am.items()))
+        if kind not in ASSERTION_KINDS:
+            raise r.fail(
+                f"{place}.{kind}", f"unknown assertion (one of {', '.join(ASSERTION_KINDS)})"
+            )
+        args_m = r.mapping(args, f"{place}.{kind}")
+        for key in ("train", "follower", "leader"):
+            if key in args_m and r.word(args_m[key], f"{place}.{kind}.{key}") not in ids:
+                raise r.fail(
+                    f"{place}.{kind}.{key}", f"no train {excerpt(args_m[key])} (trains: {ids})"
+                )
+        assertions.append(Assertion(kind, args_m, f"{place}.{kind}"))
+    return assertions
 
 
 _TRAIN_KEYS = {
