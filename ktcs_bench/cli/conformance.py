@@ -7,6 +7,7 @@ import ssl
 import sys
 from pathlib import Path
 
+from ktcs_bench import kinds
 from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.errors import UsageError
 
@@ -47,7 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser("conformance", help=HELP, description=DESCRIPTION, epilog=EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     p.add_argument(
-        "--role", choices=("ixl", "atc", "ctc", "trackside"), help="the device under test"
+        "--role",
+        choices=kinds.CONFORMANCE_KINDS,
+        help="the device under test",
     )
     p.add_argument("--target", help="the device's endpoint (see above)")
     p.add_argument("--profile", help="framing profile (default ktcs-type1 / ktcs-type2; type2-tls "
@@ -58,7 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--station", type=positive(int), help="station number (sizes the chart; ctc: our IDENT)"
     )
-    p.add_argument("--peer", choices=("atc", "io"), default="atc",
+    p.add_argument("--peer", choices=kinds.TYPE1_ROLES, default=kinds.ATC,
                    help="--role ixl on a serial line: which of its links this is")  # fmt: skip
     p.add_argument("--codes", type=positive(int), help="codes in the device's transmit chart (else from "
                    "--station and the lab's charts)")  # fmt: skip
@@ -132,8 +135,12 @@ def _codes(args: argparse.Namespace, protocol: str) -> int | None:
     if protocol == "type2":
         chart = "ixl_to_ctc"
     else:
-        chart = {"atc": "atc_to_ixl", "trackside": "io_to_ixl"}.get(
-            args.role, f"ixl_to_{args.peer}"
+        # a Type I device under test sends its own chart; an IXL, its chart to the suite's peer
+        dut = kinds.KINDS[args.role]
+        chart = (
+            kinds.chart_name(dut.role, outward=False)
+            if dut.link == kinds.TYPE1
+            else kinds.chart_name(args.peer, outward=True)
         )
     return len(station_chart(view, chart).codes)
 
@@ -168,9 +175,9 @@ def run(args: argparse.Namespace) -> int:
     protocol = protocol_of(args.role, parse_endpoint(args.target))
     name = args.profile or ("ktcs-type1" if protocol == "type1" else "ktcs-type2")
     profile = get_profile("ktcs-type2" if name == "type2-tls" else name)
-    tls = _tls(args, server=args.role == "ixl") if protocol == "type2" else None
+    tls = _tls(args, server=args.role == kinds.IXL) if protocol == "type2" else None
     station = args.station
-    if station is None and args.role == "ctc":
+    if station is None and args.role == kinds.CTC:
         from ktcs_bench.lab.topology import load_lab, resolve_lab_path
 
         station = load_lab(resolve_lab_path(args.lab)).stations[0]

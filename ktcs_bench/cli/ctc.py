@@ -10,6 +10,7 @@ import shlex
 import time
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.cli._common import host_port
 from ktcs_bench.ctc.log import parse_words
 from ktcs_bench.errors import PeerError, UsageError
@@ -64,7 +65,7 @@ def _address(args: argparse.Namespace) -> tuple[str, int]:
     from ktcs_bench.lab.state import attach
 
     state = attach(args.lab)
-    ctc = next((d for d in state["devices"].values() if d.get("kind") == "ctc"), None)
+    ctc = next((d for d in state["devices"].values() if d.get("kind") == kinds.CTC), None)
     if ctc is None:
         raise UsageError(f"lab {args.lab} has no CTC")
     host, _, port = ctc["control"].rpartition(":")
@@ -93,7 +94,7 @@ def ars_text(answer: dict[str, Any]) -> str:
     on = ", ".join(f"{st} {'on' if v else 'off'}" for st, v in a["stations"].items())
     lines = [f"ARS (timetable {a['timetable']}): station {on}"]
     for t in a["trains"]:
-        text = f"  train {t['train']}: {t['state']}"
+        text = f"  train {t[kinds.TRAIN]}: {t['state']}"
         if t.get("next"):
             text += f"; next {t['next']}"
         if t.get("waiting"):

@@ -10,6 +10,7 @@ import signal
 import sys
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
@@ -392,7 +393,7 @@ def _up_in_process(args: argparse.Namespace) -> int:
     async def serve(lab: InProcessLab) -> None:
         await lab.serve()
         links = lab.link_map()
-        ctc = lab.ready.get(next((d.name for d in spec.of_kind("ctc")), ""), {})
+        ctc = lab.ready.get(next((d.name for d in spec.of_kind(kinds.CTC)), ""), {})
         if args.json:
             print(json.dumps({"lab": spec.name, "control": lab.control_address, "links": links,
                               "console": ctc.get("console")}), flush=True)  # fmt: skip

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ktcs_bench import kinds
 from ktcs_bench.cli._common import positive
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.generate import write_line
@@ -83,7 +84,7 @@ def _generate(args: argparse.Namespace) -> int:
     print(f"  {LINE_FILE}: line {line.name}, {len(numbers)} station(s) {span}, "
           f"{(line.end_m - line.start_m) / 1000:g} km")  # fmt: skip
     print(f"  stations/: {len(numbers)} station file(s)")
-    trains = [d for d in lab.devices.values() if d.kind == "train"]
+    trains = [d for d in lab.devices.values() if d.kind == kinds.TRAIN]
     print(f"  {LAB_FILE}: lab {lab.name}, {len(lab.devices)} devices ({len(trains)} trains, "
           f"routes set by ARS), {len(lab.links)} links")  # fmt: skip
     print(f"  {TIMETABLE_FILE}: {len(trains)} trains end to end")

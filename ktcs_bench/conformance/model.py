@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.conformance.timing import MeasuredTiming, SuiteTiming
 from ktcs_bench.conformance.wire import Evidence, Type1Wire, Type2Wire
 
@@ -89,7 +90,7 @@ class Case:
     title: str
     rule: str  # the SPEC section and rule it checks
     run: CaseFunction
-    roles: tuple[str, ...] = ("ixl", "atc", "trackside", "ctc")
+    roles: tuple[str, ...] = kinds.CONFORMANCE_KINDS
 
 
 @dataclass

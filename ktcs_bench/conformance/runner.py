@@ -22,6 +22,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from ktcs_bench import kinds
 from ktcs_bench.codec import FrameProfile
 from ktcs_bench.conformance import type1_cases, type2_cases
 from ktcs_bench.conformance.model import (
@@ -40,7 +41,7 @@ from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.transport.endpoints import Endpoint, parse_endpoint
 from ktcs_bench.transport.serialport import open_transport
 
-ROLES = ("ixl", "atc", "ctc", "trackside")
+ROLES = kinds.CONFORMANCE_KINDS
 CASES: dict[str, Case] = {c.name: c for c in (*TYPE1_CASES, *TYPE2_CASES)}
 ACCEPT_TIMEOUT = 10.0  # an IXL retries with back-off of at most 5 s
 AUTO_LIMIT = 10.0  # --timings auto: the longest the suite waits for any one timer to fire
@@ -74,11 +75,11 @@ MEASURE = {
 def protocol_of(role: str, target: Endpoint) -> str:
     if role not in ROLES:
         raise UsageError(f"unknown role {role!r} (one of {', '.join(ROLES)})")
-    if role == "ctc":
+    if role == kinds.CTC:
         if target.kind != "tcp":
             raise UsageError("--role ctc needs --target tcp://HOST:PORT (the CTC's Type II server)")
         return "type2"
-    if role == "ixl" and target.kind in ("listen", "tcp"):
+    if role == kinds.IXL and target.kind in ("listen", "tcp"):
         if target.kind != "listen":
             raise UsageError("the IXL is a Type II client: use --target listen://HOST:PORT")
         return "type2"

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import time
 
+from ktcs_bench import kinds
 from ktcs_bench.codec import Frame, FrameCodec
 from ktcs_bench.conformance.model import Case, CaseContext
 from ktcs_bench.conformance.timing import mean_interval, seconds
@@ -294,7 +295,7 @@ def maximum_length(ctx: CaseContext) -> None:
     w.settle()
     p = w.profile
     # Statuses that are the restrictive side for the receiver: "occupied" for an IXL, else 0.
-    fill = 1 if ctx.role == "ixl" else 0
+    fill = 1 if ctx.role == kinds.IXL else 0
     seq = w.next_seq()
     w.send_raw(w.frame("ALL_INFO", bytes([fill]) * p.max_data, seq),
                f"ALL_INFO SEQ 0x{seq:02X} with LEN = the maximum {p.max_data}")  # fmt: skip

@@ -8,6 +8,7 @@ import dataclasses
 import time
 from collections.abc import Callable
 
+from ktcs_bench import kinds
 from ktcs_bench.codec import Frame, FrameCodec
 from ktcs_bench.conformance.model import Case, CaseContext, NotApplicable
 from ktcs_bench.conformance.timing import mean_interval, seconds
@@ -83,7 +84,7 @@ def _check_dump(ctx: CaseContext, w: Type2Wire, parts: list[Frame]) -> None:
 def _open(ctx: CaseContext, accept: bool = True) -> tuple[Type2Wire, Frame | None]:
     """A connection with the IDENT exchange done: the suite as CTC answers the IXL's IDENT; the
     suite as IXL sends its own. Returns the device's IDENT frame."""
-    if ctx.role == "ctc":
+    if ctx.role == kinds.CTC:
         w = ctx.connect()
         st = _station(ctx)
         w.send_raw(w.message("IDENT", 0, station=st, version=1))
@@ -116,7 +117,7 @@ def _send_dump(ctx: CaseContext, w: Type2Wire, codes: int | None = None) -> None
 def _opened(ctx: CaseContext) -> Type2Wire:
     w, ident = _open(ctx)
     ctx.check(ident is not None and ident.sub in (0, 1), "IDENT exchange")
-    if ctx.role == "ixl":
+    if ctx.role == kinds.IXL:
         _read_dump(ctx, w)
     return w
 
@@ -133,7 +134,7 @@ def ident(ctx: CaseContext) -> None:
     ctx.check(f is not None, "the device sends/answers IDENT within 3 s")
     assert f is not None
     fields = w.profile.opcodes.by_name["IDENT"].parse(f.data)
-    if ctx.role == "ctc":
+    if ctx.role == kinds.CTC:
         ctx.check(f.sub == 1, f"IDENT of configured station {ctx.station} is accepted (sub 1)")
         ctx.check(fields["station"] == ctx.station, "the answer names our station")
     else:
@@ -145,7 +146,7 @@ def ident(ctx: CaseContext) -> None:
 
 
 def full_dump(ctx: CaseContext) -> None:
-    if ctx.role == "ctc":
+    if ctx.role == kinds.CTC:
         w = _opened(ctx)
         ctx.check(_no_nak(w, 0.5), "our full state in parts of 40 is taken without NAK")
         return
@@ -155,7 +156,7 @@ def full_dump(ctx: CaseContext) -> None:
 
 
 def request_all(ctx: CaseContext) -> None:
-    if ctx.role == "ctc":
+    if ctx.role == kinds.CTC:
         raise NotApplicable("the CTC sends REQUEST_ALL; see seq-gap")
     w = _opened(ctx)
     w.collect(0.1)
@@ -165,7 +166,7 @@ def request_all(ctx: CaseContext) -> None:
 
 
 def seq_gap(ctx: CaseContext) -> None:
-    if ctx.role != "ctc":
+    if ctx.role != kinds.CTC:
         raise NotApplicable("only the CTC asks REQUEST_ALL on a SEQ gap (the IXL only reports it)")
     w = _opened(ctx)
     w.collect(0.2)
@@ -223,7 +224,7 @@ def maximum_length(ctx: CaseContext) -> None:
     raw = longer.encode(seq, w.op["HEARTBEAT"], bytes(p.max_data + 1), 0)
     _refused(ctx, raw, f"LENGTH {p.max_len + 1}, one past the maximum", NAK_FORMAT, seq)
     w.collect(0.2)
-    if ctx.role == "ctc":
+    if ctx.role == kinds.CTC:
         op = p.opcodes.by_name["INDICATION"]
         w.send_raw(w.frame("INDICATION", 0, op.pack_items([[c, 0] for c in range(1, 41)])),
                    "INDICATION change with 40 items (LENGTH 123)")  # fmt: skip
@@ -330,7 +331,7 @@ def measure(ctx: CaseContext, limit: float) -> None:
 
 
 def refused_station(ctx: CaseContext) -> None:
-    if ctx.role == "ctc":
+    if ctx.role == kinds.CTC:
         w = ctx.connect()
         w.send_raw(w.message("IDENT", 0, station=UNKNOWN_STATION, version=1),
                    f"IDENT station {UNKNOWN_STATION} (not configured)")  # fmt: skip
@@ -350,7 +351,7 @@ def refused_station(ctx: CaseContext) -> None:
 
 
 def second_connection(ctx: CaseContext) -> None:
-    if ctx.role != "ctc":
+    if ctx.role != kinds.CTC:
         raise NotApplicable("the CTC decides who may connect")
     _opened(ctx)
     w2 = ctx.connect()
@@ -362,14 +363,14 @@ def second_connection(ctx: CaseContext) -> None:
               "a second connection for a connected station is refused (IDENT sub 2)")  # fmt: skip
 
 
-T2 = ("ixl", "ctc")
+T2 = (kinds.IXL, kinds.CTC)
 TYPE2_CASES: tuple[Case, ...] = (
     Case("t2-ident", "type2", "IDENT exchange: station, version 1", "§4", ident, T2),
     Case("t2-full-dump", "type2", "full state after IDENT: <= 40 items a part, chart order, sub 2 last",
          "§4", full_dump, T2),
     Case("t2-request-all", "type2", "REQUEST_ALL is answered with a complete full state", "§4",
-         request_all, ("ixl",)),
-    Case("t2-seq-gap", "type2", "a SEQ gap is answered with REQUEST_ALL", "§4", seq_gap, ("ctc",)),
+         request_all, (kinds.IXL,)),
+    Case("t2-seq-gap", "type2", "a SEQ gap is answered with REQUEST_ALL", "§4", seq_gap, (kinds.CTC,)),
     Case("t2-crc-error-nak", "type2", "a CRC error is answered with NAK 1 naming the SEQ", "§4",
          crc_error_nak, T2),
     Case("t2-unknown-opcode", "type2", "an unknown opcode is answered with NAK 4", "§4",
@@ -384,5 +385,5 @@ TYPE2_CASES: tuple[Case, ...] = (
     Case("t2-refused-station", "type2", "refusal of an unknown station (IDENT sub 2, close)",
          "§4, §10", refused_station, T2),
     Case("t2-second-connection", "type2", "a second connection for one station is refused",
-         "§4, §10", second_connection, ("ctc",)),
+         "§4, §10", second_connection, (kinds.CTC,)),
 )  # fmt: skip

@@ -52,6 +52,7 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
+from ktcs_bench import kinds
 from ktcs_bench.codec.frame import Frame
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import to_text
@@ -460,8 +461,8 @@ class ConsoleServer:
                 await self._busy(client, msg, why)
         elif kind == "monitor":
             await self._select_tap(client, msg.get("tap"))
-        elif kind == "train":
-            self._select_train(client, msg.get("train"))
+        elif kind == kinds.TRAIN:
+            self._select_train(client, msg.get(kinds.TRAIN))
 
     async def _work(self, client: _Client) -> None:
         """The page's admitted requests, one at a time, each answered with its result."""
@@ -653,7 +654,7 @@ class ConsoleServer:
                 log.exception("speed-distance provider failed for train %s", train)
                 data = None
             text = json.dumps(
-                {"type": "speed", "train": train, "data": data.to_json() if data else None}
+                {"type": "speed", kinds.TRAIN: train, "data": data.to_json() if data else None}
             )
             if text != last:
                 last = text

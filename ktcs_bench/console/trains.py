@@ -15,6 +15,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from ktcs_bench import kinds
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.train.speed_distance import SpeedDistance, endpoint_speed_distance
 from ktcs_bench.train.units import to_kmh
@@ -34,7 +35,7 @@ class TrainPosition:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "train": self.train,
+            kinds.TRAIN: self.train,
             "head_m": round(self.head_m, 1),
             "tail_m": round(self.tail_m, 1),
             "speed_kmh": round(self.speed_kmh, 1),

@@ -41,7 +41,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from ktcs_bench import messages
+from ktcs_bench import kinds, messages
 from ktcs_bench.ctc.describer import DescribedTrain, Describer
 from ktcs_bench.ctc.model import CtcModel, StationReading
 from ktcs_bench.station.model import Route, Station
@@ -255,7 +255,7 @@ class Ars:
                 wanted = f"route {r.entry}-{r.exit} at station {st}"
             trains.append(
                 {
-                    "train": t.id,
+                    kinds.TRAIN: t.id,
                     "track_circuits": list(t.footprint),
                     "berth": t.berth,
                     "lost": t.lost,
@@ -267,7 +267,7 @@ class Ars:
         for s in self.describer.expected:
             trains.append(
                 {
-                    "train": s.id,
+                    kinds.TRAIN: s.id,
                     "track_circuits": [],
                     "berth": None,
                     "lost": False,
@@ -570,7 +570,7 @@ class Ars:
     def _log(
         self, now: float, text: str, station: int | None = None, train: str | None = None
     ) -> None:
-        entry = {"time": now, "station": station, "train": train, "text": text}
+        entry = {"time": now, "station": station, kinds.TRAIN: train, "text": text}
         self.log.append(entry)
         if self.on_log is not None:
             self.on_log(entry)

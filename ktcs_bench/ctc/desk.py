@@ -18,6 +18,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.ctc.log import CommandLog
 from ktcs_bench.ctc.model import Action, CtcModel
 from ktcs_bench.errors import PeerError, UsageError
@@ -72,7 +73,7 @@ class Desk:
     async def operate(
         self,
         command: OperatorCommand | Mapping[str, Any],
-        source: str = "ctc",
+        source: str = kinds.CTC,
         on_sent: Callable[[Action], None] | None = None,
     ) -> Outcome:
         """Carry out one command (a message, or its JSON object: `CtcModel.action`); `on_sent` is

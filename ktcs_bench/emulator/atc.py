@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import astuple
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.emulator.device import IxlPeerDevice
 from ktcs_bench.station.model import Line
@@ -14,7 +15,7 @@ from ktcs_bench.transport.endpoints import Endpoint
 
 
 class AtcDevice(IxlPeerDevice):
-    kind = "atc"
+    kind = kinds.ATC
     tx_chart = "atc_to_ixl"
 
     def __init__(

@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.console.server import ConsoleServer
 from ktcs_bench.console.trains import TrainPosition, position_from_status
 from ktcs_bench.ctc.ars import Ars, RouteRequest
@@ -127,7 +128,7 @@ class RemoteTrains:
 
 
 class CtcDevice(Device):
-    kind = "ctc"
+    kind = kinds.CTC
     messages = CTC
 
     def __init__(
@@ -195,7 +196,7 @@ class CtcDevice(Device):
         return await super().handle(message)
 
     async def operate(self, command: OperatorCommand) -> dict[str, Any]:
-        outcome = await self.carry_out(command, "ctc")
+        outcome = await self.carry_out(command, kinds.CTC)
         action = outcome.action
         if action is None or not outcome.answered:  # refused by the CTC, or no answer
             return {"ok": False, "error": outcome.why}
@@ -207,7 +208,7 @@ class CtcDevice(Device):
         outcome = await self.desk.operate(command, source)
         action = outcome.action
         if action is not None and outcome.answered:
-            by = "" if source == "ctc" else f" (by {source.upper()})"
+            by = "" if source == kinds.CTC else f" (by {source.upper()})"
             self.note("control", f"station {action.station} {action.name}={action.value}{by}: "
                       f"{outcome.result}")  # fmt: skip
         return outcome

@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping
 from functools import partial
 from typing import Any, ClassVar
 
+from ktcs_bench import kinds
 from ktcs_bench.binding import LinkBinding
 from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator.codeport import CodePort
@@ -225,14 +226,14 @@ class IxlPeerDevice(Device):
         super().__init__(name, control)
         self.station = station
         self.port: CodePort | None = None
-        if "ixl" in links:
+        if kinds.IXL in links:
             binding = LinkBinding(*link_charts(line.view(station), self.tx_chart), state)
             self.port = CodePort(
-                f"{name}-ixl", links["ixl"], binding, self.from_ixl, self.link_changed,
+                f"{name}-ixl", links[kinds.IXL], binding, self.from_ixl, self.link_changed,
                 type1_profile, type1, faults=faults,
             )  # fmt: skip
             if self.port.path:
-                self.ready_info["ptys"] = {"ixl": self.port.path}
+                self.ready_info["ptys"] = {kinds.IXL: self.port.path}
         self.rails: RailsClient | None = None
         if "rails" in links:
             hello = {"role": self.kind, "name": name}

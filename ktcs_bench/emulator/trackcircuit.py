@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.atc.codes import AtcCode
 from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
 from ktcs_bench.emulator.device import Device
@@ -15,7 +16,7 @@ from ktcs_bench.transport import jsonlines, net
 
 
 class TrackCircuitDevice(Device):
-    kind = "trackcircuit"
+    kind = kinds.TRACKCIRCUIT
     messages = TRACK_CIRCUITS
 
     def __init__(
@@ -41,7 +42,7 @@ class TrackCircuitDevice(Device):
         if changes:
             msg = {"occupancy": self._occ(changes)}
             for p in self.peers:
-                if p.info.get("role") in ("atc", "trackside", "observer"):
+                if p.info.get("role") in (kinds.ATC, kinds.TRACKSIDE, "observer"):
                     p.send(msg)
             self.note("occupancy", ", ".join(f"{k}={int(v)}" for k, v in sorted(changes.items())))
         self._codes_to_trains()
@@ -61,8 +62,8 @@ class TrackCircuitDevice(Device):
         if "hello" in obj and isinstance(obj["hello"], dict):
             peer.info.update(obj["hello"])
             self.peers[peer] = None
-            if peer.info.get("role") == "train" and peer.info.get("train"):
-                self.trains[str(peer.info["train"])] = peer
+            if peer.info.get("role") == kinds.TRAIN and peer.info.get(kinds.TRAIN):
+                self.trains[str(peer.info[kinds.TRAIN])] = peer
             return {"occupancy": self._occ(), "full": True}
         if "codes" in obj and isinstance(obj["codes"], dict):
             codes = {}
@@ -75,7 +76,7 @@ class TrackCircuitDevice(Device):
             self._codes_to_trains()
             return None
         if "position" in obj and isinstance(obj["position"], dict):
-            train = str(peer.info.get("train", peer.address))
+            train = str(peer.info.get(kinds.TRAIN, peer.address))
             pos = obj["position"]
             try:
                 self.model.trains[train] = TrainPosition(
@@ -89,7 +90,7 @@ class TrackCircuitDevice(Device):
 
     def _closed(self, peer: jsonlines.Peer) -> None:
         self.peers.pop(peer, None)
-        train = peer.info.get("train")
+        train = peer.info.get(kinds.TRAIN)
         if train is not None and self.trains.get(str(train)) is peer:
             del self.trains[str(train)]
             self.model.trains.pop(str(train), None)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.emulator.device import IxlPeerDevice
 from ktcs_bench.field.trackside import FieldOutput, Trackside
 from ktcs_bench.messages import (
@@ -21,7 +22,7 @@ from ktcs_bench.transport.endpoints import Endpoint
 
 
 class TracksideDevice(IxlPeerDevice):
-    kind = "trackside"
+    kind = kinds.TRACKSIDE
     messages = TRACKSIDE
     tx_chart = "io_to_ixl"
 

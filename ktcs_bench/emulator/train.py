@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.errors import ConfigError, UsageError
@@ -147,7 +148,7 @@ def _code_fields(wire: Any) -> tuple[float, float, float] | None:
 
 
 class TrainDevice(Device):
-    kind = "train"
+    kind = kinds.TRAIN
     messages = TRAIN
 
     def __init__(
@@ -173,7 +174,7 @@ class TrainDevice(Device):
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None
-        self.rails = RailsClient(rails, {"role": "train", "name": name, "train": config.train_id},
+        self.rails = RailsClient(rails, {"role": kinds.TRAIN, "name": name, kinds.TRAIN: config.train_id},
                                  self._from_rails)  # fmt: skip
         self.last: Any = None
         self.release = False
@@ -190,7 +191,7 @@ class TrainDevice(Device):
             raise UsageError(
                 "emulator train needs --link rails=tcp://HOST:PORT (the track circuits)"
             )
-        train_id = str(train or opts.get("train", name))
+        train_id = str(train or opts.get(kinds.TRAIN, name))
         timetable = lab.load_timetable(line) if lab is not None else None
         if timetable is not None:
             try:
@@ -282,7 +283,7 @@ class TrainDevice(Device):
         now = 0.0 if self.origin is None else self.now() - self.origin
         return {
             **super().status(),
-            "train": self.config.train_id,
+            kinds.TRAIN: self.config.train_id,
             **self._position(),
             "time_s": round(now, 1),
             "state": ep.service_state(now) if self.on_line else "waiting",

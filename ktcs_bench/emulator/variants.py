@@ -15,6 +15,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.codec import FrameCodec
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.errors import UsageError
@@ -49,11 +50,11 @@ FAULTS: dict[str, Variant] = {
     "duplicate-delivery": Variant("type1", "delivers a repeated SEQ again", "duplicate-seq"),
     "short-all-info": Variant("type1", "ALL_INFO leaves out the chart's last code", "request-all"),
     "no-link-test": Variant("type1", "never sends LINK_TEST when idle", "link-test-timing"),
-    "dump-out-of-order": Variant("ixl", "Type II full state not in chart order", "t2-full-dump"),
-    "ignore-nak": Variant("ixl", "Type II: ignores NAK (no retransmission)",
+    "dump-out-of-order": Variant(kinds.IXL, "Type II full state not in chart order", "t2-full-dump"),
+    "ignore-nak": Variant(kinds.IXL, "Type II: ignores NAK (no retransmission)",
                           "t2-nak-retransmission"),
-    "no-heartbeat": Variant("ixl", "Type II: sends no HEARTBEAT when idle", "t2-heartbeat"),
-    "accept-unknown-station": Variant("ctc", "admits a station not in its lab",
+    "no-heartbeat": Variant(kinds.IXL, "Type II: sends no HEARTBEAT when idle", "t2-heartbeat"),
+    "accept-unknown-station": Variant(kinds.CTC, "admits a station not in its lab",
                                       "t2-refused-station"),
 }  # fmt: skip
 
@@ -65,7 +66,7 @@ def check(names: Iterable[str], kind: str | None = None) -> frozenset[str]:
         known = ", ".join(sorted(FAULTS)) or "none yet"
         raise UsageError(f"unknown fault variant(s) {', '.join(unknown)} (known: {known})")
     if kind is not None:
-        applies = {"ctc": ("ctc",), "ixl": ("ixl", "type1")}.get(kind, ("type1",))
+        applies = {kinds.CTC: (kinds.CTC,), kinds.IXL: (kinds.IXL, "type1")}.get(kind, ("type1",))
         wrong = sorted(n for n in chosen if FAULTS[n].kind not in applies)
         if wrong:
             raise UsageError(f"fault variant(s) {', '.join(wrong)} do not apply to {kind}")
@@ -177,7 +178,7 @@ def ixl_client(
     ssl: ssl_module.SSLContext | None = None,
     server_hostname: str | None = None,
 ) -> IxlClient:
-    mine = faults & {n for n, v in FAULTS.items() if v.kind == "ixl"}
+    mine = faults & {n for n, v in FAULTS.items() if v.kind == kinds.IXL}
     client = IxlClient(station, host, port, app, ssl=ssl, server_hostname=server_hostname)
     if mine:
         session_class = type("FaultyIxlSession", (_VariantIxlSession,), {"faults": mine})

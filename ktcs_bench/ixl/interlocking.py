@@ -547,7 +547,7 @@ class Interlocking:
             return
         if self._proceed_before.get(r.entry, False):
             rs.status = RouteStatus.ENTERED
-            self._event(now, "train", f"train entered route {r.name}: signal {r.entry} to stop")
+            self._event(now, kinds.TRAIN, f"train entered route {r.name}: signal {r.entry} to stop")
             rs.passed[0] = not r.approach or self._was_occupied(r.approach)
             if not rs.passed[0]:
                 self._event(

@@ -34,6 +34,7 @@ from functools import partial
 from pathlib import Path
 from typing import IO, Any, TypeVar
 
+from ktcs_bench import kinds
 from ktcs_bench.capture import CaptureWriter, open_writer
 from ktcs_bench.emulator.build import build_device, device_namespace
 from ktcs_bench.emulator.device import Device
@@ -305,13 +306,13 @@ class InProcessLab:
 
     async def _trains_to_ctc(self) -> None:
         """Tell a CTC that serves a console of every train (as `lab up` does)."""
-        for ctc in self.topology.of_kind("ctc"):
+        for ctc in self.topology.of_kind(kinds.CTC):
             device = self.objects.get(ctc.name)
             if device is None or not self.console:
                 continue
-            for d in self.topology.of_kind("train"):
-                train = str(d.options.get("train", d.name))
-                await device.command({"cmd": "add_train", "train": train,
+            for d in self.topology.of_kind(kinds.TRAIN):
+                train = str(d.options.get(kinds.TRAIN, d.name))
+                await device.command({"cmd": "add_train", kinds.TRAIN: train,
                                       "control": self.ready[d.name]["control"]})  # fmt: skip
 
     # -- faults of devices -------------------------------------------------------------------------
@@ -339,7 +340,7 @@ class InProcessLab:
         if name in self.objects:
             await self.kill(name)
         await self._start(name)
-        if self.topology.devices[name].kind == "ctc":
+        if self.topology.devices[name].kind == kinds.CTC:
             await self._trains_to_ctc()
         self.notices.append(f"{name} restarted")
         self._note_lab(name, "lab", "restarted")
@@ -350,7 +351,8 @@ class InProcessLab:
             n: (d.status() if (d := self.objects.get(n)) else None) for n in self.topology.devices
         }
         ctc = next(
-            (s for n, s in devices.items() if self.topology.devices[n].kind == "ctc" and s), None
+            (s for n, s in devices.items() if self.topology.devices[n].kind == kinds.CTC and s),
+            None,
         )
         return {
             "lab": self.topology.name,
@@ -383,7 +385,7 @@ class InProcessLab:
         virtual = (self.now() if self._loop is not None else self._virtual) - self._t0
         wall = (time.monotonic() - self._wall0) if self._loop is not None else self._wall
         trains = {}
-        for d in self.topology.of_kind("train"):
+        for d in self.topology.of_kind(kinds.TRAIN):
             device = self.objects.get(d.name)
             status = device.status() if device is not None else {}
             trains[d.name] = {k: status[k] for k in sorted(status) if k not in ("name", "kind")}
@@ -410,7 +412,7 @@ class InProcessLab:
             return
         self._virtual, self._wall = self.now(), time.monotonic() - self._wall0
         summary = self.summary()
-        ixls = [n for n in self.objects if self.topology.devices[n].kind == "ixl"]
+        ixls = [n for n in self.objects if self.topology.devices[n].kind == kinds.IXL]
         for name in [*ixls, *[n for n in reversed(self.objects) if n not in ixls]]:
             await self.kill(name)
         for tap in self.taps.values():

@@ -31,6 +31,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.codes.stations import station_chart
 from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.station.model import Line, TrackCircuit
@@ -393,7 +394,7 @@ async def snapshot(access: LabAccess, views: bool = True) -> LabSnapshot:
     """What the lab's devices say now, through `LabAccess` (one status request each, and the
     CTC's `show` per station unless `views` is False: invariants 1-3 do not need the CTC's view).
     A device that does not answer leaves its part unknown."""
-    kinds = access.devices
+    device_kinds = access.devices
     time = access.now()
     trains: dict[str, TrainState] = {}
     occupied: set[str] = set()
@@ -401,21 +402,21 @@ async def snapshot(access: LabAccess, views: bool = True) -> LabSnapshot:
     ixls: dict[int, dict[str, Any]] = {}
     sides: dict[int, dict[str, Any]] = {}
     ctcs: list[str] = []
-    for name, kind in sorted(kinds.items()):
-        if kind == "ctc":
+    for name, kind in sorted(device_kinds.items()):
+        if kind == kinds.CTC:
             ctcs += [name] if views else []
             continue
-        if kind not in ("trackcircuit", "ixl", "trackside"):
+        if kind not in (kinds.TRACKCIRCUIT, kinds.IXL, kinds.TRACKSIDE):
             continue
         status = await _status(access, name)
         if status is None:
             continue
-        if kind == "trackcircuit":
+        if kind == kinds.TRACKCIRCUIT:
             for t, (head, tail, track) in status.get("trains", {}).items():
                 trains[t] = TrainState(t, float(head), float(tail), str(track))
             occupied |= set(status.get("occupied", []))
             tc_faults.update(status.get("faults", {}))
-        elif kind == "ixl":
+        elif kind == kinds.IXL:
             ixls[int(status["station"])] = status
         else:
             sides[int(status["station"])] = status

@@ -330,7 +330,7 @@ class LabRunner:
             for d in self.lab.of_kind(kinds.TRAIN):
                 train, ready = str(d.options.get(kinds.TRAIN, d.name)), self.children[d.name].ready
                 await jsonlines.request(host, int(port),
-                                        {"cmd": "add_train", "train": train, "control": ready["control"]},
+                                        {"cmd": "add_train", kinds.TRAIN: train, "control": ready["control"]},
                                         token=self.token)  # fmt: skip
 
     # -- control port and state file ---------------------------------------------------------------

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.lab.invariants import SafetyChecker, Violation, snapshot, views_agree
@@ -54,27 +55,27 @@ class StepRun:
 async def command(access: LabAccess, step: Mapping[str, Any]) -> dict[str, Any]:
     """Carry out a step's command (not its run); the answer of the device, tap or lab."""
     do = step.get("do")
-    kinds = access.devices
-    ctc = next((n for n, k in kinds.items() if k == "ctc"), "ctc")
+    device_kinds = access.devices
+    ctc = next((n for n, k in device_kinds.items() if k == kinds.CTC), kinds.CTC)
     if do in ("route", "point", "signal", "mode", "ars"):
         obj = {k: v for k, v in step.items() if k not in ("do", "run_s")}
         return await access.device(ctc, {"cmd": do, **obj})
     if do == "link":
         return await access.link(str(step["link"]), dict(step["fault"]))
     if do == "point_fault":
-        side = _device_of(kinds, "trackside", int(step["station"]), access)
+        side = _device_of(device_kinds, kinds.TRACKSIDE, int(step["station"]), access)
         return await access.device(
             side, {"cmd": "fail_point", "point": step["point"], "kind": "detection"}
         )
     if do == "tc_fault":
-        tc = next(n for n, k in kinds.items() if k == "trackcircuit")
+        tc = next(n for n, k in device_kinds.items() if k == kinds.TRACKCIRCUIT)
         return await access.device(
             tc, {"cmd": "fail", "tc": step["tc"], "kind": step.get("kind", "failed_occupied")}
         )
     if do == "restart":
         return await access.lab({"cmd": "restart", "device": step["device"]})
     if do == "release_eb":
-        return await access.device(str(step["train"]), {"cmd": "release_eb"})
+        return await access.device(str(step[kinds.TRAIN]), {"cmd": "release_eb"})
     if do == "settle":
         return await clear_faults(access)
     if do == "wait":
@@ -82,9 +83,9 @@ async def command(access: LabAccess, step: Mapping[str, Any]) -> dict[str, Any]:
     raise ConfigError("steps", "", f"unknown step {do!r} ({', '.join(DO)})")
 
 
-def _device_of(kinds: Mapping[str, str], kind: str, station: int, access: LabAccess) -> str:
+def _device_of(device_kinds: Mapping[str, str], kind: str, station: int, access: LabAccess) -> str:
     """The device of `kind` at `station` (lab files name them kind + station: io20, atc20)."""
-    names = [n for n, k in kinds.items() if k == kind and n.endswith(str(station))]
+    names = [n for n, k in device_kinds.items() if k == kind and n.endswith(str(station))]
     if not names:
         raise ConfigError("steps", "", f"no {kind} device of station {station}")
     return names[0]
@@ -97,9 +98,9 @@ async def clear_faults(access: LabAccess) -> dict[str, Any]:
         answers.append(await access.link(link, {"cmd": "restore"}))
         answers.append(await access.link(link, {"cmd": "clear"}))
     for name, kind in sorted(access.devices.items()):
-        if kind == "trackside":
+        if kind == kinds.TRACKSIDE:
             answers.append(await access.device(name, {"cmd": "clear_faults"}))
-        elif kind == "trackcircuit":
+        elif kind == kinds.TRACKCIRCUIT:
             answers.append(await access.device(name, {"cmd": "clear"}))
     failed = [a for a in answers if not a.get("ok")]
     return {"ok": not failed, "failed": failed}

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from ktcs_bench import kinds
+
 GREEN, RED, YELLOW, CYAN, DIM, BOLD, RESET = (
     "\x1b[32m", "\x1b[31m", "\x1b[33m", "\x1b[36m", "\x1b[2m", "\x1b[1m", "\x1b[0m"
 )  # fmt: skip
@@ -39,13 +41,13 @@ def train_lines(status: dict[str, Any], colour: bool) -> list[str]:
     out = []
     for d in status.get("devices", {}).values():
         t = d.get("status") or {}
-        if t.get("kind") != "train":
+        if t.get("kind") != kinds.TRAIN:
             continue
         state = str(t.get("state") or "?")
         stops = " ".join(f"{a['station']}:{a['error_m']:+.2f}m@{a['time_s']:.0f}s"
                          for a in t.get("arrivals", []))  # fmt: skip
         nxt = f"next {t['next_stop']}" if t.get("next_stop") else "no stop left"
-        out.append(f"{_c('train ' + str(t.get('train')), BOLD, colour)} "
+        out.append(f"{_c('train ' + str(t.get(kinds.TRAIN)), BOLD, colour)} "
                    f"{_c(state, TRAIN_STATE.get(state, ''), colour):<10} front "
                    f"{float(t.get('head', 0.0)):8.1f} m {float(t.get('speed_kmh', 0.0)):5.1f} km/h  "
                    f"{nxt}   {'stops ' + stops if stops else ''}".rstrip())  # fmt: skip
@@ -57,11 +59,11 @@ def station_lines(status: dict[str, Any], colour: bool) -> list[str]:
     devices = status.get("devices", {})
     for st, s in sorted(status.get("stations", {}).items(), key=lambda kv: int(kv[0])):
         ixl = next((d.get("status") or {} for d in devices.values()
-                    if (d.get("status") or {}).get("kind") == "ixl"
+                    if (d.get("status") or {}).get("kind") == kinds.IXL
                     and (d.get("status") or {}).get("station") == int(st)), {})  # fmt: skip
-        links = {"ctc": s.get("link") == "up", **(ixl.get("links") or {})}
+        links = {kinds.CTC: s.get("link") == "up", **(ixl.get("links") or {})}
         link_txt = " ".join(_c(f"{k}{'●' if up else '○'}", GREEN if up else RED, colour)
-                            for k, up in links.items() if k != "ctc" or True)  # fmt: skip
+                            for k, up in links.items() if k != kinds.CTC or True)  # fmt: skip
         mode = s.get("mode", "?")
         mode_txt = _c(mode, CYAN if mode == "center" else YELLOW, colour)
         none = "-" if s.get("known", True) else "unknown"  # the CTC does not know them now

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.argtypes import say_seconds
 from ktcs_bench.datafiles import YamlReader, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
@@ -71,7 +72,7 @@ class Procedure:
         for s in self.steps:
             exp = getattr(s, "expectation", None)
             out.update(exp.devices if exp is not None else ())
-            for attr in ("device", "ctc", "name"):
+            for attr in ("device", kinds.CTC, "name"):
                 value = getattr(s, attr, None)
                 if isinstance(value, str) and value in self.setup.lab.devices:
                     out.add(value)

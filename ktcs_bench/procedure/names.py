@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ktcs_bench import kinds
 from ktcs_bench.ctc.model import signal_name
 from ktcs_bench.lab.topology import Lab, LinkSpec
 from ktcs_bench.station.model import Line, TrackCircuit
@@ -28,8 +29,8 @@ class LabNames:
     trains: set[str] = field(default_factory=set)  # placed by the setup, or train devices
 
     def __post_init__(self) -> None:
-        for d in self.lab.of_kind("train"):
-            self.trains.add(str(d.options.get("train", d.name)))
+        for d in self.lab.of_kind(kinds.TRAIN):
+            self.trains.add(str(d.options.get(kinds.TRAIN, d.name)))
         self.tcs: dict[str, TrackCircuit] = {t.name: t for t in self.line.all_track_circuits()}
 
     # -- stations --------------------------------------------------------------------------------
@@ -106,8 +107,8 @@ class LabNames:
 
     def train_device(self, train: str) -> str | None:
         """The device running train `train`, None for a train the procedure places itself."""
-        for d in self.lab.of_kind("train"):
-            if str(d.options.get("train", d.name)) == train:
+        for d in self.lab.of_kind(kinds.TRAIN):
+            if str(d.options.get(kinds.TRAIN, d.name)) == train:
                 return d.name
         return None
 

@@ -17,6 +17,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.capture import PcapngWriter
 from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml
 from ktcs_bench.procedure.runner import ProcedureResult
@@ -156,7 +157,7 @@ def _plots(result: ProcedureResult) -> str:
         n = len(running)
         fig, axes = plt.subplots(n, 1, figsize=(10, 3.2 * n), squeeze=False)
         for ax, (tid, series) in zip(axes[:, 0], running.items(), strict=True):
-            rows = [{"train": tid, "t_s": t, "front_m": h, "speed_kmh": v, **none}
+            rows = [{kinds.TRAIN: tid, "t_s": t, "front_m": h, "speed_kmh": v, **none}
                     for t, h, _tl, v in series]  # fmt: skip
             plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
         fig.tight_layout()
@@ -166,7 +167,7 @@ def _plots(result: ProcedureResult) -> str:
     if still:
         out.append(f'<p class="still">Did not move, so no speed-distance plot: '
                    f"{_e(', '.join(still))}.</p>")  # fmt: skip
-    td = [{"train": tid, "t_s": t, "front_m": h, "rear_m": tl}
+    td = [{kinds.TRAIN: tid, "t_s": t, "front_m": h, "rear_m": tl}
           for tid, series in result.trains.items() for t, h, tl, _v in series]  # fmt: skip
     fig, ax = plt.subplots(figsize=(10, 4))
     plot_time_distance(ax, td, [], "train positions over time")

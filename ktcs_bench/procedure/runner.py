@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.capture import CaptureRecord, read_capture
 from ktcs_bench.capture.hexlog import parse_hex_log
 from ktcs_bench.codec.frame import Frame
@@ -34,7 +35,7 @@ from ktcs_bench.procedure.steps import FaultBook, Ghost, Step
 SAMPLE_S = 0.5  # the lab's seconds between two samples (and two checks of an expectation)
 SETUP_S = 60.0  # how long the setup may take to find the lab ready
 VERDICTS = ("pass", "fail", "error", "skipped")
-ACTIONS = ("ctc", "local", "train", "fault")
+ACTIONS = (kinds.CTC, "local", kinds.TRAIN, "fault")
 LAB_ERRORS = (KtcsError, OSError, TimeoutError, ConnectionError, ValueError)
 
 
@@ -221,7 +222,7 @@ class Snapshot:
     async def show(self, station: int) -> dict[str, Any] | None:
         if station not in self._show:
             try:
-                ctc = self.run.names.device_of("ctc")
+                ctc = self.run.names.device_of(kinds.CTC)
                 answer = wire(
                     await self.run.access.device(ctc, {"cmd": "show", "station": station})
                 )
@@ -287,7 +288,7 @@ class ProcedureRun:
         self.frame_links = sorted({lk for s in procedure.steps for lk in _frame_links(s)})
         lab = procedure.setup.lab
         self.sampled = [d.name for d in lab.devices.values()
-                        if d.kind in ("ctc", "ixl", "atc", "trackcircuit", "train")]  # fmt: skip
+                        if d.kind in (kinds.CTC, kinds.IXL, kinds.ATC, kinds.TRACKCIRCUIT, kinds.TRAIN)]  # fmt: skip
 
     # -- the context steps run with ------------------------------------------------------------
     def elapsed(self) -> float:
@@ -326,8 +327,8 @@ class ProcedureRun:
         await self.sample()
 
     async def place(self, ghost: Ghost) -> None:
-        tc = self.names.device_of("trackcircuit")
-        answer = await self.access.device(tc, {"cmd": "place", "train": ghost.train,
+        tc = self.names.device_of(kinds.TRACKCIRCUIT)
+        answer = await self.access.device(tc, {"cmd": "place", kinds.TRAIN: ghost.train,
                                                "head": ghost.head, "tail": ghost.head - ghost.length,
                                                "track": ghost.track})  # fmt: skip
         if not answer.get("ok"):
@@ -342,7 +343,7 @@ class ProcedureRun:
         for device in sorted(book.trackside):
             await self._quiet(self.access.device(device, {"cmd": "clear_faults"}))
             done.append(f"{device} faults cleared")
-        tc = self.names.device_of("trackcircuit") if book.track_circuits else ""
+        tc = self.names.device_of(kinds.TRACKCIRCUIT) if book.track_circuits else ""
         for name in sorted(book.track_circuits):
             await self._quiet(self.access.device(tc, {"cmd": "clear", "tc": name}))
             done.append(f"track circuit {name} cleared")
@@ -367,7 +368,7 @@ class ProcedureRun:
     async def _record(self, snap: Snapshot) -> None:
         t = round(self.elapsed(), 3)
         values: dict[str, str] = {}
-        ctc = self.names.device_of("ctc")
+        ctc = self.names.device_of(kinds.CTC)
         for st, s in ((await snap.status(ctc)) or {}).get("stations", {}).items():
             values[f"ctc {st} link"] = f"{s['link']}{'' if s.get('synced') else ' (not synced)'}"
             values[f"ctc {st} mode"] = s["mode"] + (" (center requested)"
@@ -383,19 +384,19 @@ class ProcedureRun:
             s = await snap.status(d.name) if d.name in self.sampled else None
             if s is None:
                 continue
-            if d.kind == "ixl":
+            if d.kind == kinds.IXL:
                 for g, v in s.get("signals", {}).items():
                     values[f"ixl {d.station} signal {g}"] = str(v)
-            elif d.kind == "atc":
+            elif d.kind == kinds.ATC:
                 for tc, code in s.get("codes", {}).items():
                     values[f"code {tc}"] = f"{code[0]} ({code[1]:g} km/h)"
-            elif d.kind == "trackcircuit":
+            elif d.kind == kinds.TRACKCIRCUIT:
                 for train, (head, tail, _track) in s.get("trains", {}).items():
                     g = self.ghosts.get(train)  # a train device reports itself (below)
                     if g is not None:
                         self._train(train, t, head, tail, g.speed_kmh)
-            elif d.kind == "train" and s.get("head") is not None:
-                self._train(str(s.get("train", d.name)), t, s["head"], s["tail"],
+            elif d.kind == kinds.TRAIN and s.get("head") is not None:
+                self._train(str(s.get(kinds.TRAIN, d.name)), t, s["head"], s["tail"],
                             float(s.get("speed_kmh") or 0.0))  # fmt: skip
         for key, value in values.items():
             if self._last.get(key) != value:
@@ -410,7 +411,7 @@ class ProcedureRun:
     # -- the run -------------------------------------------------------------------------------------
     async def _setup(self) -> None:
         proc, names = self.procedure, self.names
-        ctc = names.device_of("ctc")
+        ctc = names.device_of(kinds.CTC)
         missing = sorted(proc.devices - set(self.access.devices))
         if missing:
             raise _SetupError(f"the lab has no {', '.join(missing)} (a lab made from "
@@ -461,7 +462,7 @@ class ProcedureRun:
 
     async def _cancel_routes(self, stations: list[int]) -> None:
         names = self.names
-        ctc = names.device_of("ctc")
+        ctc = names.device_of(kinds.CTC)
         s = ((await self.snapshot.status(ctc)) or {}).get("stations", {})
         for st in stations:
             for route_name in s.get(str(st), {}).get("routes", []):
@@ -480,7 +481,7 @@ class ProcedureRun:
         await self._until(no_routes, "the routes left set cancelled", SETUP_S + longest)
 
     async def _mode(self, st: int, mode: str) -> None:
-        ctc, ixl = self.names.device_of("ctc"), self.names.device_of("ixl", st)
+        ctc, ixl = self.names.device_of(kinds.CTC), self.names.device_of(kinds.IXL, st)
 
         async def current() -> dict[str, Any]:
             snap = await self.sample()
@@ -576,8 +577,8 @@ class ProcedureRun:
         result = self.result
         result.cleared = await self.clear_faults()
         for train in list(self.ghosts):
-            tc = self.names.device_of("trackcircuit")
-            await self._quiet(self.access.device(tc, {"cmd": "remove", "train": train}))
+            tc = self.names.device_of(kinds.TRACKCIRCUIT)
+            await self._quiet(self.access.device(tc, {"cmd": "remove", kinds.TRAIN: train}))
             result.cleared.append(f"train {train} taken off")
         self.ghosts.clear()
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ktcs_bench import kinds
 from ktcs_bench.scenario.model import Assertion
 from ktcs_bench.scenario.runner import RunResult
 from ktcs_bench.train.units import to_kmh
@@ -36,7 +37,7 @@ def _stops(result: RunResult, train: str) -> list[tuple[float, float]]:
 
 def check(a: Assertion, result: RunResult) -> Outcome:
     g = a.args
-    tr = result.traces.get(str(g.get("train", "")))
+    tr = result.traces.get(str(g.get(kinds.TRAIN, "")))
     if a.kind == "min_gap":
         f, lead = result.traces[str(g["follower"])], result.traces[str(g["leader"])]
         gaps = [lt - fh for fh, lt in zip(f.head, lead.tail, strict=True)]
@@ -46,7 +47,7 @@ def check(a: Assertion, result: RunResult) -> Outcome:
     assert tr is not None
     if a.kind == "stops_at":
         mark, tol = float(g["mark"]), float(g.get("tolerance", 0.3))
-        stops = _stops(result, str(g["train"]))
+        stops = _stops(result, str(g[kinds.TRAIN]))
         if not stops:
             return Outcome(a, False, "the train never stopped")
         best = min(stops, key=lambda s: abs(s[1] - mark))
@@ -69,7 +70,7 @@ def check(a: Assertion, result: RunResult) -> Outcome:
         return Outcome(a, True, "speed stayed below the EBD at the true front")
     if a.kind == "event":
         kind = str(g["kind"])
-        n = sum(1 for e in result.events if e.train == str(g["train"]) and e.kind == kind)
+        n = sum(1 for e in result.events if e.train == str(g[kinds.TRAIN]) and e.kind == kind)
         lo = int(g.get("at_least", 0 if "at_most" in g else 1))
         hi = int(g.get("at_most", 10**9))
         return Outcome(a, lo <= n <= hi, f"{n} × {kind} (wanted {lo}..{hi if hi < 10**9 else '∞'})")

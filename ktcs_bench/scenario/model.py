@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.datafiles import YamlReader, load_mapping
 from ktcs_bench.errors import UsageError, excerpt, say_seconds
 from ktcs_bench.train.deceleration import GradientProfile
@@ -297,7 +298,7 @@ def _assertions(r: YamlReader, doc: dict[str, Any], ids: list[str]) -> list[Asse
                 f"{place}.{kind}", f"unknown assertion (one of {', '.join(ASSERTION_KINDS)})"
             )
         args_m = r.mapping(args, f"{place}.{kind}")
-        for key in ("train", "follower", "leader"):
+        for key in (kinds.TRAIN, "follower", "leader"):
             if key in args_m and r.word(args_m[key], f"{place}.{kind}.{key}") not in ids:
                 raise r.fail(
                     f"{place}.{kind}.{key}", f"no train {excerpt(args_m[key])} (trains: {ids})"

@@ -22,6 +22,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.scenario.assertions import Outcome
 from ktcs_bench.scenario.runner import RunResult
 from ktcs_bench.train.units import to_kmh
@@ -31,14 +32,14 @@ NO_LIMIT_KMH = 400.0
 LIMITS = ("mrsp", "ebi", "sbi", "warning", "permitted")
 """The supervision limits the speed–distance plot draws, in the order of the curves."""
 SPEED_DISTANCE_COLUMNS = (
-    "train",
+    kinds.TRAIN,
     "t_s",
     "front_m",
     "speed_kmh",
     "safe_front_m",
     *(f"{name}_kmh" for name in LIMITS),
 )
-TIME_DISTANCE_COLUMNS = ("train", "t_s", "front_m", "rear_m")
+TIME_DISTANCE_COLUMNS = (kinds.TRAIN, "t_s", "front_m", "rear_m")
 MARK_COLUMNS = ("kind", "name", "from_m", "to_m", "active_from_s", "active_until_s")
 
 
@@ -88,7 +89,7 @@ def speed_distance_rows(result: RunResult) -> list[dict[str, Any]]:
     for tid, tr in result.traces.items():
         sampled = dict(zip(tr.limits_row, range(len(tr.limits_row)), strict=True))
         for i, (t, x, v) in enumerate(zip(tr.t, tr.head, tr.speed, strict=True)):
-            row: dict[str, Any] = {"train": tid, "t_s": t, "front_m": x, "speed_kmh": to_kmh(v)}
+            row: dict[str, Any] = {kinds.TRAIN: tid, "t_s": t, "front_m": x, "speed_kmh": to_kmh(v)}
             k = sampled.get(i)
             row["safe_front_m"] = None if k is None else tr.limits_x[k]
             for name in LIMITS:
@@ -101,7 +102,7 @@ def speed_distance_rows(result: RunResult) -> list[dict[str, Any]]:
 def time_distance_rows(result: RunResult) -> list[dict[str, Any]]:
     """The time–distance plot's numbers (`TIME_DISTANCE_COLUMNS`)."""
     return [
-        {"train": tid, "t_s": t, "front_m": head, "rear_m": tail}
+        {kinds.TRAIN: tid, "t_s": t, "front_m": head, "rear_m": tail}
         for tid, tr in result.traces.items()
         for t, head, tail in zip(tr.t, tr.head, tr.tail, strict=True)
     ]
@@ -178,8 +179,8 @@ def plot_time_distance(
     ax: Any, td: list[dict[str, Any]], marks: list[dict[str, Any]], title: str
 ) -> None:
     """Every train's front and rear over time (`TIME_DISTANCE_COLUMNS`), the marks behind them."""
-    for tid in dict.fromkeys(r["train"] for r in td):
-        rows = [r for r in td if r["train"] == tid]
+    for tid in dict.fromkeys(r[kinds.TRAIN] for r in td):
+        rows = [r for r in td if r[kinds.TRAIN] == tid]
         t = [r["t_s"] for r in rows]
         line = ax.plot(t, [r["front_m"] for r in rows], lw=1.4, label=f"{tid} front")
         ax.fill_between(
@@ -213,7 +214,7 @@ def write_report(
     n = len(result.traces)
     fig, axes = plt.subplots(n, 1, figsize=(11, 3.6 * n), squeeze=False)
     for ax, tid in zip(axes[:, 0], result.traces, strict=True):
-        rows = [r for r in sd if r["train"] == tid]
+        rows = [r for r in sd if r[kinds.TRAIN] == tid]
         plot_speed_distance(ax, rows, f"{result.scenario.name}: train {tid} — speed vs distance")
     fig.tight_layout()
     paths["speed_distance"] = out_dir / "speed_distance.png"

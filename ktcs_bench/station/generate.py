@@ -32,6 +32,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
+from ktcs_bench import kinds
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line, PointSetting, Route, Signal, Station, TrackCircuit
@@ -400,9 +401,10 @@ def _lab_text(placed: list[_Placed], n: int) -> str:
         "  tc: {kind: trackcircuit, host: 127.0.0.1}",
     ]
     for p in placed:
-        for kind, prefix in (("ixl", "ixl"), ("atc", "atc"), ("trackside", "io")):
+        for kind in kinds.STATION_KINDS:  # each named by its link role: ixl18, atc18, io18
             out.append(
-                f"  {prefix}{p.number}: {{kind: {kind}, station: {p.number}, host: 127.0.0.1}}"
+                f"  {kinds.KINDS[kind].role}{p.number}: "
+                f"{{kind: {kind}, station: {p.number}, host: 127.0.0.1}}"
             )
     first = placed[0].number
     for k, (train, track) in enumerate(TIMETABLE_TRAINS):
@@ -413,11 +415,12 @@ def _lab_text(placed: list[_Placed], n: int) -> str:
     out += ["", "links:"]
     for p in placed:
         s = p.number
-        out += [
-            f"  - {{name: st{s}-ctc, type: type2, a: ixl{s}, b: ctc, tap: true}}",
-            f"  - {{name: st{s}-atc, type: type1, a: ixl{s}, b: atc{s}, tap: true}}",
-            f"  - {{name: st{s}-io, type: type1, a: ixl{s}, b: io{s}, tap: true}}",
-        ]
+        for peer in kinds.IXL_PEERS:  # st18-ctc, st18-atc, st18-io: a link per peer, by role
+            b = f"{peer.role}{s}" if peer.station else peer.name
+            out.append(
+                f"  - {{name: st{s}-{peer.role}, type: {peer.link}, a: {kinds.IXL}{s}, b: {b}, "
+                "tap: true}"
+            )
     return "\n".join(out) + "\n"
 
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench import kinds
 from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.codes.names import Function
 from ktcs_bench.codes.stations import StationCodes, station_chart
@@ -39,20 +40,20 @@ class Application:
     ctc: tuple[str, int] | None = None
     ctc_log: Path | None = None
     station: int | None = None
-    role: str = "atc"
+    role: str = kinds.ATC
     rx_chart: CodeChart | None = None  # the Type I peer -> IXL chart
     ctc_chart: CodeChart | None = None  # IXL -> CTC
     guarded: tuple[str, ...] = ()
     source: str = ""
-    device: str = "ixl"  # the IXL's end name on the tapped link
+    device: str = kinds.IXL  # the IXL's end name on the tapped link
     notes: list[str] = field(default_factory=list)
 
     @classmethod
-    def of_station(cls, line: Line, station: int, role: str = "atc", **kw: Any) -> Application:
+    def of_station(cls, line: Line, station: int, role: str = kinds.ATC, **kw: Any) -> Application:
         view = line.view(station)
         rx = station_chart(view, f"{role}_to_ixl")
         guarded: tuple[str, ...] = ()
-        if role == "atc":  # the track circuits: unsafe (occupied) while the ATC link is lost
+        if role == kinds.ATC:  # the track circuits: unsafe (occupied) while the ATC link is lost
             codes = StationCodes(view)
             guarded = tuple(
                 c.name
@@ -95,14 +96,14 @@ class Application:
     def failsafe(self, status: dict[str, Any]) -> bool:
         """While the Type I link is lost: every guarded track circuit occupied (ATC), every point
         without detection (trackside I/O)."""
-        if self.role == "atc":
+        if self.role == kinds.ATC:
             return bool(self.guarded) and set(self.guarded) <= set(status["occupied"])
         return all(d == "none" for d in status["points"].values())
 
     def settled(self, status: dict[str, Any]) -> bool:
         """The link is up and the IXL's inputs are the true (clear) state again."""
         up = bool(status["links"].get(self.role))
-        if self.role == "atc":
+        if self.role == kinds.ATC:
             return up and not set(self.guarded) & set(status["occupied"])
         return up and all(d != "none" for d in status["points"].values())
 
@@ -149,13 +150,13 @@ def find_in_labs(tap_name: str, lab_name: str | None = None) -> Application:
 def _from_state(state: dict[str, Any], link: dict[str, Any]) -> Application:
     lab = load_lab(Path(state["file"]))
     devices = state.get("devices", {})
-    ixl_name = link["a"] if lab.devices[link["a"]].kind == "ixl" else link["b"]
+    ixl_name = link["a"] if lab.devices[link["a"]].kind == kinds.IXL else link["b"]
     ixl_spec = lab.devices[ixl_name]
     if ixl_spec.station is None or ixl_name not in devices:
         return Application()
-    ctc_name = next((d.name for d in lab.of_kind("ctc") if d.name in devices), None)
+    ctc_name = next((d.name for d in lab.of_kind(kinds.CTC) if d.name in devices), None)
     spec = next(lk for lk in lab.links if lk.name == link["link"])
-    role = lab.peer_role(spec, ixl_name) if spec.type == "type1" else "atc"
+    role = lab.peer_role(spec, ixl_name) if spec.type == "type1" else kinds.ATC
     return Application.of_station(
         lab.load_line(), ixl_spec.station, role,
         ixl=host_port(devices[ixl_name]["control"]),

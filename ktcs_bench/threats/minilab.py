@@ -9,6 +9,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+from ktcs_bench import kinds
 from ktcs_bench.errors import PeerError
 from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.topology import load_lab, resolve_lab_path
@@ -56,23 +57,23 @@ class ThreatLab:
 
     def _start(self) -> None:
         st = str(self.station)
-        self.ctc = self._spawn("ctc", "--listen", "127.0.0.1:0")
+        self.ctc = self._spawn(kinds.CTC, "--listen", "127.0.0.1:0")
         ctc_address = host_port(self.ctc.ready["listen"])
-        self.t2 = TcpTap(("127.0.0.1", 0), ctc_address, names=("ixl", "ctc"),
+        self.t2 = TcpTap(("127.0.0.1", 0), ctc_address, names=(kinds.IXL, kinds.CTC),
                          profile="ktcs-type2", name=f"st{st}-ctc")  # fmt: skip
-        self.t1 = PtyTap(names=("ixl", "atc"), profile="ktcs-type1", name=f"st{st}-atc")
+        self.t1 = PtyTap(names=(kinds.IXL, kinds.ATC), profile="ktcs-type1", name=f"st{st}-atc")
         for tap in (self.t2, self.t1):
             tap.start()
             self.taps.append(tap)
         assert self.t2.listen_address is not None
         lh, lp = self.t2.listen_address
-        rails = self._spawn("trackcircuit", "--listen", "127.0.0.1:0").ready["listen"]
-        self._spawn("atc", "--station", st, "--unpaced", "--link", f"ixl={self.t1.paths['atc']}",
+        rails = self._spawn(kinds.TRACKCIRCUIT, "--listen", "127.0.0.1:0").ready["listen"]
+        self._spawn(kinds.ATC, "--station", st, "--unpaced", "--link", f"ixl={self.t1.paths[kinds.ATC]}",
                     "--link", f"rails=tcp://{rails}")  # fmt: skip
-        self.ixl = self._spawn("ixl", "--station", st, "--unpaced", "--link",
-                               f"atc={self.t1.paths['ixl']}", "--link", f"ctc=tcp://{lh}:{lp}")  # fmt: skip
+        self.ixl = self._spawn(kinds.IXL, "--station", st, "--unpaced", "--link",
+                               f"atc={self.t1.paths[kinds.IXL]}", "--link", f"ctc=tcp://{lh}:{lp}")  # fmt: skip
         self.app = Application.of_station(
-            self.line, self.station, "atc", ixl=host_port(self.ixl.ready["control"]),
+            self.line, self.station, kinds.ATC, ixl=host_port(self.ixl.ready["control"]),
             ctc=host_port(self.ctc.ready["control"]), ctc_log=self.ctc.log_path,
             source="the threat lab",
         )  # fmt: skip
@@ -81,13 +82,13 @@ class ThreatLab:
 
     def healthy(self) -> bool:
         s, v = self.app.ixl_status(), self.app.ctc_view()
-        return bool(s and v and s["links"].get("atc") and s["links"].get("ctc")
+        return bool(s and v and s["links"].get(kinds.ATC) and s["links"].get(kinds.CTC)
                     and self.app.settled(s) and v["summary"]["synced"])  # fmt: skip
 
     def targets(self) -> list[ThreatTarget]:
         """The Type I link (device under test: the IXL) and the Type II link (the CTC)."""
         out = []
-        for tap, dut in ((self.t1, "ixl"), (self.t2, "ctc")):
+        for tap, dut in ((self.t1, kinds.IXL), (self.t2, kinds.CTC)):
             assert tap.control_address is not None
             wire = WireTap(tap.control_address)
             self.wires.append(wire)

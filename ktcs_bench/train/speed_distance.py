@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ktcs_bench import kinds
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.train.units import to_kmh
 
@@ -35,7 +36,7 @@ class SpeedDistance:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "train": self.train,
+            kinds.TRAIN: self.train,
             "x": self.x,
             "curves": self.curves,
             "front_m": self.front_m,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from ktcs_bench import kinds
 from ktcs_bench.codec import Frame
 from ktcs_bench.errors import UsageError
 from ktcs_bench.type2 import events as ev
@@ -36,7 +37,7 @@ from ktcs_bench.type2.session import (
 class CtcConnection(Type2Session):
     """One accepted TCP connection at the CTC, before and after its IXL has identified."""
 
-    role = "ctc"
+    role = kinds.CTC
 
     def __init__(self, now: float, config: Type2Config | None = None) -> None:
         super().__init__(now, config)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from ktcs_bench import kinds
 from ktcs_bench.codec import Frame
 from ktcs_bench.errors import UsageError
 from ktcs_bench.type2 import events as ev
@@ -37,7 +38,7 @@ from ktcs_bench.type2.session import (
 class IxlSession(Type2Session):
     """One connection of station `station`'s IXL to the CTC. IDENT is queued at construction."""
 
-    role = "ixl"
+    role = kinds.IXL
 
     def __init__(self, station: int, now: float, config: Type2Config | None = None) -> None:
         super().__init__(now, config)
