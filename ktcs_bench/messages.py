@@ -20,8 +20,8 @@ Sans-I/O: it imports msgspec and nothing of the bench.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
-from typing import Literal, TypeVar, get_args
+from collections.abc import Mapping, Sequence
+from typing import Any, Literal, TypeVar, get_args
 
 import msgspec
 
@@ -308,3 +308,85 @@ def _clear(obj: Mapping[str, object], union: object, error: str) -> str:
         if field is not None:
             return f"{cmd}: {key} must be {_words(field.type)}, not {obj.get(key)!r}"
     return f"{cmd}: {error}"
+
+
+# -- answers --------------------------------------------------------------------------------------
+# What a port answers, `{"ok": ..., ...}`: its JSON object is `answer(...)`. The payloads (a
+# device's status, a station's summary, the logs) are each device's own JSON.
+
+
+class Answer(msgspec.Struct, kw_only=True):
+    """`{"ok": true}`: done."""
+
+    ok: bool = True
+
+
+class Refused(Answer, kw_only=True):
+    """`{"ok": false, "error": ...}`: not done, and why (the one shape of every port's error)."""
+
+    ok: bool = False
+    error: str
+
+
+class StatusAnswer(Answer, kw_only=True):
+    status: object
+
+
+class EventsAnswer(Answer, kw_only=True):
+    events: Sequence[object]
+
+
+class ShowAnswer(Answer, kw_only=True):
+    summary: object
+    state: object
+
+
+class LogAnswer(Answer, kw_only=True):
+    log: Sequence[object]
+
+
+class ArsAnswer(Answer, kw_only=True):
+    ars: object
+    log: Sequence[object]
+
+
+class ControlAnswer(Answer, kw_only=True):
+    """The CTC's control sent and its CONTROL_RESULT: accepted (ok) or the reason."""
+
+    code: str
+    result: str
+    reason: int | None
+
+
+class TimedAnswer(ControlAnswer, kw_only=True):
+    """`ControlAnswer` and the times (s) to the result and to the entry signal's proceed."""
+
+    result_s: float
+    proceed_s: float
+
+
+class ReasonAnswer(Answer, kw_only=True):
+    """The local panel's control: accepted (ok) or the reason's number."""
+
+    reason: int
+
+
+class ModeAnswer(Answer, kw_only=True):
+    mode: str
+
+
+class ResultAnswer(Answer, kw_only=True):
+    """A train's order carried out, in the ATO's words."""
+
+    result: str
+
+
+class DataAnswer(Answer, kw_only=True):
+    data: object
+
+
+def answer(reply: Answer) -> dict[str, Any]:
+    """An answer's JSON object, as the port sends it."""
+    out = msgspec.to_builtins(reply)
+    assert isinstance(out, dict)
+    return out

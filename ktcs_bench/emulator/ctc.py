@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from ktcs_bench import kinds
+from ktcs_bench import messages as msg
 from ktcs_bench.console.server import ConsoleServer
 from ktcs_bench.console.trains import TrainPosition, position_from_status
 from ktcs_bench.ctc.ars import Ars, RouteRequest
@@ -37,19 +38,24 @@ from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.messages import (
     CTC,
     AddTrain,
+    Answer,
+    ArsAnswer,
     Control,
+    ControlAnswer,
     Log,
+    LogAnswer,
     Message,
     Mode,
     OperatorCommand,
     Point,
+    Refused,
     Route,
     Show,
+    ShowAnswer,
     Signal,
+    Status,
+    TimedAnswer,
     TimedRoute,
-)
-from ktcs_bench.messages import (
-    Ars as ArsMessage,
 )
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable
@@ -104,7 +110,7 @@ class RemoteTrains:
 
         async def one(train: str, address: tuple[str, int]) -> TrainPosition | None:
             try:
-                answer = await jsonlines.request(*address, {"cmd": "status"}, timeout=2.0)
+                answer = await jsonlines.request(*address, Status(), timeout=2.0)
             except (OSError, TimeoutError, ValueError, PeerError):
                 return None
             status = answer.get("status")
@@ -120,7 +126,7 @@ class RemoteTrains:
         if address is None:
             return None
         try:
-            answer = await jsonlines.request(*address, {"cmd": "speed_distance"}, timeout=5.0)
+            answer = await jsonlines.request(*address, msg.SpeedDistance(), timeout=5.0)
         except (OSError, TimeoutError, ValueError):
             return None
         data = answer.get("data")
@@ -170,38 +176,37 @@ class CtcDevice(Device):
         self.remote_trains: RemoteTrains | None = None
 
     # -- operator commands -----------------------------------------------------------------------
-    async def handle(self, message: Message) -> dict[str, Any]:
+    async def handle(self, message: Message) -> Answer:
         match message:
             case Show(station=station):
                 try:
                     st = self.model.station(station).number
                 except UsageError as exc:
-                    return {"ok": False, "error": str(exc)}
-                return {"ok": True, "summary": self.model.summary(st),
-                        "state": self.model.named(st)}  # fmt: skip
+                    return Refused(error=str(exc))
+                return ShowAnswer(summary=self.model.summary(st), state=self.model.named(st))
             case Log(last=last):
-                return {"ok": True, "log": self.desk.log.last(last)}
+                return LogAnswer(log=self.desk.log.last(last))
             case Route() | Point() | Signal() | Mode() | Control():
                 return await self.operate(message)
-            case ArsMessage():
+            case msg.Ars():
                 return self.ars_command(message)
             case TimedRoute():
                 return await self.timed_route(message)
             case AddTrain(train=train, control=control):  # a train process the console may draw
                 if self.remote_trains is None:
-                    return {"ok": False, "error": "this CTC serves no console"}
+                    return Refused(error="this CTC serves no console")
                 host, _, port = control.rpartition(":")
                 self.remote_trains.add(train, host, int(port))
-                return {"ok": True}
+                return Answer()
         return await super().handle(message)
 
-    async def operate(self, command: OperatorCommand) -> dict[str, Any]:
+    async def operate(self, command: OperatorCommand) -> ControlAnswer | Refused:
         outcome = await self.carry_out(command, kinds.CTC)
         action = outcome.action
         if action is None or not outcome.answered:  # refused by the CTC, or no answer
-            return {"ok": False, "error": outcome.why}
-        return {"ok": outcome.accepted, "code": action.name, "result": outcome.result,
-                "reason": outcome.reason}  # fmt: skip
+            return Refused(error=str(outcome.why))
+        return ControlAnswer(ok=outcome.accepted, code=action.name, result=outcome.result,
+                             reason=outcome.reason)  # fmt: skip
 
     async def carry_out(self, command: OperatorCommand, source: str) -> Outcome:
         """One command through the desk (`source`: who gives it), its outcome in the events."""
@@ -232,18 +237,17 @@ class CtcDevice(Device):
         self.ars_update()
         return done
 
-    def ars_command(self, ars: ArsMessage) -> dict[str, Any]:
+    def ars_command(self, ars: msg.Ars) -> Answer:
         """{"cmd": "ars"}: the state and the last `last` log entries; with "on": true/false
         (and "station", else every station) switch it first."""
         if self.ars is None:
-            return {"ok": False, "error": "this CTC runs no timetable: ARS needs `ars:` in the "
-                    "lab file"}  # fmt: skip
+            return Refused(error="this CTC runs no timetable: ARS needs `ars:` in the lab file")
         if ars.on is not None:
             try:
                 self.switch_ars(ars.station, ars.on)
             except UsageError as exc:
-                return {"ok": False, "error": str(exc)}
-        return {"ok": True, "ars": self.ars.status(), "log": self.ars.last(ars.last)}
+                return Refused(error=str(exc))
+        return ArsAnswer(ars=self.ars.status(), log=self.ars.last(ars.last))
 
     def _ars_now(self) -> float:
         """ARS's time: seconds since the device started (the timetable's times count from it)."""
@@ -274,7 +278,7 @@ class CtcDevice(Device):
         if self.console is not None:
             self.console.note_ars(entry)
 
-    async def timed_route(self, timed: TimedRoute) -> dict[str, Any]:
+    async def timed_route(self, timed: TimedRoute) -> Answer:
         """Set a route and time, in this process's clock, CONTROL sent -> CONTROL_RESULT -> the
         entry signal's proceed indication (the benchmark's end-to-end figure)."""
         model = self.model.station(timed.station)
@@ -283,12 +287,13 @@ class CtcDevice(Device):
         route = Route(station=timed.station, entry=timed.entry, exit=timed.exit)
         answer = await self.operate(route)
         t_result = time.monotonic() - t0
-        if not answer.get("ok"):
+        if not isinstance(answer, ControlAnswer) or not answer.ok:
             return answer
         await self.server.wait_until(
             lambda: model.proceed_shown(entry, self.model.state(model.number)), timed.timeout
         )
-        return {**answer, "result_s": t_result, "proceed_s": time.monotonic() - t0}
+        return TimedAnswer(code=answer.code, result=answer.result, reason=answer.reason,
+                           result_s=t_result, proceed_s=time.monotonic() - t0)  # fmt: skip
 
     # -- life cycle ------------------------------------------------------------------------------
     async def start(self) -> None:

@@ -27,7 +27,20 @@ from ktcs_bench.binding import LinkBinding
 from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator.codeport import CodePort
 from ktcs_bench.emulator.rails import RailsClient
-from ktcs_bench.messages import DEVICE, BadMessage, Events, Message, Status, Stop, decode
+from ktcs_bench.messages import (
+    DEVICE,
+    Answer,
+    BadMessage,
+    Events,
+    EventsAnswer,
+    Message,
+    Refused,
+    Status,
+    StatusAnswer,
+    Stop,
+    answer,
+    decode,
+)
 from ktcs_bench.runtime import server_token
 from ktcs_bench.station.model import Line
 from ktcs_bench.timed import Out, Sink, Timed
@@ -93,21 +106,21 @@ class Device:
         try:
             message = obj if isinstance(obj, Message) else decode(obj, self.messages)
         except BadMessage as exc:
-            return {"ok": False, "error": str(exc)}
-        return await self.handle(message)
+            return answer(Refused(error=str(exc)))
+        return answer(await self.handle(message))
 
-    async def handle(self, message: Message) -> dict[str, Any]:
+    async def handle(self, message: Message) -> Answer:
         """Override to add commands (and name them in `messages`); the base knows status, events
         and stop."""
         match message:
             case Status():
-                return {"ok": True, "status": self.status()}
+                return StatusAnswer(status=self.status())
             case Events(last=n):
-                return {"ok": True, "events": list(self.events)[-n:]}
+                return EventsAnswer(events=list(self.events)[-n:])
             case Stop():
                 self.stop()
-                return {"ok": True}
-        return {"ok": False, "error": f"unknown command {message.cmd()!r}"}
+                return Answer()
+        return Refused(error=f"unknown command {message.cmd()!r}")
 
     async def _handle(
         self, obj: Message | Mapping[str, object], peer: jsonlines.Peer

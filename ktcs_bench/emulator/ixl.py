@@ -19,7 +19,16 @@ from ktcs_bench.emulator.device import Device
 from ktcs_bench.ixl.interlocking import LINKS, Interlocking, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
-from ktcs_bench.messages import IXL, Local, LocalControl, Message
+from ktcs_bench.messages import (
+    IXL,
+    Answer,
+    Local,
+    LocalControl,
+    Message,
+    ModeAnswer,
+    ReasonAnswer,
+    Refused,
+)
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.transport.ixl_client import IxlClient
@@ -164,20 +173,20 @@ class IxlDevice(Device):
             "ctc_state": dict(self.ctc_link.full_state()),
         }
 
-    async def handle(self, message: Message) -> dict[str, Any]:
+    async def handle(self, message: Message) -> Answer:
         match message:
             case LocalControl(code=code, value=value):  # the local panel: a code by name or number
                 name = self.ctc_link.control_name(code) if isinstance(code, int) else code
                 if name is None:
-                    return {"ok": False, "reason": int(Reason.UNKNOWN_CODE)}
+                    return ReasonAnswer(ok=False, reason=int(Reason.UNKNOWN_CODE))
                 out = self.ixl.local_control(name, value, self.now())
                 self.apply(out)
                 r = out.results[0]
-                return {"ok": r.accepted, "reason": int(r.reason)}
+                return ReasonAnswer(ok=r.accepted, reason=int(r.reason))
             case Local(action=action):  # the local operator: grant | refuse | take (CMR handshake)
                 try:
                     self.apply(self.ixl.local(action, self.now()))
                 except ValueError as exc:
-                    return {"ok": False, "error": str(exc)}
-                return {"ok": True, "mode": self.ixl.modes.mode.value}
+                    return Refused(error=str(exc))
+                return ModeAnswer(mode=self.ixl.modes.mode.value)
         return await super().handle(message)

@@ -10,7 +10,16 @@ from ktcs_bench import kinds
 from ktcs_bench.atc.codes import AtcCode
 from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
 from ktcs_bench.emulator.device import Device
-from ktcs_bench.messages import TRACK_CIRCUITS, Clear, Fail, Message, Place, Remove
+from ktcs_bench.messages import (
+    TRACK_CIRCUITS,
+    Answer,
+    Clear,
+    Fail,
+    Message,
+    Place,
+    Refused,
+    Remove,
+)
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport import jsonlines, net
 
@@ -96,7 +105,7 @@ class TrackCircuitDevice(Device):
             self.model.trains.pop(str(train), None)
             self._broadcast(self.model.update(list(self.model.trains.values())))
 
-    async def handle(self, message: Message) -> dict[str, Any]:
+    async def handle(self, message: Message) -> Answer:
         """fail (tc, kind), clear (tc, else every one), place (train, head, tail, track: a train
         with no process of its own), remove (train)."""
         try:
@@ -114,8 +123,8 @@ class TrackCircuitDevice(Device):
                 case _:
                     return await super().handle(message)
         except (KeyError, ValueError) as exc:
-            return {"ok": False, "error": f"{type(exc).__name__}: {exc}"}
-        return {"ok": True}
+            return Refused(error=f"{type(exc).__name__}: {exc}")
+        return Answer()
 
     async def start(self) -> None:
         await super().start()

@@ -11,11 +11,13 @@ from ktcs_bench.emulator.device import IxlPeerDevice
 from ktcs_bench.field.trackside import FieldOutput, Trackside
 from ktcs_bench.messages import (
     TRACKSIDE,
+    Answer,
     ClearFaults,
     FailLamp,
     FailPoint,
     FailTrackCircuit,
     Message,
+    Refused,
 )
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
@@ -74,7 +76,7 @@ class TracksideDevice(IxlPeerDevice):
             },  # fmt: skip
         }
 
-    async def handle(self, message: Message) -> dict[str, Any]:
+    async def handle(self, message: Message) -> Answer:
         """Faults: fail_point (point, kind), fail_lamp (signal, aspect), fail_track_circuit (tc,
         kind), clear_faults."""
         now = self.now()
@@ -91,5 +93,5 @@ class TracksideDevice(IxlPeerDevice):
                 case _:
                     return await super().handle(message)
         except (KeyError, ValueError) as exc:
-            return {"ok": False, "error": str(exc)}
-        return {"ok": True}
+            return Refused(error=str(exc))
+        return Answer()

@@ -33,10 +33,14 @@ from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.messages import (
     TRAIN,
+    Answer,
+    DataAnswer,
     Dispatch,
     Hold,
     Message,
+    Refused,
     ReleaseEb,
+    ResultAnswer,
     RunTo,
     SpeedDistance,
     TrainOrder,
@@ -318,7 +322,7 @@ class TrainDevice(Device):
             "target_point": None if self.last is None else self.last.target_point,
         }
 
-    def _order(self, order: TrainOrder) -> dict[str, Any]:
+    def _order(self, order: TrainOrder) -> Answer:
         """The operator's orders to the ATO: hold, dispatch [now], run_to AT (m on the line)."""
         now = 0.0 if self.origin is None else self.now() - self.origin
         ep = self.endpoint
@@ -331,18 +335,18 @@ class TrainDevice(Device):
                 case RunTo(at=at):
                     text = ep.run_to(now, at)
         except UsageError as exc:
-            return {"ok": False, "error": str(exc)}
+            return Refused(error=str(exc))
         self.note(order.cmd(), text)
-        return {"ok": True, "result": text}
+        return ResultAnswer(result=text)
 
-    async def handle(self, message: Message) -> dict[str, Any]:
+    async def handle(self, message: Message) -> Answer:
         match message:
             case ReleaseEb():
                 self.release = True
-                return {"ok": True}
+                return Answer()
             case Hold() | Dispatch() | RunTo():
                 return self._order(message)
             case SpeedDistance():  # for the CTC console's speed-distance panel
                 sd = endpoint_speed_distance(self.config.train_id, self.endpoint)
-                return {"ok": True, "data": sd.to_json()}
+                return DataAnswer(data=sd.to_json())
         return await super().handle(message)
