@@ -4,15 +4,14 @@ and ports, JSON lines."""
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import sys
 from collections.abc import Callable
-from typing import Any, TextIO
+from typing import TextIO
 
 from ktcs_bench.argtypes import duration as duration
 from ktcs_bench.argtypes import host_port as host_port
 from ktcs_bench.argtypes import positive as positive
+from ktcs_bench.capture.printer import print_json_line as print_json_line
 from ktcs_bench.errors import UsageError
 from ktcs_bench.transport.endpoints import check_port
 
@@ -36,7 +35,3 @@ def port(any_free: bool = False) -> Callable[[str], int]:
             raise argparse.ArgumentTypeError(str(exc)) from None
 
     return parse
-
-
-def print_json_line(obj: dict[str, Any], stream: TextIO = sys.stdout) -> None:
-    stream.write(json.dumps(obj, ensure_ascii=False, separators=(", ", ": ")) + "\n")

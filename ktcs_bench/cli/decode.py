@@ -23,6 +23,7 @@ from ktcs_bench.codec.hextext import TEXT_WINDOW, Chunk, HexTextParser, TextWatc
 from ktcs_bench.codec.profile import FrameProfile, get_profile, profile_names
 from ktcs_bench.codec.render import BOLD, RESET, json_line, payload, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.codec.vote import DECODE_SLICE, ProfileVote
 from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.errors import UsageError
 
@@ -55,7 +56,6 @@ stops being text part-way: the message names the byte where it did).
 """
 
 READ_BLOCK = 1 << 20  # bytes of input read and parsed at a time
-DECODE_SLICE = 64 << 10  # bytes of a block decoded and printed at a time: one slice's records
 AUTO_WINDOW = 256 << 10  # --profile auto decides once this many bytes decoded hold a good frame,
 AUTO_WINDOW_MAX = 4 << 20  # or at this many in any case (or at the end of the input),
 AUTO_WINDOW_RECORDS = 1 << 16  # or once this many records (lines of a hex log) have begun
@@ -86,54 +86,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--chart", help="code chart YAML: show code names for items and statuses")
     p.add_argument("--json", action="store_true", help="one JSON object per frame (SPEC §7 keys)")
     p.set_defaults(handler=run)
-
-
-# -- choosing a profile -------------------------------------------------------------------------
-def decode_all(data: bytes, profile: FrameProfile) -> list[Record]:
-    dec = StreamDecoder(profile)
-    return dec.feed(data) + dec.close()
-
-
-class ProfileVote:
-    """The same bytes decoded by each shipped profile of a protocol side by side, counting the
-    frames whose checks pass; the one with the most wins (ties: the one listed first)."""
-
-    def __init__(self, protocol: str) -> None:
-        names = profile_names(None if protocol == "auto" else protocol)
-        if not names:
-            raise UsageError(f"no shipped profile for protocol {protocol}")
-        self.profiles = [get_profile(n) for n in names]
-        self._decoders = [StreamDecoder(p) for p in self.profiles]
-        self.good = dict.fromkeys(names, 0)
-        self.seen = 0
-
-    def feed(self, data: bytes | bytearray) -> None:
-        self.seen += len(data)
-        with memoryview(data) as view:
-            for prof, dec in zip(self.profiles, self._decoders, strict=True):
-                for at in range(0, len(data), DECODE_SLICE):  # a slice's records at a time
-                    self.good[prof.name] += _good(dec.feed(view[at : at + DECODE_SLICE]))
-
-    def close(self) -> None:
-        for prof, dec in zip(self.profiles, self._decoders, strict=True):
-            self.good[prof.name] += _good(dec.close())
-
-    def winner(self) -> FrameProfile:
-        best = max(self.good.values())
-        return next(p for p in self.profiles if self.good[p.name] == best)
-
-
-def _good(records: list[Record]) -> int:
-    return sum(1 for r in records if isinstance(r, Frame) and r.error is None)
-
-
-def choose_profile(data: bytes, protocol: str) -> tuple[FrameProfile, list[Record], dict[str, int]]:
-    """The profile whose CRC checks most often over all of `data`, its records and the counts."""
-    vote = ProfileVote(protocol)
-    vote.feed(data)
-    vote.close()
-    profile = vote.winner()
-    return profile, decode_all(data, profile), vote.good
 
 
 # -- input --------------------------------------------------------------------------------------

@@ -5,23 +5,17 @@ from __future__ import annotations
 import argparse
 import os
 import socket
-import sys
 import time
-from collections import defaultdict
 from collections.abc import Iterator
-from typing import Any, TextIO
+from typing import Any
 
 import serial
 
 from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
-from ktcs_bench.capture.arq import ArqTracker
+from ktcs_bench.capture.printer import FramePrinter
 from ktcs_bench.charts.files import load_chart
-from ktcs_bench.cli._common import duration, positive, print_json_line
-from ktcs_bench.codec.frame import Frame, Record
+from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.codec.profile import FrameProfile, get_profile
-from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
-from ktcs_bench.codec.stream import StreamDecoder
-from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap.client import TapClient
 from ktcs_bench.tap.recorder import Recorder
@@ -76,74 +70,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--baud", type=positive(int), default=9600, help="serial endpoint baud rate (9600)"
     )
     p.set_defaults(handler=run)
-
-
-def format_time(t: float | None) -> str:
-    if t is None:
-        return "-"
-    if t < 1e9:  # relative (a capture without a start time)
-        return f"{t:.6f}"
-    return time.strftime("%H:%M:%S", time.localtime(t)) + f".{int(t * 1e6) % 1_000_000:06d}"
-
-
-class FramePrinter:
-    """Decodes capture records frame by frame and prints them (text or JSON), with ARQ events."""
-
-    def __init__(
-        self,
-        profile: FrameProfile,
-        *,
-        chart: CodeChart | None = None,
-        colour: bool = False,
-        as_json: bool = False,
-        stream: TextIO = sys.stdout,
-    ) -> None:
-        self.profile = profile
-        self.chart = chart
-        self.colour = colour
-        self.as_json = as_json
-        self.stream = stream
-        self.arq = ArqTracker(profile)
-        self._offsets: dict[str, int] = defaultdict(int)
-        self.frames = 0
-        self.bad = 0
-
-    def decode(self, record: CaptureRecord) -> list[Record]:
-        dec = StreamDecoder(self.profile, offset=self._offsets[record.direction])
-        self._offsets[record.direction] += len(record.data)
-        return dec.feed(record.data) + dec.close()
-
-    def show(self, record: CaptureRecord, note: str = "") -> list[Record]:
-        decoded = self.decode(record)
-        for rec in decoded:
-            events: list[str] = []
-            if isinstance(rec, Frame):
-                self.frames += 1
-                self.bad += rec.error is not None
-                events = self.arq.observe(record.direction, rec, record.time)
-            if self.as_json:
-                obj: dict[str, Any] = {"time": record.time, "direction": record.direction}
-                obj.update(to_json(rec, self.profile))
-                obj["arq"] = events
-                print_json_line(obj, self.stream)
-                continue
-            label = f"{format_time(record.time)} {record.direction}{note}  "
-            lines = [to_text(rec, self.profile, self.chart, self.colour, label)]
-            for ev in events:
-                text = f"  ARQ: {ev}"
-                lines.append(f"{YELLOW}{text}{RESET}" if self.colour else text)
-            self.stream.write("\n".join(lines) + "\n\n")
-        self.stream.flush()
-        return decoded
-
-    def event(self, event: dict[str, Any]) -> None:
-        """A tap event (fault command, connection) -- shown in text mode only."""
-        if self.as_json:
-            return
-        detail = " ".join(f"{k}={v}" for k, v in event.items() if k not in ("time", "event"))
-        text = f"-- {format_time(event.get('time'))} {event.get('event')}: {detail}"
-        self.stream.write((f"{DIM}{text}{RESET}" if self.colour else text) + "\n")
-        self.stream.flush()
 
 
 def _is_serial(source: str) -> bool:
@@ -225,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     if os.path.isfile(source):
         capture = read_capture(source)
         if profile is None:
-            from ktcs_bench.cli.decode import choose_profile
+            from ktcs_bench.codec.vote import choose_profile
 
             data = b"".join(r.data for r in capture.records)
             profile = get_profile(capture.profile) if capture.profile else None

@@ -60,6 +60,7 @@ def test_no_part_of_the_bench_reaches_itself_through_another() -> None:
         ("faults", {"transport", "tap", "type1", "type2", "emulator"}),
         ("transport", {"tap", "emulator", "lab", "console", "threats", "cli"}),
         ("tap", {"emulator", "lab", "console", "threats", "cli"}),  # type2: module by module
+        ("replay", {"cli", "lab", "emulator", "console"}),
     ],
 )
 def test_a_layer_never_reaches_the_ones_above_it(package: str, never: set[str]) -> None:
@@ -83,6 +84,16 @@ def test_the_tap_loads_no_type2_module() -> None:
     assert "ktcs_bench.transport.net" in reached  # the walk follows the tap into transport
     assert sorted(m for m in reached
                   if m.startswith("ktcs_bench.type2") or m in TYPE2_ADAPTERS) == []  # fmt: skip
+
+
+def test_a_cli_subcommand_imports_no_other() -> None:
+    """Each subcommand is a front over the library: its module imports no other subcommand's
+    (replay once took monitor's printer and decode's profile vote); what two share is library."""
+    graph = module_imports()
+    fronts = {m for m in graph if m.startswith("ktcs_bench.cli.")} - {
+        "ktcs_bench.cli._common", "ktcs_bench.cli.main"}  # fmt: skip
+    assert {"ktcs_bench.cli.replay", "ktcs_bench.cli.monitor", "ktcs_bench.cli.decode"} <= fronts
+    assert {m: sorted(graph[m] & fronts - {m}) for m in fronts if graph[m] & fronts - {m}} == {}
 
 
 # -- the sans-I/O cores --------------------------------------------------------------------------

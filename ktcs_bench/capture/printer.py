@@ -1,0 +1,91 @@
+"""Decoded capture records printed as they come (`monitor`, `replay`): each frame in the console's
+words or as a JSON line (SPEC §7 keys, with time and direction), and the ARQ events it makes.
+Formats the times its records carry; reads no clock."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections import defaultdict
+from typing import Any, TextIO
+
+from ktcs_bench.capture.arq import ArqTracker
+from ktcs_bench.capture.records import CaptureRecord
+from ktcs_bench.codec.frame import Frame, Record
+from ktcs_bench.codec.profile import FrameProfile
+from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
+from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.codes.chart import CodeChart
+
+
+def print_json_line(obj: dict[str, Any], stream: TextIO = sys.stdout) -> None:
+    stream.write(json.dumps(obj, ensure_ascii=False, separators=(", ", ": ")) + "\n")
+
+
+def format_time(t: float | None) -> str:
+    if t is None:
+        return "-"
+    if t < 1e9:  # relative (a capture without a start time)
+        return f"{t:.6f}"
+    return time.strftime("%H:%M:%S", time.localtime(t)) + f".{int(t * 1e6) % 1_000_000:06d}"
+
+
+class FramePrinter:
+    """Decodes capture records frame by frame and prints them (text or JSON), with ARQ events."""
+
+    def __init__(
+        self,
+        profile: FrameProfile,
+        *,
+        chart: CodeChart | None = None,
+        colour: bool = False,
+        as_json: bool = False,
+        stream: TextIO = sys.stdout,
+    ) -> None:
+        self.profile = profile
+        self.chart = chart
+        self.colour = colour
+        self.as_json = as_json
+        self.stream = stream
+        self.arq = ArqTracker(profile)
+        self._offsets: dict[str, int] = defaultdict(int)
+        self.frames = 0
+        self.bad = 0
+
+    def decode(self, record: CaptureRecord) -> list[Record]:
+        dec = StreamDecoder(self.profile, offset=self._offsets[record.direction])
+        self._offsets[record.direction] += len(record.data)
+        return dec.feed(record.data) + dec.close()
+
+    def show(self, record: CaptureRecord, note: str = "") -> list[Record]:
+        decoded = self.decode(record)
+        for rec in decoded:
+            events: list[str] = []
+            if isinstance(rec, Frame):
+                self.frames += 1
+                self.bad += rec.error is not None
+                events = self.arq.observe(record.direction, rec, record.time)
+            if self.as_json:
+                obj: dict[str, Any] = {"time": record.time, "direction": record.direction}
+                obj.update(to_json(rec, self.profile))
+                obj["arq"] = events
+                print_json_line(obj, self.stream)
+                continue
+            label = f"{format_time(record.time)} {record.direction}{note}  "
+            lines = [to_text(rec, self.profile, self.chart, self.colour, label)]
+            for ev in events:
+                text = f"  ARQ: {ev}"
+                lines.append(f"{YELLOW}{text}{RESET}" if self.colour else text)
+            self.stream.write("\n".join(lines) + "\n\n")
+        self.stream.flush()
+        return decoded
+
+    def event(self, event: dict[str, Any]) -> None:
+        """A tap event (fault command, connection) -- shown in text mode only."""
+        if self.as_json:
+            return
+        detail = " ".join(f"{k}={v}" for k, v in event.items() if k not in ("time", "event"))
+        text = f"-- {format_time(event.get('time'))} {event.get('event')}: {detail}"
+        self.stream.write((f"{DIM}{text}{RESET}" if self.colour else text) + "\n")
+        self.stream.flush()
