@@ -20,7 +20,9 @@ $(VENV)/.installed: pyproject.toml .ci/system-deps
 lab: setup
 	$(BIN)/ktcs-bench lab up
 
-test: setup
+# The tests hold the line on lint too: ruff check, ruff format --check and strict mypy (`lint`)
+# run first, and a finding fails `make test` -- and so CI -- before pytest starts.
+test: setup lint
 	$(BIN)/python -m pytest -q
 
 lint: setup
