@@ -1,8 +1,10 @@
 """Captures behind one front (python-can's Logger/LogReader shape): hex logs and pcapng.
 
 Owns: the capture record, the hex-log and pcapng formats (pure encode/parse functions) and thin
-file writers/readers chosen by the file name (`.pcapng` -> pcapng, anything else -> hex log).
-Must not touch: sockets, ptys, clocks -- records arrive with their time already set.
+file writers/readers chosen by the file name (`.pcapng` -> pcapng, anything else -> hex log), and
+the printer of decoded records (`printer`: text or JSON lines, for `monitor` and `replay`).
+Must not touch: sockets, ptys, clocks -- records arrive with their time already set (the printer
+formats it, never reads one).
 
     with open_writer("link.pcapng", link="type1") as w:
         w.write(CaptureRecord(time.time(), "ixl>atc", frame))
