@@ -32,8 +32,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ktcs_bench import kinds
+from ktcs_bench import messages as msg
 from ktcs_bench.codes.stations import station_chart
 from ktcs_bench.lab.access import LabAccess
+from ktcs_bench.messages import Message
 from ktcs_bench.station.model import Line, TrackCircuit
 
 # Route states in which a route's locked elements protect a train on them: a route being set is
@@ -424,7 +426,7 @@ async def snapshot(access: LabAccess, views: bool = True) -> LabSnapshot:
     for ctc in ctcs:
         status = await _status(access, ctc)
         for number in (status or {}).get("stations", {}):
-            answer = await _ask(access, ctc, {"cmd": "show", "station": int(number)})
+            answer = await _ask(access, ctc, msg.Show(station=int(number)))
             if answer is not None:
                 shown[int(number)] = answer
     stations: dict[int, StationState] = {}
@@ -461,7 +463,7 @@ def _status_value(text: str) -> str:
     return text.rpartition(".")[2].lower()
 
 
-async def _ask(access: LabAccess, name: str, obj: dict[str, Any]) -> dict[str, Any] | None:
+async def _ask(access: LabAccess, name: str, obj: Message) -> dict[str, Any] | None:
     try:
         answer = await access.device(name, obj)
     except (OSError, TimeoutError, ValueError, KeyError):
@@ -470,6 +472,6 @@ async def _ask(access: LabAccess, name: str, obj: dict[str, Any]) -> dict[str, A
 
 
 async def _status(access: LabAccess, name: str) -> dict[str, Any] | None:
-    answer = await _ask(access, name, {"cmd": "status"})
+    answer = await _ask(access, name, msg.Status())
     status = None if answer is None else answer.get("status")
     return status if isinstance(status, dict) else None

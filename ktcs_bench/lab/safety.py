@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench import kinds
+from ktcs_bench import messages as msg
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.lab.invariants import SafetyChecker, Violation, snapshot, views_agree
@@ -64,18 +65,15 @@ async def command(access: LabAccess, step: Mapping[str, Any]) -> dict[str, Any]:
         return await access.link(str(step["link"]), dict(step["fault"]))
     if do == "point_fault":
         side = _device_of(device_kinds, kinds.TRACKSIDE, int(step["station"]), access)
-        return await access.device(
-            side, {"cmd": "fail_point", "point": step["point"], "kind": "detection"}
-        )
+        return await access.device(side, msg.FailPoint(point=str(step["point"]), kind="detection"))
     if do == "tc_fault":
         tc = next(n for n, k in device_kinds.items() if k == kinds.TRACKCIRCUIT)
-        return await access.device(
-            tc, {"cmd": "fail", "tc": step["tc"], "kind": step.get("kind", "failed_occupied")}
-        )
+        kind = str(step.get("kind", "failed_occupied"))
+        return await access.device(tc, msg.Fail(tc=str(step["tc"]), kind=kind))
     if do == "restart":
         return await access.lab({"cmd": "restart", "device": step["device"]})
     if do == "release_eb":
-        return await access.device(str(step[kinds.TRAIN]), {"cmd": "release_eb"})
+        return await access.device(str(step[kinds.TRAIN]), msg.ReleaseEb())
     if do == "settle":
         return await clear_faults(access)
     if do == "wait":
@@ -99,9 +97,9 @@ async def clear_faults(access: LabAccess) -> dict[str, Any]:
         answers.append(await access.link(link, {"cmd": "clear"}))
     for name, kind in sorted(access.devices.items()):
         if kind == kinds.TRACKSIDE:
-            answers.append(await access.device(name, {"cmd": "clear_faults"}))
+            answers.append(await access.device(name, msg.ClearFaults()))
         elif kind == kinds.TRACKCIRCUIT:
-            answers.append(await access.device(name, {"cmd": "clear"}))
+            answers.append(await access.device(name, msg.Clear()))
     failed = [a for a in answers if not a.get("ok")]
     return {"ok": not failed, "failed": failed}
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench import kinds
+from ktcs_bench import messages as msg
 from ktcs_bench.capture import CaptureRecord, read_capture
 from ktcs_bench.capture.hexlog import parse_hex_log
 from ktcs_bench.codec.frame import Frame
@@ -207,7 +208,7 @@ class Snapshot:
     async def status(self, device: str) -> dict[str, Any] | None:
         if device not in self._status:
             try:
-                answer = wire(await self.run.access.device(device, {"cmd": "status"}))
+                answer = wire(await self.run.access.device(device, msg.Status()))
             except LabGone:
                 raise
             except LAB_ERRORS:
@@ -223,9 +224,7 @@ class Snapshot:
         if station not in self._show:
             try:
                 ctc = self.run.names.device_of(kinds.CTC)
-                answer = wire(
-                    await self.run.access.device(ctc, {"cmd": "show", "station": station})
-                )
+                answer = wire(await self.run.access.device(ctc, msg.Show(station=station)))
             except LabGone:
                 raise
             except LAB_ERRORS:
@@ -235,7 +234,7 @@ class Snapshot:
 
     async def new_events(self, device: str) -> list[dict[str, Any]]:
         try:
-            answer = wire(await self.run.access.device(device, {"cmd": "events", "last": 2000}))
+            answer = wire(await self.run.access.device(device, msg.Events(last=2000)))
         except LabGone:
             raise
         except LAB_ERRORS:
@@ -311,7 +310,7 @@ class ProcedureRun:
         """Before each action: expectations of events and frames look at what came after it."""
         for device in self.event_devices:
             try:
-                answer = wire(await self.access.device(device, {"cmd": "events", "last": 2000}))
+                answer = wire(await self.access.device(device, msg.Events(last=2000)))
             except LabGone:
                 raise
             except LAB_ERRORS:
@@ -328,9 +327,9 @@ class ProcedureRun:
 
     async def place(self, ghost: Ghost) -> None:
         tc = self.names.device_of(kinds.TRACKCIRCUIT)
-        answer = await self.access.device(tc, {"cmd": "place", kinds.TRAIN: ghost.train,
-                                               "head": ghost.head, "tail": ghost.head - ghost.length,
-                                               "track": ghost.track})  # fmt: skip
+        place = msg.Place(train=ghost.train, head=ghost.head, tail=ghost.head - ghost.length,
+                          track=ghost.track)  # fmt: skip
+        answer = await self.access.device(tc, place)
         if not answer.get("ok"):
             raise PeerError(f"the track circuits did not take train {ghost.train}: {answer}")
 
@@ -341,11 +340,11 @@ class ProcedureRun:
             await self._quiet(self.access.link(link, {"cmd": "clear"}))
             done.append(f"link {link} cleared")
         for device in sorted(book.trackside):
-            await self._quiet(self.access.device(device, {"cmd": "clear_faults"}))
+            await self._quiet(self.access.device(device, msg.ClearFaults()))
             done.append(f"{device} faults cleared")
         tc = self.names.device_of(kinds.TRACKCIRCUIT) if book.track_circuits else ""
         for name in sorted(book.track_circuits):
-            await self._quiet(self.access.device(tc, {"cmd": "clear", "tc": name}))
+            await self._quiet(self.access.device(tc, msg.Clear(tc=name)))
             done.append(f"track circuit {name} cleared")
         for device in sorted(book.killed):
             await self._quiet(self.access.lab({"cmd": "restart", "device": device}))
@@ -446,8 +445,8 @@ class ProcedureRun:
             await self._mode(st, proc.setup.modes.get(st, proc.setup.lab.ixl_mode))
         if proc.setup.ars or (proc.setup.ars is False and proc.setup.lab.ars is not None):
             for st in stations:
-                answer = await self.access.device(ctc, {"cmd": "ars", "station": st,
-                                                        "on": proc.setup.ars})  # fmt: skip
+                switch = msg.Ars(station=st, on=bool(proc.setup.ars))
+                answer = await self.access.device(ctc, switch)
                 if not answer.get("ok"):
                     raise _SetupError(f"ars {'on' if proc.setup.ars else 'off'} at station {st}: "
                                       f"{answer.get('error') or answer}")  # fmt: skip
@@ -467,8 +466,8 @@ class ProcedureRun:
         for st in stations:
             for route_name in s.get(str(st), {}).get("routes", []):
                 route = names.line.station(st).route(route_name)
-                await self.access.device(ctc, {"cmd": "route", "action": "cancel", "station": st,
-                                               "entry": route.entry, "exit": route.exit})  # fmt: skip
+                cancel = msg.Route(action="cancel", station=st, entry=route.entry, exit=route.exit)
+                await self.access.device(ctc, cancel)
 
         async def no_routes() -> str:
             snap = await self.sample()
@@ -491,10 +490,10 @@ class ProcedureRun:
         now = await current()
         if now.get("mode") == mode:
             return
-        await self.access.device(ctc, {"cmd": "mode", "mode": mode, "station": st})
+        await self.access.device(ctc, msg.Mode(mode=mode, station=st))
         if mode == "center":  # the CMR handshake: the local operator grants it
             await self._until(lambda: self._requested(current), f"station {st} asking for center")
-            await self.access.device(ixl, {"cmd": "local", "action": "grant"})
+            await self.access.device(ixl, msg.Local(action="grant"))
 
         async def reached() -> str:
             m = (await current()).get("mode")
@@ -578,7 +577,7 @@ class ProcedureRun:
         result.cleared = await self.clear_faults()
         for train in list(self.ghosts):
             tc = self.names.device_of(kinds.TRACKCIRCUIT)
-            await self._quiet(self.access.device(tc, {"cmd": "remove", kinds.TRAIN: train}))
+            await self._quiet(self.access.device(tc, msg.Remove(train=train)))
             result.cleared.append(f"train {train} taken off")
         self.ghosts.clear()
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench import kinds
+from ktcs_bench import messages as msg
 from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.codes.names import Function
 from ktcs_bench.codes.stations import StationCodes, station_chart
@@ -75,19 +76,19 @@ class Application:
 
     # -- reading ---------------------------------------------------------------------------------
     @staticmethod
-    def _ask(address: tuple[str, int], obj: dict[str, Any]) -> dict[str, Any]:
+    def _ask(address: tuple[str, int], obj: msg.Message) -> dict[str, Any]:
         return asyncio.run(jsonlines.request(*address, obj, timeout=ASK_TIMEOUT))
 
     def ixl_status(self) -> dict[str, Any] | None:
         if self.ixl is None:
             return None
-        status: dict[str, Any] = self._ask(self.ixl, {"cmd": "status"})["status"]
+        status: dict[str, Any] = self._ask(self.ixl, msg.Status())["status"]
         return status
 
     def ctc_view(self) -> dict[str, Any] | None:
         if self.ctc is None or self.station is None:
             return None
-        return self._ask(self.ctc, {"cmd": "show", "station": self.station})
+        return self._ask(self.ctc, msg.Show(station=self.station))
 
     def link_up(self) -> bool | None:
         s = self.ixl_status()
