@@ -261,7 +261,9 @@ class YamlReader:
         self.path = path
 
     def fail(self, place: str, problem: str) -> ConfigError:
-        return ConfigError(self.path, place, problem)
+        from ktcs_bench.schema import located
+
+        return located(self.path, place, problem)
 
     def mapping(self, obj: object, place: str) -> dict[str, Any]:
         if not isinstance(obj, dict):

@@ -96,19 +96,22 @@ def _place(steps: list[str | int]) -> str:
     return text
 
 
-def line_of(file: str | Path, steps: list[str | int]) -> int | None:
-    """The line of `file` (1-based) where the value at the key path `steps` starts -- or, when
-    the last step is not there (a missing key), where the mapping that lacks it starts. None if
-    the file cannot be read again or the path is not in it."""
+def line_of(file: str | Path, place: str) -> int | None:
+    """The line of `file` (1-based) where the value at the key path `place` starts -- or, when
+    its last key is not there (a missing key), where the mapping that lacks it starts. None if
+    the file cannot be read again or the path is not in it (a key with a dot in it, a place that
+    is no key path)."""
     import yaml
 
+    steps = _steps("." + place if place and not place.startswith("[") else place)
+    if _place(steps) != place:
+        return None
+    loader = yaml.CSafeLoader if yaml.__with_libyaml__ else yaml.SafeLoader  # C: a big file
     try:
-        node: Any = yaml.compose(Path(file).read_text(encoding="utf-8"), Loader=yaml.SafeLoader)
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        node: Any = yaml.compose(Path(file).read_text(encoding="utf-8"), Loader=loader)
+    except (OSError, UnicodeDecodeError, RecursionError, yaml.YAMLError):
         return None
-    if node is None:
-        return None
-    for step in steps:
+    for i, step in enumerate(steps):
         child = None
         if isinstance(node, yaml.MappingNode):
             for k, v in node.value:
@@ -117,9 +120,19 @@ def line_of(file: str | Path, steps: list[str | int]) -> int | None:
         elif isinstance(node, yaml.SequenceNode) and isinstance(step, int):
             child = node.value[step] if step < len(node.value) else None
         if child is None:
-            break
+            if i == len(steps) - 1:
+                break
+            return None
         node = child
-    return int(node.start_mark.line) + 1
+    return None if node is None else int(node.start_mark.line) + 1
+
+
+def located(file: str | Path, place: str, problem: str) -> ConfigError:
+    """A ConfigError at the key path `place` of `file`, the problem saying on which line (when
+    the path is found in the file as written). Looked up only for an error: loading a good file
+    costs nothing more."""
+    line = line_of(file, place)
+    return ConfigError(file, place, f"{problem} (line {line})" if line else problem)
 
 
 def error(file: str | Path, exc: msgspec.ValidationError, under: str = "") -> ConfigError:
@@ -133,10 +146,7 @@ def error(file: str | Path, exc: msgspec.ValidationError, under: str = "") -> Co
         steps.append(key)
     inner = _place(steps)
     place = (f"{under}{inner}" if inner.startswith("[") else f"{under}.{inner}") if under else inner
-    if under:  # the part's own steps come first when the line is looked up
-        steps = _steps("." + under) + steps
-    line = line_of(file, steps)
-    return ConfigError(file, place, f"{problem} (line {line})" if line else problem)
+    return located(file, place, problem)
 
 
 def convert(raw: object, shape: type[T], file: str | Path, under: str = "") -> T:

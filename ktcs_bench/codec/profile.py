@@ -18,7 +18,7 @@ from ktcs_bench.codec.crc import CrcFunction, CrcSpec
 from ktcs_bench.codec.opcodes import FieldSpec, Opcode, OpcodeTable
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
-from ktcs_bench.schema import Shape, convert
+from ktcs_bench.schema import Shape, convert, located
 
 HEADER_FIELDS = ("len", "seq", "op", "sub")
 _SIZE_FMT = {1: "B", 2: "H", 4: "I"}
@@ -137,7 +137,7 @@ class _Reader:
         self.file = file
 
     def fail(self, place: str, problem: str) -> ConfigError:
-        return ConfigError(self.file, place, problem)
+        return located(self.file, place, problem)
 
     def mapping(self, value: Any, place: str, keys: tuple[str, ...] = ()) -> dict[str, Any]:
         """`value` as a mapping; with `keys`, any other key is refused (a misspelt key would

@@ -26,6 +26,7 @@ import serial
 from ktcs_bench import kinds
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
+from ktcs_bench.schema import located
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable, load_timetable
@@ -151,7 +152,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
     raw = load_mapping(file, "lab")
 
     def fail(place: str, problem: str) -> ConfigError:
-        return ConfigError(file, place, problem)
+        return located(file, place, problem)
 
     for key in ("lab", "line", "devices", "links"):
         if key not in raw:

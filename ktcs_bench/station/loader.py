@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, excerpt
-from ktcs_bench.schema import convert
+from ktcs_bench.schema import convert, located
 from ktcs_bench.station.model import (
     ASPECT_ORDER,
     DIRECTIONS,
@@ -60,7 +60,7 @@ class _Doc:
         self.file = str(file)
 
     def fail(self, place: str, problem: str) -> ConfigError:
-        return ConfigError(self.file, place, problem)
+        return located(self.file, place, problem)
 
     def unique(self, names: list[str], place: str, what: str) -> None:
         seen: dict[str, int] = {}

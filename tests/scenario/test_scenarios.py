@@ -151,3 +151,14 @@ def test_a_bad_tag_position_is_one_config_error_naming_the_item(tmp_path: Path, 
     with pytest.raises(ConfigError) as exc:
         load_scenario(_write(tmp_path, text))
     assert exc.value.place == "line.tags.at_m[1]"
+
+
+def test_a_config_error_gives_the_line_of_its_key(tmp_path: Path) -> None:
+    """The scenario's reader names the line the key path is on (BASE starts with a blank line)."""
+    text = BASE.replace("trains: [{id: A, start_m: 300, driver_speed_kmh: 60}]",
+                        "trains:\n  - {id: A, start_m: 1, colour: red}")  # fmt: skip
+    with pytest.raises(ConfigError) as exc:
+        load_scenario(_write(tmp_path, text))
+    assert exc.value.place == "trains[0].colour"
+    line = text.splitlines().index("  - {id: A, start_m: 1, colour: red}") + 1
+    assert exc.value.problem.endswith(f"(line {line})"), exc.value.problem

@@ -81,3 +81,17 @@ def test_cli_gives_one_message_and_exit_2(copy: Path) -> None:
     line = _number_of(station, "station: twenty-two")
     assert f"{station}: station: must be an integer, not str (line {line})" in out.stderr
     assert out.stderr.count("\n") == 1, out.stderr
+
+
+def test_a_reference_check_names_the_line_too(copy: Path) -> None:
+    """Past the shape, the checks in code (here an unknown track circuit) give the line of the
+    key path they name, looked up in the file as written."""
+    station = copy.parent.parent / "stations" / "st18.yaml"
+    _replace(
+        station, '{name: "32", track_circuits: [TC1857A]', '{name: "32", track_circuits: [TC1899]'
+    )
+    with pytest.raises(ConfigError) as err:
+        load_line(copy)
+    assert err.value.place == "points[1].track_circuits[0]"
+    line = _number_of(station, "[TC1899]")
+    assert err.value.problem == f"unknown track circuit 'TC1899' (line {line})"
