@@ -11,6 +11,13 @@ The IXL is the hub of a station: every other station kind is one of its peers, a
 carries two code charts, `ixl_to_ROLE` and `ROLE_to_ixl` (`chart_name`). A new kind is one row
 here, its core and its emulator, and its builder; every layer reads the rest from this table.
 
+The trackside is `trackside` wherever a kind is named (lab files, `ktcs-bench emulator
+trackside`, `--link trackside=...`, the docs); `io` is only its link role, the word the IXL's side
+of the link uses, kept because users' files and tools carry it: the charts `ixl_to_io` and
+`io_to_ixl` (and their files), the taps and devices of the shipped labs (`st20-io`, `io20`), the
+`io` of a status's links and of the IXL's events ("io link up"). `--link io=...` and `--link
+trackside=...` are the same (`link_role`).
+
 Must not import anything of `ktcs_bench`: every layer imports it.
 """
 
@@ -63,6 +70,13 @@ class Kind:
     """A lab has at most one."""
     builder: str
     """`module:function` building its device from `ktcs-bench emulator` arguments."""
+
+    @property
+    def charts(self) -> tuple[str, str] | None:
+        """Its link's charts with the IXL, (IXL->it, it->IXL); None: no IXL link."""
+        if self.link is None:
+            return None
+        return chart_name(self.role, outward=True), chart_name(self.role, outward=False)
 
     def build(self, *args: Any, **kwargs: Any) -> Any:
         """Its device, built by its builder (imported now)."""
@@ -117,15 +131,19 @@ def externals(key: str) -> tuple[str, ...]:
     return tuple(k.name for k in KINDS.values() if k.external == key)
 
 
-def by_role(role: str) -> Kind | None:
-    """The kind whose devices play `role` (None: no kind does)."""
-    return next((k for k in KINDS.values() if k.role == role), None)
-
-
 def role_of(kind: str) -> str:
     """The role a device of `kind` plays on a link ("" for no kind)."""
     k = KINDS.get(kind)
     return k.role if k is not None else ""
+
+
+def link_role(word: str) -> str:
+    """The link role `word` names on input (`--link WORD=...`): a role, or the name of a kind
+    that has one (`trackside` for `io`); "" when it names none."""
+    if word in LINK_ROLES:
+        return word
+    k = KINDS.get(word)
+    return k.role if k is not None and k.role in LINK_ROLES else ""
 
 
 def chart_name(role: str, outward: bool) -> str:
@@ -137,7 +155,8 @@ def charts() -> tuple[tuple[str, str, str], ...]:
     """(chart, link type, direction) of every station link, peer by peer, each way."""
     out: list[tuple[str, str, str]] = []
     for k in IXL_PEERS:
-        assert k.link is not None
-        out.append((chart_name(k.role, True), k.link, f"IXL->{k.label}"))
-        out.append((chart_name(k.role, False), k.link, f"{k.label}->IXL"))
+        assert k.link is not None and k.charts is not None
+        outward, inward = k.charts
+        out.append((outward, k.link, f"IXL->{k.label}"))
+        out.append((inward, k.link, f"{k.label}->IXL"))
     return tuple(out)

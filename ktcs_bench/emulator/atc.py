@@ -16,7 +16,6 @@ from ktcs_bench.transport.endpoints import Endpoint
 
 class AtcDevice(IxlPeerDevice):
     kind = kinds.ATC
-    tx_chart = "atc_to_ixl"
 
     def __init__(
         self, name: str, line: Line, station: int, links: dict[str, Endpoint], **kwargs: Any

@@ -90,10 +90,11 @@ def arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _roles(links: dict[str, Endpoint], lab_devices: dict[str, str]) -> dict[str, Endpoint]:
-    """Peer names may be roles or lab device names; return {role: endpoint}."""
+    """Peer names may be roles, kinds (`trackside` for its role `io`) or lab device names;
+    return {role: endpoint}."""
     out = {}
     for peer, ep in links.items():
-        role = peer if peer in kinds.LINK_ROLES else kinds.role_of(lab_devices.get(peer, ""))
+        role = kinds.link_role(peer) or kinds.link_role(lab_devices.get(peer, ""))
         if not role:
             raise UsageError(
                 f"--link {peer}=...: unknown peer (use {', '.join(kinds.LINK_ROLES)}"

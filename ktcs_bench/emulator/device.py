@@ -42,7 +42,7 @@ from ktcs_bench.messages import (
     decode,
 )
 from ktcs_bench.runtime import server_token
-from ktcs_bench.station.model import Line
+from ktcs_bench.station.model import Line, StationView
 from ktcs_bench.timed import Out, Sink, Timed
 from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport import jsonlines, net
@@ -214,14 +214,36 @@ class Device:
             await asyncio.gather(*running, return_exceptions=True)
             await self.close()
 
+    def bind_code_link(
+        self,
+        peer: str,
+        endpoint: Endpoint,
+        charts: tuple[str, str],
+        view: StationView,
+        state: Callable[[], Mapping[str, int]],
+        on_codes: Callable[[dict[str, int]], None],
+        on_link: Callable[[bool], None],
+        type1_profile: str,
+        type1: LinkConfig | None,
+        faults: frozenset[str],
+    ) -> CodePort:
+        """The one way a device binds a Type I link of code changes: to `peer` (its role, as
+        `--link PEER=...` names it) at `endpoint`, sending chart `charts[0]` (the state `state`
+        gives) and reading `charts[1]`, codes in to `on_codes`, the link's state to `on_link`; a
+        pty it makes is in its ready line (`ptys`, by peer)."""
+        binding = LinkBinding(*link_charts(view, charts[0]), state)
+        port = CodePort(f"{self.name}-{peer}", endpoint, binding, on_codes, on_link,
+                        type1_profile, type1, faults=faults)  # fmt: skip
+        if port.path:
+            self.ready_info.setdefault("ptys", {})[peer] = port.path
+        return port
+
 
 class IxlPeerDevice(Device):
     """A station device on a Type I link to its IXL (`--link ixl=...`) and on the rails
-    (`--link rails=...`): the wayside ATC and the trackside I/O. Subclasses name the chart they
-    send (`tx_chart`; they read the link back), give their core's state of it, and react to codes
-    from the IXL, the link state and the rails."""
-
-    tx_chart = ""  # e.g. "atc_to_ixl"
+    (`--link rails=...`): the wayside ATC and the trackside. It sends its kind's chart to the IXL
+    (`kinds`: "atc_to_ixl", "io_to_ixl") and reads the other way; subclasses give their core's
+    state of it, and react to codes from the IXL, the link state and the rails."""
 
     def __init__(
         self,
@@ -240,18 +262,16 @@ class IxlPeerDevice(Device):
         self.station = station
         self.port: CodePort | None = None
         if kinds.IXL in links:
-            binding = LinkBinding(*link_charts(line.view(station), self.tx_chart), state)
-            self.port = CodePort(
-                f"{name}-ixl", links[kinds.IXL], binding, self.from_ixl, self.link_changed,
-                type1_profile, type1, faults=faults,
+            outward, inward = kinds.KINDS[self.kind].charts or ("", "")
+            self.port = self.bind_code_link(
+                kinds.IXL, links[kinds.IXL], (inward, outward), line.view(station), state,
+                self.from_ixl, self.link_changed, type1_profile, type1, faults,
             )  # fmt: skip
-            if self.port.path:
-                self.ready_info["ptys"] = {kinds.IXL: self.port.path}
         self.rails: RailsClient | None = None
-        if "rails" in links:
+        if kinds.RAILS in links:
             hello = {"role": self.kind, "name": name}
             lost = partial(self.rails_changed, False)
-            self.rails = RailsClient(links["rails"], hello, self.from_rails, lost)
+            self.rails = RailsClient(links[kinds.RAILS], hello, self.from_rails, lost)
 
     def from_ixl(self, codes: dict[str, int]) -> None:
         raise NotImplementedError

@@ -11,7 +11,7 @@ from functools import partial
 from typing import Any
 
 from ktcs_bench import kinds
-from ktcs_bench.binding import ControlLink, LinkBinding
+from ktcs_bench.binding import ControlLink
 from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.codeport import CodePort
@@ -65,14 +65,12 @@ class IxlDevice(Device):
         self.ports: dict[str, CodePort] = {}
         for role in LINKS:  # the Type I peers: each link bound the one way
             if role in links:
-                state = partial(self.ixl.full_state, role)
-                binding = LinkBinding(*link_charts(view, kinds.chart_name(role, True)), state)
-                self.ports[role] = CodePort(
-                    f"{name}-{role}", links[role], binding, self._codes_from(role),
-                    self._link_of(role), type1_profile, type1, faults=faults,
+                charts = (kinds.chart_name(role, True), kinds.chart_name(role, False))
+                self.ports[role] = self.bind_code_link(
+                    role, links[role], charts, view, partial(self.ixl.full_state, role),
+                    partial(self._codes_from, role), partial(self._link_of, role),
+                    type1_profile, type1, faults,
                 )  # fmt: skip
-                if self.ports[role].path:
-                    self.ready_info.setdefault("ptys", {})[role] = self.ports[role].path
         # the application the Type II client serves: full states, controls by number
         self.ctc_link = ControlLink(
             *link_charts(view, kinds.chart_name(kinds.CTC, True)),
@@ -95,17 +93,11 @@ class IxlDevice(Device):
         self.note("control", f"ctc: unknown control code {code} rejected")
 
     # -- plumbing --------------------------------------------------------------------------------
-    def _codes_from(self, role: str):  # type: ignore[no-untyped-def]
-        def handle(codes: dict[str, int]) -> None:
-            self.apply(self.ixl.receive(role, codes, self.now()))
+    def _codes_from(self, role: str, codes: dict[str, int]) -> None:
+        self.apply(self.ixl.receive(role, codes, self.now()))
 
-        return handle
-
-    def _link_of(self, role: str):  # type: ignore[no-untyped-def]
-        def handle(up: bool) -> None:
-            self.apply(self.ixl.link_state(role, up, self.now()))
-
-        return handle
+    def _link_of(self, role: str, up: bool) -> None:
+        self.apply(self.ixl.link_state(role, up, self.now()))
 
     def apply(self, out: IxlOutput) -> None:
         for role, changes in out.changes.items():

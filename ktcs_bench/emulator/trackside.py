@@ -26,7 +26,6 @@ from ktcs_bench.transport.endpoints import Endpoint
 class TracksideDevice(IxlPeerDevice):
     kind = kinds.TRACKSIDE
     messages = TRACKSIDE
-    tx_chart = "io_to_ixl"
 
     def __init__(
         self, name: str, line: Line, station: int, links: dict[str, Endpoint], **kwargs: Any

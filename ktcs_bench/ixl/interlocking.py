@@ -4,8 +4,8 @@ Inputs: CTC controls (`control`, by code name), local-panel actions (`local`), T
 code changes from the ATC and the trackside (`receive`), link up/down (`link_state`) and timers
 (`handle_timer` at `next_deadline()`: the automatic center-mode grant, timed route and overlap
 releases -- the timer shape of every core, `ktcs_bench.timed`). Every call takes `now` (seconds)
-and returns an `IxlOutput`: indication changes for the CTC chart, code changes for the IXL->ATC
-and IXL->IO charts, control results and events. After every input the whole station is
+and returns an `IxlOutput`: per peer role (`kinds.PEER_ROLES`: the CTC, the ATC, the trackside's
+`io`) the changes of its IXL->ROLE chart, control results and events. After every input the whole station is
 re-evaluated at once, so a failing condition puts a signal to stop in the same call that reported
 it (invariant 4: within one cycle).
 

@@ -168,3 +168,68 @@ def test_the_sans_io_cores_import_no_io_or_clock_module() -> None:
     assert len(cores) > 40  # the walk found the cores' modules
     bad = {m: io_reached(graph, m) for m in cores}
     assert not {m: chains[0] for m, chains in bad.items() if chains}
+
+
+# -- the device kinds have one home ---------------------------------------------------------------
+
+KIND_TABLE = "kinds.py"
+"""The one table of the device kinds (`ktcs_bench.kinds`): the only module naming them."""
+
+GRAMMAR = {
+    "procedure/steps.py": "a procedure's step words (`- ctc: route set ...`, `- train: T1 ...`)",
+    "procedure/expect.py": "a procedure's expectation words (`ixl 18 route ...`, `ctc 18 signal`)",
+    "cli/ctc.py": "the `ktcs-bench ctc` command's name",
+}
+"""Modules where a kind's word is user-facing grammar, spelled as the user types it: renaming a
+kind must not silently change what users' procedures and command lines say."""
+
+
+def kind_words(path: Path) -> dict[str, int]:
+    """The string constants of a module equal to a kind's name (docstrings aside), counted."""
+    from ktcs_bench import kinds
+
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    docstrings = {
+        id(st.value)
+        for node in ast.walk(tree)
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+        for st in node.body
+        if isinstance(st, ast.Expr) and isinstance(st.value, ast.Constant)
+    }
+    out: dict[str, int] = {}
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.Constant)
+            and node.value in kinds.KINDS
+            and id(node) not in docstrings
+        ):
+            out[node.value] = out.get(node.value, 0) + 1
+    return out
+
+
+def test_the_device_kinds_are_named_only_in_their_table() -> None:
+    """Issue 22 part 1: a kind -- ctc, ixl, atc, trackside, trackcircuit, train -- is spelled in
+    `ktcs_bench.kinds` and read from it everywhere else (its constants, its rows), so a new kind
+    is a row there, not edits across the tree; only the grammar modules spell the words users
+    type."""
+    found = {
+        str(path.relative_to(ROOT)): words
+        for path in sorted(ROOT.rglob("*.py"))
+        if (words := kind_words(path))
+    }
+    assert KIND_TABLE in found  # the scan sees the table's own spelling
+    assert len(GRAMMAR) <= 3
+    assert {m: w for m, w in found.items() if m != KIND_TABLE and m not in GRAMMAR} == {}
+
+
+def test_every_kind_builds_through_its_row() -> None:
+    """Each row's builder names a function that exists (it is imported only when a device of
+    that kind is built, so the table stays at the bottom of the layers)."""
+    import importlib
+
+    from ktcs_bench import kinds
+
+    for kind in kinds.KINDS.values():
+        module, _, func = kind.builder.partition(":")
+        assert callable(getattr(importlib.import_module(module), func)), kind.name
+    assert package_imports().get("kinds", set()) == set()  # the table imports nothing of ours
