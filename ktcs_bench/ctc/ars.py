@@ -39,7 +39,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench import kinds, messages
 from ktcs_bench.ctc.describer import DescribedTrain, Describer
@@ -51,6 +51,15 @@ RETRY_S = 5.0  # a rejected or unanswered request: ask again no sooner
 GRANT_GRACE_S = 10.0  # an accepted request whose route is not indicated set by then: ask again
 LOG_KEEP = 2_000  # log entries kept
 FAIL_SAFE_MIN = 3  # a station with this many circuits or more, all occupied: its fail-safe picture
+
+
+class ArsLogEntry(TypedDict):
+    """One entry of ARS's log: what it asked for, what came of it, why a train waits."""
+
+    time: float  # ARS's time (s from the CTC's start)
+    station: int | None
+    train: str | None
+    text: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,8 +125,8 @@ class Ars:
             self.enabled[self.model.station(st).number] = True
         self.describer = Describer(self.line, timetable)
         self.progress: dict[str, _Progress] = {}
-        self.log: deque[dict[str, Any]] = deque(maxlen=keep)
-        self.on_log: Callable[[dict[str, Any]], None] | None = None  # told of each entry
+        self.log: deque[ArsLogEntry] = deque(maxlen=keep)
+        self.on_log: Callable[[ArsLogEntry], None] | None = None  # told of each entry
         self.pending: dict[tuple[int, str], RouteRequest] = {}  # sent, no result yet
         self.granted: dict[tuple[str, int, str], _Grant] = {}  # (train, station, route)
         self.retry_at: dict[tuple[str, int, str], tuple[float, str]] = {}  # -> (when, why)
@@ -283,7 +292,7 @@ class Ars:
             "gone": list(self.describer.gone),
         }
 
-    def last(self, count: int) -> list[dict[str, Any]]:
+    def last(self, count: int) -> list[ArsLogEntry]:
         return list(self.log)[-count:] if count > 0 else []
 
     # ------------------------------------------------------------------ the timetable
@@ -570,7 +579,7 @@ class Ars:
     def _log(
         self, now: float, text: str, station: int | None = None, train: str | None = None
     ) -> None:
-        entry = {"time": now, "station": station, kinds.TRAIN: train, "text": text}
+        entry = ArsLogEntry(time=now, station=station, train=train, text=text)
         self.log.append(entry)
         if self.on_log is not None:
             self.on_log(entry)

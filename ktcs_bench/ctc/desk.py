@@ -101,7 +101,7 @@ class Desk:
             why = answer.reason_name or f"reason {answer.reason}"
             outcome = Outcome(action, answer.accepted, None if answer.accepted else why,
                               answer.reason)  # fmt: skip
-            entry.update(result=outcome.result, seconds=round(self.clock() - t0, 4))
+            entry["result"], entry["seconds"] = outcome.result, round(self.clock() - t0, 4)
             log.info("station %d %s=%d -> %s", action.station, action.name, action.value,
                      outcome.result)  # fmt: skip
             return outcome

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Mapping
-from typing import Any, Literal
+from typing import Any, Literal, NotRequired, TypedDict
 
 from ktcs_bench.ctc.model import signal_name
 from ktcs_bench.errors import UsageError
@@ -85,19 +85,29 @@ def parse_words(words: list[str]) -> Message:
     raise UsageError(f"cannot read {' '.join(words)!r}; type `help`")
 
 
+class LogEntry(TypedDict):
+    """One command in the log (its JSON object as `ctc log` shows it)."""
+
+    time: float  # when it was given, on the lab's clock
+    command: str  # in the operator's words (`command_words`)
+    source: str  # who gave it: ctc, console, ars
+    result: NotRequired[str]  # once known: accepted, rejected: REASON, refused ..., no result ...
+    code: NotRequired[str]  # the control code it went out as
+    seconds: NotRequired[float]  # CONTROL -> CONTROL_RESULT
+
+
 class CommandLog:
-    """Entries `{"time", "command", "source"}`, completed with "result" (and, for a command that
-    went out, "code" and "seconds") once known. Newest last; the oldest beyond `keep` drop out."""
+    """Entries (`LogEntry`) `{"time", "command", "source"}`, completed with "result" (and, for a
+    command that went out, "code" and "seconds") once known. Newest last; the oldest beyond `keep`
+    drop out."""
 
     def __init__(self, keep: int = KEEP) -> None:
-        self.entries: deque[dict[str, Any]] = deque(maxlen=keep)
+        self.entries: deque[LogEntry] = deque(maxlen=keep)
 
-    def record(
-        self, time: float, command: Message | Mapping[str, Any], source: str
-    ) -> dict[str, Any]:
-        entry: dict[str, Any] = {"time": time, "command": command_words(command), "source": source}
+    def record(self, time: float, command: Message | Mapping[str, Any], source: str) -> LogEntry:
+        entry = LogEntry(time=time, command=command_words(command), source=source)
         self.entries.append(entry)
         return entry
 
-    def last(self, count: int) -> list[dict[str, Any]]:
+    def last(self, count: int) -> list[LogEntry]:
         return list(self.entries)[-count:] if count > 0 else []

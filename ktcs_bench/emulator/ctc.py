@@ -28,7 +28,7 @@ from ktcs_bench import kinds
 from ktcs_bench import messages as msg
 from ktcs_bench.console.server import ConsoleServer
 from ktcs_bench.console.trains import TrainPosition, position_from_status
-from ktcs_bench.ctc.ars import Ars, RouteRequest
+from ktcs_bench.ctc.ars import Ars, ArsLogEntry, RouteRequest
 from ktcs_bench.ctc.desk import Desk, Outcome
 from ktcs_bench.ctc.model import CtcModel, signal_name
 from ktcs_bench.ctc.tables import IndicationTables
@@ -273,8 +273,8 @@ class CtcDevice(Device):
         self.ars.result(request, outcome.accepted, outcome.why, self._ars_now())
         self.ars_update()
 
-    def _ars_logged(self, entry: dict[str, Any]) -> None:
-        self.note("ars", str(entry["text"]))
+    def _ars_logged(self, entry: ArsLogEntry) -> None:
+        self.note("ars", entry["text"])
         if self.console is not None:
             self.console.note_ars(entry)
 
