@@ -20,7 +20,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from functools import partial
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench.binding import LinkBinding
@@ -52,6 +52,14 @@ from ktcs_bench.type1 import LinkConfig
 log = logging.getLogger("ktcs_bench.emulator")
 
 
+class Event(TypedDict):
+    """One event a device noted (its `events` command answers the last of them)."""
+
+    time: float  # on the device's clock (wall time live, the loop's in a lab in one process)
+    kind: str  # e.g. control, link, fault, ars
+    text: str
+
+
 class Device:
     kind = "device"
     messages: ClassVar[object] = DEVICE  # the commands its control port takes (a union)
@@ -59,7 +67,7 @@ class Device:
     def __init__(self, name: str, control: tuple[str, int] = ("127.0.0.1", 0)) -> None:
         self.name = name
         self.control_address = control
-        self.events: deque[dict[str, Any]] = deque(maxlen=2000)
+        self.events: deque[Event] = deque(maxlen=2000)
         self.timer: LoopTimer[Any] | None = None  # the device's core on the wall clock
         self._stop: asyncio.Event | None = None
         self._server: net.Server | None = None
@@ -69,7 +77,7 @@ class Device:
         self.token = ""
         # where `note` takes its time (wall time live; a lab in one process gives its loop's)
         self.clock: Callable[[], float] = time.time
-        self.on_note: Callable[[Device, dict[str, Any]], None] | None = None  # the lab's log
+        self.on_note: Callable[[Device, Event], None] | None = None  # the lab's log
 
     # -- clock and timers ----------------------------------------------------------------------
     @property
@@ -90,7 +98,7 @@ class Device:
             self.timer.poke()
 
     def note(self, kind: str, text: str) -> None:
-        event = {"time": self.clock(), "kind": kind, "text": text}
+        event = Event(time=self.clock(), kind=kind, text=text)
         self.events.append(event)
         if self.on_note is not None:
             self.on_note(self, event)

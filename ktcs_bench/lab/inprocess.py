@@ -37,7 +37,7 @@ from typing import IO, Any, TypeVar
 from ktcs_bench import kinds
 from ktcs_bench.capture import CaptureWriter, open_writer
 from ktcs_bench.emulator.build import build_device, device_namespace
-from ktcs_bench.emulator.device import Device
+from ktcs_bench.emulator.device import Device, Event
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.runner import device_args, lab_command, start_in_order
 from ktcs_bench.lab.state import read_state, state_file, write_state
@@ -480,7 +480,7 @@ class InProcessLab:
         if self._events is not None:
             self._events.write(json.dumps(event, sort_keys=True, separators=(",", ":")) + "\n")
 
-    def _on_note(self, device: Device, event: dict[str, Any]) -> None:
+    def _on_note(self, device: Device, event: Event) -> None:
         self._log({"t": round(event["time"], 6), "device": device.name, "kind": event["kind"],
                    "text": event["text"]})  # fmt: skip
 
