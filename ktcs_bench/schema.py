@@ -12,13 +12,14 @@ the loaders check in plain code after the conversion.
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 from typing import Any, TypeVar
 
 import msgspec
 
-from ktcs_bench.errors import ConfigError
+from ktcs_bench.errors import ConfigError, excerpt, kind_of
 
 T = TypeVar("T")
 
@@ -44,35 +45,71 @@ _WANT = {
 }
 _GOT = {"null": "nothing", "array": "list", "object": "dict"}
 _BOUNDS = {">=": "at least", "<=": "at most", ">": "greater than", "<": "less than"}
+_ABSENT = object()
+
+READER = "reader"
+"""The words of `datafiles.YamlReader` (scenario files): "expected a number, got text 'x'",
+"must be at least 1, got 0.5", "missing" -- rather than the station loaders' "must be a
+number, not str", "must be at least 1", "missing key"."""
 
 
-def _want(types: str) -> str:
+def _want(types: str, reader: bool) -> str:
     parts = [t.strip() for t in types.split("|")]
     if "str" in parts:  # text where a number is taken as its digits (`tracks: [1, 2]`)
-        return "a string"
+        return "text" if reader else "a string"
     if "float" in parts:
         return "a number"
     return " or ".join(_WANT.get(p, p) for p in parts if p != "null")
 
 
-def _words(problem: str) -> tuple[str, str]:
-    """msgspec's problem -> (a key under the error's path or "", the problem in our words)."""
+def _bound(rest: str) -> str | None:
+    """`>= 1.0` -> "at least 1" (None: not a bound)."""
+    for op, words in _BOUNDS.items():
+        if rest.startswith(op):
+            number = rest[len(op) :].strip()
+            try:
+                number = f"{float(number):g}"
+            except ValueError:
+                pass
+            return f"{words} {number}"
+    return None
+
+
+def _words(problem: str, style: str = "", value: object = _ABSENT) -> tuple[str, str]:
+    """msgspec's problem -> (a key under the error's path or "", the problem in our words;
+    `style` READER for the words of `YamlReader`, quoting `value`, the value at fault)."""
+    reader = style == READER
     if m := _MISSING.match(problem):
-        return m["key"], "missing key"
+        return m["key"], "missing" if reader else "missing key"
     if m := _UNKNOWN.match(problem):
         return m["key"], "unknown key"
     if m := _EXPECTED.match(problem):
-        want = _want(m["want"])
+        want = _want(m["want"], reader)
+        quoted = "" if value is _ABSENT else f", got {excerpt(value)}"
         if m["got"]:
+            if reader and value is not _ABSENT:
+                return "", f"expected {want}, got {kind_of(value)} {excerpt(value)}"
             return "", f"must be {want}, not {_GOT.get(m['got'], m['got'])}"
         rest = m["rest"].strip()
         if rest.startswith("of length >= 1"):
             return "", "must not be empty"
-        for op, words in _BOUNDS.items():
-            if rest.startswith(op):
-                return "", f"must be {words} {rest[len(op) :].strip()}"
+        bound = _bound(rest)
+        if bound is not None:
+            return "", f"must be {bound}{quoted if reader else ''}"
         return "", f"must be {want} {rest}".strip()
     return "", problem
+
+
+def _value_at(raw: object, steps: list[str | int]) -> object:
+    """The parsed value at the key path `steps` (_ABSENT: not there)."""
+    for step in steps:
+        if isinstance(raw, dict) and step in raw:
+            raw = raw[step]
+        elif isinstance(raw, list) and isinstance(step, int) and step < len(raw):
+            raw = raw[step]
+        else:
+            return _ABSENT
+    return raw
 
 
 def _steps(path: str) -> list[str | int]:
@@ -135,13 +172,19 @@ def located(file: str | Path, place: str, problem: str) -> ConfigError:
     return ConfigError(file, place, f"{problem} (line {line})" if line else problem)
 
 
-def error(file: str | Path, exc: msgspec.ValidationError, under: str = "") -> ConfigError:
+def error(
+    file: str | Path,
+    exc: msgspec.ValidationError,
+    under: str = "",
+    raw: object = _ABSENT,
+    style: str = "",
+) -> ConfigError:
     """msgspec's ValidationError as the project's ConfigError (`under`: the key path of the part
-    converted, "" for the whole file)."""
+    converted, "" for the whole file; `raw`: what was converted, to quote the value at fault)."""
     m = _AT.match(str(exc))
     assert m is not None  # the pattern matches any text
-    key, problem = _words(m["problem"])
     steps = _steps(m["path"] or "")
+    key, problem = _words(m["problem"], style, _value_at(raw, steps))
     if key:
         steps.append(key)
     inner = _place(steps)
@@ -149,10 +192,38 @@ def error(file: str | Path, exc: msgspec.ValidationError, under: str = "") -> Co
     return located(file, place, problem)
 
 
-def convert(raw: object, shape: type[T], file: str | Path, under: str = "") -> T:
+def convert(raw: object, shape: type[T], file: str | Path, under: str = "", style: str = "") -> T:
     """`raw` (parsed YAML) as `shape`, strictly (no text taken for a number); a mismatch is one
-    ConfigError naming `file`, the key path and the line."""
+    ConfigError naming `file`, the key path and the line (in the words of `style`: READER for
+    the files `YamlReader` reads)."""
     try:
         return msgspec.convert(raw, shape, strict=True)
     except msgspec.ValidationError as exc:
-        raise error(file, exc, under) from None
+        raise error(file, exc, under, raw, style) from None
+
+
+def finite(
+    value: object,
+    file: str | Path,
+    place: str = "",
+    infinite: frozenset[str] = frozenset(),
+    style: str = "",
+) -> None:
+    """Refuse a number of a converted shape that is NaN or infinite (YAML's .nan, .inf) --
+    except under a key in `infinite`, where infinity means "for ever" (NaN never)."""
+    if isinstance(value, float):
+        key = place.rsplit(".", 1)[-1]
+        if math.isnan(value) or (math.isinf(value) and key not in infinite):
+            words = (
+                "expected a finite number, got"
+                if style == READER
+                else "must be a finite number, not"
+            )
+            raise located(file, place, f"{words} {value!r}")
+    elif isinstance(value, msgspec.Struct):
+        for name in value.__struct_fields__:
+            here = f"{place}.{name}" if place else name
+            finite(getattr(value, name), file, here, infinite, style)
+    elif isinstance(value, (tuple, list)):
+        for i, item in enumerate(value):
+            finite(item, file, f"{place}[{i}]", infinite, style)

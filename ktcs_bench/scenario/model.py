@@ -1,8 +1,9 @@
 """Reading a scenario file into checked objects; every mistake is one ConfigError (file, key, why).
 
-Owns the scenario YAML schema: the line (tags, gradients, speed limits, protection zones,
-stations, kTCS track-circuit codes), the trains, an optional resource manager and the assertions.
-km/h and km/h/s are converted to SI here, at the edge.
+The file's shape -- the line (tags, gradients, speed limits, protection zones, stations, kTCS
+track-circuit codes), the trains, an optional resource manager and the assertions -- is declared
+in `shapes.py` and converted by `schema.convert` (no number NaN or infinite: `schema.finite`);
+what hangs on other keys is checked here, and km/h and km/h/s are converted to SI, at the edge.
 """
 
 from __future__ import annotations
@@ -15,6 +16,15 @@ from typing import Any
 from ktcs_bench import kinds
 from ktcs_bench.datafiles import YamlReader, load_mapping
 from ktcs_bench.errors import UsageError, excerpt, say_seconds
+from ktcs_bench.scenario.shapes import (
+    INFINITE,
+    LineShape,
+    ResourceManagerShape,
+    ScenarioShape,
+    TagsShape,
+    TrainShape,
+)
+from ktcs_bench.schema import READER, convert, finite
 from ktcs_bench.train.deceleration import GradientProfile
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import LineData, Station, TrainConfig
@@ -22,13 +32,9 @@ from ktcs_bench.train.mrsp import Restriction
 from ktcs_bench.train.resources import Resource
 from ktcs_bench.train.units import kmh
 
-MAX_DURATION_S = 24 * 3600.0
-"""The longest scenario (virtual time); the shipped ones run 200..900 s."""
 MAX_CYCLES = 500_000
 """The most cycles (duration_s / dt_s) a scenario runs: every cycle of every train is kept for
 the report (some kB a cycle), so more cannot fit (a 24 h scenario takes dt_s 0.2 or more)."""
-MAX_LENGTH_M = 1_000_000.0
-"""The longest line (1000 km): its tags and resources are laid out one by one."""
 
 ASSERTION_KINDS = (
     "min_gap",
@@ -83,57 +89,41 @@ class Scenario:
     assertions: list[Assertion] = field(default_factory=list)
 
 
-_SCENARIO_KEYS = {
-    "name",
-    "description",
-    "duration_s",
-    "dt_s",
-    "line",
-    "trains",
-    "resource_manager",
-    "assertions",
-    "stop_when_all_stopped",
-}
-_LINE_KEYS = {
-    "length_m",
-    "tags",
-    "gradients",
-    "speed_limits",
-    "protection_zones",
-    "stations",
-    "track_circuits",
-}
-
-
 def load_scenario(path: str | Path) -> Scenario:
     p = Path(path)
     r = YamlReader(p)
-    doc = load_mapping(p, "scenario")
-    r.known(doc, _SCENARIO_KEYS, "")
-    line_m = r.mapping(doc.get("line"), "line")
-    r.known(line_m, _LINE_KEYS, "line")
-    length = r.num(line_m, "length_m", "line", minimum=1.0, maximum=MAX_LENGTH_M)
-    tags = _tags(r, line_m, length)
-    gradient = _gradient(r, line_m)
-    restrictions = _restrictions(r, line_m)
-    zones = _zones(r, line_m)
-    stations = _stations(r, line_m)
-    tcs = _track_circuits(r, line_m)
-    line = LineData(length, tags, gradient, restrictions, stations)
-    trains = []
-    for i, t in enumerate(r.seq(doc.get("trains"), "trains")):
-        trains.append(_train(r, r.mapping(t, f"trains[{i}]"), f"trains[{i}]"))
+    doc = convert(load_mapping(p, "scenario"), ScenarioShape, p, style=READER)
+    finite(doc, p, infinite=INFINITE, style=READER)
+    lm = doc.line
+    length = lm.length_m
+    for i, s in enumerate(lm.speed_limits):
+        if s.to_m <= s.from_m:
+            raise r.fail(f"line.speed_limits[{i}].to_m", f"must lie after from_m ({s.from_m})")
+    try:
+        grads = sorted((g.from_m, g.permille) for g in lm.gradients)
+        gradient = GradientProfile(tuple(g[0] for g in grads), tuple(g[1] for g in grads))
+    except UsageError as exc:
+        raise r.fail("line.gradients", str(exc)) from None
+    line = LineData(
+        length,
+        _tags(r, lm.tags, length),
+        gradient,
+        [Restriction(s.from_m, s.to_m, kmh(s.speed_kmh)) for s in lm.speed_limits],
+        sorted(
+            (Station(str(s.name), s.stop_mark_m, s.dwell_s) for s in lm.stations),
+            key=lambda s: s.stop_mark,
+        ),
+    )
+    trains = [_train(r, t, f"trains[{i}]") for i, t in enumerate(doc.trains)]
     if not trains:
         raise r.fail("trains", "at least one train is needed")
     ids = [t.train_id for t in trains]
     if len(set(ids)) != len(ids):
         raise r.fail("trains", "train ids must be unique")
     resources = None
-    if "resource_manager" in doc:
-        resources = _resources(r, doc["resource_manager"], length)
-    assertions = _assertions(r, doc, ids)
-    duration = r.num(doc, "duration_s", "", minimum=0.1, maximum=MAX_DURATION_S)
-    dt = r.num(doc, "dt_s", "", default=0.1, minimum=0.001)
+    if doc.resource_manager is not None:
+        resources = _resources(doc.resource_manager, length)
+    duration, dt = doc.duration_s, doc.dt_s
     if duration / dt > MAX_CYCLES:
         raise r.fail(
             "dt_s",
@@ -142,140 +132,58 @@ def load_scenario(path: str | Path) -> Scenario:
         )
     return Scenario(
         path=p,
-        name=r.text(doc, "name", "", default=p.stem),
-        description=r.text(doc, "description", "", default=""),
+        name=str(doc.name) if doc.name is not None else p.stem,
+        description=str(doc.description),
         duration=duration,
         dt=dt,
         line=line,
         trains=trains,
-        zones=zones,
-        track_circuits=sorted(tcs, key=lambda t: t.start),
+        zones=[
+            Zone(z.from_m, z.to_m, z.active_from_s, z.active_until_s) for z in lm.protection_zones
+        ],
+        track_circuits=sorted(_track_circuits(lm), key=lambda t: t.start),
         resources=resources,
-        stop_when_all_stopped=r.flag(doc, "stop_when_all_stopped", "", False),
-        assertions=assertions,
+        stop_when_all_stopped=doc.stop_when_all_stopped,
+        assertions=_assertions(r, doc.assertions, ids),
     )
 
 
-def _tags(r: YamlReader, line_m: dict[str, Any], length: float) -> list[float]:
+def _tags(r: YamlReader, tm: TagsShape | None, length: float) -> list[float]:
     """Where the balise tags lie: listed (`at_m`) or every `spacing_m` from `first_m`, with any
     `extra_m` besides."""
-    if "tags" not in line_m:
+    if tm is None:
         return []
-    tm = r.mapping(line_m["tags"], "line.tags")
-    r.known(tm, {"spacing_m", "first_m", "at_m", "extra_m"}, "line.tags")
-    if "at_m" in tm:
-        tags = [
-            r.value(x, f"line.tags.at_m[{i}]")
-            for i, x in enumerate(r.seq(tm["at_m"], "line.tags.at_m"))
-        ]
+    if tm.at_m is not None:
+        tags = list(tm.at_m)
+    elif tm.spacing_m is None:
+        raise r.fail("line.tags.spacing_m", "missing")
     else:
-        spacing = r.num(tm, "spacing_m", "line.tags", minimum=1.0)
-        first = r.num(tm, "first_m", "line.tags", default=0.0)
-        n = int(math.floor((length - first) / spacing + 1e-9)) + 1
-        tags = [first + i * spacing for i in range(n)]
-    extra = [
-        r.value(x, f"line.tags.extra_m[{i}]")
-        for i, x in enumerate(r.seq(tm.get("extra_m", []), "line.tags.extra_m"))
+        n = int(math.floor((length - tm.first_m) / tm.spacing_m + 1e-9)) + 1
+        tags = [tm.first_m + i * tm.spacing_m for i in range(n)]
+    return sorted(set(tags) | set(tm.extra_m))
+
+
+def _track_circuits(lm: LineShape) -> list[TrackCircuit]:
+    return [
+        TrackCircuit(
+            f"TC{i + 1}" if t.id is None else str(t.id),
+            t.from_m,
+            t.to_m,
+            kmh(t.code_kmh),
+            t.target_distance_m,
+        )
+        for i, t in enumerate(lm.track_circuits)
     ]
-    return sorted(set(tags) | set(extra))
 
 
-def _gradient(r: YamlReader, line_m: dict[str, Any]) -> GradientProfile:
-    grads: list[tuple[float, float]] = []
-    for i, g in enumerate(r.seq(line_m.get("gradients", []), "line.gradients")):
-        gm = r.mapping(g, f"line.gradients[{i}]")
-        grads.append(
-            (
-                r.num(gm, "from_m", f"line.gradients[{i}]"),
-                r.num(gm, "permille", f"line.gradients[{i}]"),
-            )
-        )
-    grads.sort()
-    try:
-        return GradientProfile(tuple(g[0] for g in grads), tuple(g[1] for g in grads))
-    except UsageError as exc:
-        raise r.fail("line.gradients", str(exc)) from None
-
-
-def _restrictions(r: YamlReader, line_m: dict[str, Any]) -> list[Restriction]:
-    restrictions = []
-    for i, s in enumerate(r.seq(line_m.get("speed_limits", []), "line.speed_limits")):
-        place = f"line.speed_limits[{i}]"
-        sm = r.mapping(s, place)
-        start, end = r.num(sm, "from_m", place), r.num(sm, "to_m", place)
-        if end <= start:
-            raise r.fail(f"{place}.to_m", f"must lie after from_m ({start})")
-        restrictions.append(Restriction(start, end, kmh(r.num(sm, "speed_kmh", place, minimum=0))))
-    return restrictions
-
-
-def _zones(r: YamlReader, line_m: dict[str, Any]) -> list[Zone]:
-    zones = []
-    for i, z in enumerate(r.seq(line_m.get("protection_zones", []), "line.protection_zones")):
-        place = f"line.protection_zones[{i}]"
-        zm = r.mapping(z, place)
-        zones.append(
-            Zone(
-                r.num(zm, "from_m", place),
-                r.num(zm, "to_m", place),
-                r.num(zm, "active_from_s", place, default=0.0),
-                r.num(zm, "active_until_s", place, default=math.inf, infinite=True),
-            )
-        )
-    return zones
-
-
-def _stations(r: YamlReader, line_m: dict[str, Any]) -> list[Station]:
-    stations = []
-    for i, s in enumerate(r.seq(line_m.get("stations", []), "line.stations")):
-        place = f"line.stations[{i}]"
-        sm = r.mapping(s, place)
-        stations.append(
-            Station(
-                r.text(sm, "name", place),
-                r.num(sm, "stop_mark_m", place),
-                r.num(sm, "dwell_s", place, default=20.0, minimum=0.0),
-            )
-        )
-    stations.sort(key=lambda s: s.stop_mark)
-    return stations
-
-
-def _track_circuits(r: YamlReader, line_m: dict[str, Any]) -> list[TrackCircuit]:
-    tcs = []
-    for i, t in enumerate(r.seq(line_m.get("track_circuits", []), "line.track_circuits")):
-        place = f"line.track_circuits[{i}]"
-        tm = r.mapping(t, place)
-        td = tm.get("target_distance_m")
-        tcs.append(
-            TrackCircuit(
-                r.text(tm, "id", place, default=f"TC{i + 1}"),
-                r.num(tm, "from_m", place),
-                r.num(tm, "to_m", place),
-                kmh(r.num(tm, "code_kmh", place, minimum=0.0)),
-                None if td is None else r.num(tm, "target_distance_m", place),
-            )
-        )
-    return tcs
-
-
-def _resources(r: YamlReader, section: object, length: float) -> list[Resource]:
+def _resources(rm: ResourceManagerShape, length: float) -> list[Resource]:
     """The resource manager's resources: the line cut every `resource_length_m`, each holding
     the point (and the position it needs) that lies in it."""
-    rm = r.mapping(section, "resource_manager")
-    size = r.num(rm, "resource_length_m", "resource_manager", minimum=10.0)
-    points = {}
-    for i, pt in enumerate(r.seq(rm.get("points", []), "resource_manager.points")):
-        place = f"resource_manager.points[{i}]"
-        pm = r.mapping(pt, place)
-        points[r.num(pm, "at_m", place)] = (
-            r.text(pm, "id", place),
-            r.text(pm, "required", place, default="reverse"),
-        )
+    points = {pt.at_m: (str(pt.id), str(pt.required)) for pt in rm.points}
     resources = []
     x, k = 0.0, 1
     while x < length:
-        end = min(x + size, length)
+        end = min(x + rm.resource_length_m, length)
         pt_here = [(at, v) for at, v in points.items() if x <= at < end]
         res = Resource(f"R{k}", x, end)
         if pt_here:
@@ -285,11 +193,12 @@ def _resources(r: YamlReader, section: object, length: float) -> list[Resource]:
     return resources
 
 
-def _assertions(r: YamlReader, doc: dict[str, Any], ids: list[str]) -> list[Assertion]:
+def _assertions(
+    r: YamlReader, items: tuple[dict[Any, Any], ...], ids: list[str]
+) -> list[Assertion]:
     assertions = []
-    for i, a in enumerate(r.seq(doc.get("assertions", []), "assertions")):
+    for i, am in enumerate(items):
         place = f"assertions[{i}]"
-        am = r.mapping(a, place)
         if len(am) != 1:
             raise r.fail(place, f"one assertion per item, one of {', '.join(ASSERTION_KINDS)}")
         kind, args = next(iter(am.items()))
@@ -307,73 +216,40 @@ def _assertions(r: YamlReader, doc: dict[str, Any], ids: list[str]) -> list[Asse
     return assertions
 
 
-_TRAIN_KEYS = {
-    "id",
-    "start_m",
-    "length_m",
-    "max_speed_kmh",
-    "accel_kmhps",
-    "service_brake_kmhps",
-    "emergency_brake_kmhps",
-    "brake_build_up_s",
-    "driver_speed_kmh",
-    "mode",
-    "ato",
-    "recovery",
-    "safety_distance_m",
-    "service_brake",
-    "inattentive_until_eb",
-    "eb_release_delay_s",
-    "tacho_error",
-    "missed_tags",
-    "depart_at_s",
-    "resistance",
-}
-
-
-def _train(r: YamlReader, m: dict[str, Any], place: str) -> TrainConfig:
-    r.known(m, _TRAIN_KEYS, place)
-    mode = r.text(m, "mode", place, default="atcs")
+def _train(r: YamlReader, m: TrainShape, place: str) -> TrainConfig:
+    mode = str(m.mode)
     if mode not in ("atcs", "ktcs"):
         raise r.fail(f"{place}.mode", f"must be atcs or ktcs, got {excerpt(mode)}")
-    sb = r.text(m, "service_brake", place, default="enabled")
+    sb = str(m.service_brake)
     if sb not in ("enabled", "disabled"):
         raise r.fail(f"{place}.service_brake", f"must be enabled or disabled, got {excerpt(sb)}")
-    res = r.mapping(m.get("resistance", {}), f"{place}.resistance")
     try:
         params = TrainParams(
-            length=r.num(m, "length_m", place, default=200.0, minimum=1.0),
-            max_speed=kmh(r.num(m, "max_speed_kmh", place, default=80.0, minimum=1.0)),
-            max_traction=kmh(r.num(m, "accel_kmhps", place, default=3.0, minimum=0.1)),
-            service_decel=kmh(r.num(m, "service_brake_kmhps", place, default=3.0, minimum=0.1)),
-            emergency_decel=kmh(r.num(m, "emergency_brake_kmhps", place, default=4.0, minimum=0.1)),
-            brake_build_up=r.num(m, "brake_build_up_s", place, default=1.0, minimum=0.0),
-            resistance_a=r.num(res, "a", f"{place}.resistance", default=0.005),
-            resistance_b=r.num(res, "b", f"{place}.resistance", default=0.0001),
-            resistance_c=r.num(res, "c", f"{place}.resistance", default=0.00002),
+            length=m.length_m,
+            max_speed=kmh(m.max_speed_kmh),
+            max_traction=kmh(m.accel_kmhps),
+            service_decel=kmh(m.service_brake_kmhps),
+            emergency_decel=kmh(m.emergency_brake_kmhps),
+            brake_build_up=m.brake_build_up_s,
+            resistance_a=m.resistance.a,
+            resistance_b=m.resistance.b,
+            resistance_c=m.resistance.c,
         )
     except UsageError as exc:
         raise r.fail(place, str(exc)) from None
-    delay = m.get("eb_release_delay_s", 5.0)
-    missed = frozenset(
-        int(r.value(x, f"{place}.missed_tags[{i}]", minimum=0))
-        for i, x in enumerate(r.seq(m.get("missed_tags", []), f"{place}.missed_tags"))
-    )
     return TrainConfig(
-        train_id=r.text(m, "id", place),
+        train_id=str(m.id),
         params=params,
-        start=r.num(m, "start_m", place),
+        start=m.start_m,
         mode=mode,
-        driver_speed=kmh(r.num(m, "driver_speed_kmh", place, default=80.0, minimum=0.0)),
-        ato=r.flag(m, "ato", place, False),
-        recovery=r.flag(m, "recovery", place, False),
-        safety_distance=r.num(m, "safety_distance_m", place, default=50.0, minimum=0.0),
+        driver_speed=kmh(m.driver_speed_kmh),
+        ato=m.ato,
+        recovery=m.recovery,
+        safety_distance=m.safety_distance_m,
         service_brake_enabled=sb == "enabled",
-        inattentive_until_eb=r.flag(m, "inattentive_until_eb", place, False),
-        eb_release_delay=None
-        if delay is None
-        else r.num(m, "eb_release_delay_s", place, default=5.0),
-        tacho_error=r.num(m, "tacho_error", place, default=0.01, minimum=0.0),
-        missed_tags=missed,
-        depart_at=r.num(m, "depart_at_s", place, default=0.0, minimum=0.0),
+        inattentive_until_eb=m.inattentive_until_eb,
+        eb_release_delay=m.eb_release_delay_s,
+        tacho_error=m.tacho_error,
+        missed_tags=frozenset(int(x) for x in m.missed_tags),
+        depart_at=m.depart_at_s,
     )
