@@ -9,10 +9,16 @@ misspelt, a value of the wrong type -- which the port answers as `{"ok": false, 
 The handlers then dispatch on the message's class (`match`), never on strings; `encode` gives a
 message's JSON object back (a message round-trips: `decode(encode(m), union) == m`).
 
-The CTC's operator commands (`OPERATOR`: route, point, signal, mode, control) are one message
-whoever gives them: the `ctc` console's words (`ctc.log.parse_words`), the web console's clicks,
-automatic route setting, procedures -- and the command log says them in the operator's words from
-the same message.
+The CTC's operator commands (`OperatorCommand`: route, point, signal, mode, control) are one
+message whoever gives them: the `ctc` console's words (`ctc.log.parse_words`), automatic route
+setting, procedures, the web console's clicks (read into it by the desk:
+`ctc.model.operator_command`) -- and the command log says them in the operator's words from the
+same message.
+
+The answers are typed too (`Answer`: `Refused` is the one error shape, `StatusAnswer`,
+`ShowAnswer`, `ControlAnswer`, ...): a handler returns one, the port sends its JSON object
+(`answer`). What they carry -- a device's status, a station's summary, the logs -- is each
+device's own JSON.
 
 Sans-I/O: it imports msgspec and nothing of the bench.
 """
@@ -21,7 +27,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any, Literal, TypeVar, get_args
+from typing import Any, Literal, get_args
 
 import msgspec
 
@@ -32,9 +38,10 @@ class Message(msgspec.Struct, tag_field="cmd", forbid_unknown_fields=True, kw_on
 
     @classmethod
     def cmd(cls) -> str:
-        tag = msgspec.inspect.type_info(cls)
-        assert isinstance(tag, msgspec.inspect.StructType) and isinstance(tag.tag, str)
-        return tag.tag
+        """Its "cmd" (the Struct's tag)."""
+        tag = cls.__struct_config__.tag
+        assert isinstance(tag, str)
+        return tag
 
 
 # -- every device -------------------------------------------------------------------------------
@@ -248,8 +255,6 @@ TRACKSIDE = Status | Events | Stop | FailPoint | FailLamp | FailTrackCircuit | C
 TRACK_CIRCUITS = Status | Events | Stop | Fail | Clear | Place | Remove
 TRAIN = Status | Events | Stop | ReleaseEb | Hold | Dispatch | RunTo | SpeedDistance
 ATC = DEVICE
-
-M = TypeVar("M", bound=Message)
 
 
 class BadMessage(ValueError):
