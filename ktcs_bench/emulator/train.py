@@ -191,7 +191,7 @@ class TrainDevice(Device):
     ) -> TrainDevice:  # fmt: skip
         spec = lab.devices.get(name)
         opts = dict(spec.options) if spec is not None else {}
-        if "rails" not in links:
+        if kinds.RAILS not in links:
             raise UsageError(
                 "emulator train needs --link rails=tcp://HOST:PORT (the track circuits)"
             )
@@ -206,7 +206,7 @@ class TrainDevice(Device):
                 ) from None
             build_up = float(opts.get("brake_build_up_s", BRAKE_BUILD_UP_S))
             run = timetable_run(entry, line, build_up)
-            return cls(name, line, run.config, links["rails"], control, run)
+            return cls(name, line, run.config, links[kinds.RAILS], control, run)
         params = TrainParams(
             length=float(opts.get("length_m", 100.0)),
             max_speed=kmh(float(opts.get("max_speed_kmh", 80.0))),
@@ -220,7 +220,7 @@ class TrainDevice(Device):
             ato=bool(opts.get("ato", True)),
             driver_speed=kmh(float(opts.get("max_speed_kmh", 80.0))),
         )
-        return cls(name, line, cfg, links["rails"], control)
+        return cls(name, line, cfg, links[kinds.RAILS], control)
 
     def _from_rails(self, obj: dict[str, Any]) -> None:
         if "code" not in obj:

@@ -1,4 +1,5 @@
-"""The trackside I/O rack of one station: the IO end of the IXL's Type I relay-I/O link.
+"""The trackside I/O rack of one station (kind `trackside`): the far end of the IXL's Type I link
+with link role `io` (`ktcs_bench.kinds`).
 
 Inputs by IXL->IO code name (`receive`), train occupancy from the track-circuit model
 (`set_occupancy`), link state and `now`; outputs the IO->IXL code changes. When its link to the

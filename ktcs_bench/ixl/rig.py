@@ -63,10 +63,10 @@ class StationRig:
 
     def set_link(self, link: str, up: bool) -> None:
         self.take(self.ixl.link_state(link, up, self.now))
-        if link == "io":
+        if link == kinds.IO:
             self.from_field(self.io.link_state(up, self.now).changes)
         if up:
-            full = self.io.full_state() if link == "io" else None
+            full = self.io.full_state() if link == kinds.IO else None
             if full is not None:
                 self.take(self.ixl.receive(kinds.IO, full, self.now))
             else:
