@@ -26,7 +26,7 @@ import serial
 from ktcs_bench import kinds
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
-from ktcs_bench.schema import located
+from ktcs_bench.schema import Shape, convert, located
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
 from ktcs_bench.station.timetable import Timetable, load_timetable
@@ -161,7 +161,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
     if not line_file.is_file():
         raise fail("line", f"no such line file: {line_file}")
     devices = _devices(raw["devices"], fail)
-    links = _links(raw["links"], devices, fail)
+    links = _links(raw["links"], devices, file, fail)
     sections: dict[str, dict[str, Any]] = {}
     for key in ("type1", "type2", "console"):
         section = raw.get(key) or {}
@@ -276,44 +276,47 @@ def _devices(section: object, fail: _Fail) -> dict[str, DeviceSpec]:
     return devices
 
 
-def _links(section: object, devices: dict[str, DeviceSpec], fail: _Fail) -> list[LinkSpec]:
+class _LinkShape(Shape):
+    """One entry of the lab file's `links:`."""
+
+    name: str | int
+    type: str | int  # type1 or type2: checked with the ends
+    a: str | int  # the IXL
+    b: str | int  # its peer
+    tap: bool = True
+
+
+def _links(
+    section: object, devices: dict[str, DeviceSpec], file: Path, fail: _Fail
+) -> list[LinkSpec]:
     """The lab file's `links:`, each from an IXL to a peer of its station, one per role."""
     links: list[LinkSpec] = []
-    if not isinstance(section, list):
-        raise fail("links", "must be a list of {name, type, a, b, tap}")
     seen: dict[tuple[str, str], str] = {}
-    for i, lk in enumerate(section):
+    for i, lk in enumerate(convert(section, tuple[_LinkShape, ...], file, "links")):
         place = f"links[{i}]"
-        if not isinstance(lk, dict):
-            raise fail(place, "must be a mapping {name, type, a, b, tap}")
-        for key in ("name", "type", "a", "b"):
-            if key not in lk:
-                raise fail(f"{place}.{key}", "missing key")
-        a, b, typ = str(lk["a"]), str(lk["b"]), lk["type"]
-        for end in ("a", "b"):
-            if str(lk[end]) not in devices:
-                raise fail(f"{place}.{end}", f"unknown device {excerpt(lk[end])}")
+        for end, device in (("a", lk.a), ("b", lk.b)):
+            if str(device) not in devices:
+                raise fail(f"{place}.{end}", f"unknown device {excerpt(device)}")
+        a, b = str(lk.a), str(lk.b)
         _check_link(lk, place, devices[a], devices[b], fail)
         role_key = (a, kinds.role_of(devices[b].kind))
         if role_key in seen:
             raise fail(place, f"{a} already has a {role_key[1]} link ({seen[role_key]})")
-        seen[role_key] = str(lk["name"])
-        links.append(LinkSpec(str(lk["name"]), typ, a, b, bool(lk.get("tap", True))))
+        seen[role_key] = str(lk.name)
+        links.append(LinkSpec(str(lk.name), str(lk.type), a, b, lk.tap))
     return links
 
 
-def _check_link(
-    lk: dict[str, Any], place: str, ixl: DeviceSpec, peer: DeviceSpec, fail: _Fail
-) -> None:
+def _check_link(lk: _LinkShape, place: str, ixl: DeviceSpec, peer: DeviceSpec, fail: _Fail) -> None:
     """One link's ends: an IXL (not an external one on Type I, nor without a tap) and a peer
     the link's type reaches, of the IXL's station."""
-    a, b, typ = ixl.name, peer.name, lk["type"]
+    a, b, typ = ixl.name, peer.name, lk.type
     if ixl.kind != kinds.IXL:
         raise fail(f"{place}.a", "end a of every link is an IXL")
     if ixl.external is not None and typ == "type1":
         raise fail(f"{place}.a", f"{a} is external: its Type I peers are its own, not the "
                    "lab's (list only its Type II link)")  # fmt: skip
-    if ixl.external is not None and lk.get("tap", True) is not True:
+    if ixl.external is not None and not lk.tap:
         raise fail(f"{place}.tap", f"{a} is external: the link's tap serves the address it "
                    "connects to, so the tap must be there (tap: true)")  # fmt: skip
     allowed = tuple(k.name for k in kinds.IXL_PEERS if k.link == typ)

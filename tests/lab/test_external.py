@@ -292,3 +292,15 @@ def test_good_external_entries_load(tmp_path: Path) -> None:
     assert atc is not None and atc.serial == "rfc2217://10.0.0.2:4000" and atc.rails
     assert lab.devices["ctc"].external is not None
     assert lab.devices["ctc"].external.address == ("10.0.0.5", 6000)
+
+
+def test_a_link_entry_is_declared_a_misspelt_key_refused_with_its_line(tmp_path: Path) -> None:
+    """`links:` entries have a declared shape: a key no reader knows (here `tapp`) is refused,
+    not silently ignored, naming the key path and its line."""
+    path = write_lab(tmp_path, "misspelt", "  ixl18: {kind: ixl, station: 18}\n  atc18: {kind: atc, station: 18}\n",
+                     "  - {name: st18-atc, type: type1, a: ixl18, b: atc18,\n     tapp: false}\n")  # fmt: skip
+    with pytest.raises(ConfigError) as err:
+        load_lab(path)
+    line = path.read_text(encoding="utf-8").splitlines().index("     tapp: false}") + 1
+    assert err.value.place == "links[0].tapp"
+    assert err.value.problem == f"unknown key (line {line})", str(err.value)
