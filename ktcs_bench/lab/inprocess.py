@@ -415,6 +415,9 @@ class InProcessLab:
         ixls = [n for n in self.objects if self.topology.devices[n].kind == kinds.IXL]
         for name in [*ixls, *[n for n in reversed(self.objects) if n not in ixls]]:
             await self.kill(name)
+        # the taps close their capture files as they go (each flushes its own); the loop's
+        # periodic flush steps on while they do and must not reach a closed one
+        self._flushers.clear()
         for tap in self.taps.values():
             await tap.close_here()
         self._unserve()

@@ -17,6 +17,7 @@ from typing import Any
 import pytest
 
 from ktcs_bench.errors import UsageError
+from ktcs_bench.lab import inprocess
 from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.lab.inprocess import InProcessLab
 from ktcs_bench.station.loader import load_line
@@ -354,3 +355,19 @@ def test_lab_up_in_process_serves_status_ctc_and_taps_on_real_sockets(
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_the_periodic_flush_never_reaches_a_capture_the_lab_has_closed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The files are flushed between the loop's steps; while the lab winds down its taps close
+    their captures one by one and the loop steps on. With a flush at every step (period 0) a
+    flush of a closed capture would end the run with `ValueError: flush of closed file`."""
+    monkeypatch.setattr(inprocess, "FLUSH_EVERY", 0.0)
+
+    async def main(lab: InProcessLab) -> None:
+        await until(lab, "every station in center mode, every link up", lambda: all_up(lab))
+
+    run(main, out=tmp_path)
+    assert (tmp_path / "summary.json").is_file()
+    assert all(p.stat().st_size > 0 for p in (tmp_path / "captures").iterdir())
