@@ -62,6 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--station", type=positive(int), help="station number (sizes the chart; ctc: our IDENT)"
     )
     p.add_argument("--peer", choices=kinds.TYPE1_ROLES, default=kinds.ATC,
+                   type=lambda word: kinds.link_role(word) or word,  # trackside: its role, io
                    help="--role ixl on a serial line: which of its links this is")  # fmt: skip
     p.add_argument("--codes", type=positive(int), help="codes in the device's transmit chart (else from "
                    "--station and the lab's charts)")  # fmt: skip

@@ -16,8 +16,8 @@ DESCRIPTION = """\
 Run one emulated device as its own process. It prints one JSON line when it is ready (its control
 port, the pty paths it made, the address it listens on) and logs to stderr.
 
-ENDPOINT forms (--link PEER=ENDPOINT; PEER is a role: ctc, ixl, atc, io, rails, or a device name
-from the lab file):
+ENDPOINT forms (--link PEER=ENDPOINT; PEER is a role: ctc, ixl, atc, io (the trackside: `trackside`
+too), rails, or a device name from the lab file):
   /dev/ttyUSB0, loop://, socket://H:P, rfc2217://H:P   a serial device or any pyserial URL (Type I)
   pty                                                  make a pty pair here, print the path
   tcp://HOST:PORT                                      connect (Type II to the CTC, the rails)
