@@ -23,6 +23,10 @@ from ktcs_bench.messages import (
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport import jsonlines, net
 
+OCCUPANCY_ROLES = (*(k.name for k in kinds.KINDS.values() if k.rails and k.station), "observer")
+"""Who on the rails is told the occupancy: the station devices on them (the ATC, the trackside),
+and observers."""
+
 
 class TrackCircuitDevice(Device):
     kind = kinds.TRACKCIRCUIT
@@ -51,7 +55,7 @@ class TrackCircuitDevice(Device):
         if changes:
             msg = {"occupancy": self._occ(changes)}
             for p in self.peers:
-                if p.info.get("role") in (kinds.ATC, kinds.TRACKSIDE, "observer"):
+                if p.info.get("role") in OCCUPANCY_ROLES:
                     p.send(msg)
             self.note("occupancy", ", ".join(f"{k}={int(v)}" for k, v in sorted(changes.items())))
         self._codes_to_trains()
