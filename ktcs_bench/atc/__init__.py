@@ -5,12 +5,12 @@ each train's antenna. `WaysideAtc(line, station)`: occupancy + IXL route state -
 for the IXL and an `AtcCode` (speed code, target speed, gradient, target distance) per track
 circuit; the most restrictive code everywhere while its IXL link is in communication error.
 
-Must not import the station-code files (`charts`), the links (`type1`, `binding`, `transport`),
+Must not import the station-code files (`chart_files`), the links (`type1`, `binding`, `transport`),
 `emulator`, `ctc` or `console`; no socket, pty or clock: the ATC device binds it to its links.
 """
 
-from ktcs_bench.atc.codes import AtcCode, most_restrictive
 from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
+from ktcs_bench.atc.track_codes import AtcCode, most_restrictive
 from ktcs_bench.atc.wayside import AtcEvent, AtcOutput, WaysideAtc
 
 __all__ = [

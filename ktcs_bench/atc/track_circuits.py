@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from ktcs_bench.atc.codes import AtcCode
+from ktcs_bench.atc.track_codes import AtcCode
 from ktcs_bench.station.model import Line, TrackCircuit
 
 FAULTS = ("failed_occupied", "failed_clear", "no_code")

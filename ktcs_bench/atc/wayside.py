@@ -32,11 +32,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ktcs_bench.atc.codes import AtcCode, braking_speed_kmh, most_restrictive, quantise
-from ktcs_bench.codes import names as n
-from ktcs_bench.codes.names import Function as F
-from ktcs_bench.codes.stations import StationCodes
+from ktcs_bench.atc.track_codes import AtcCode, braking_speed_kmh, most_restrictive, quantise
 from ktcs_bench.station.model import Direction, Interval, Line, Route, TrackCircuit
+from ktcs_bench.station_codes import names as n
+from ktcs_bench.station_codes.names import Function as F
+from ktcs_bench.station_codes.stations import StationCodes
 
 MAX_ROUTES_AHEAD = 4  # a path never chains more routes than a station has in a row
 

@@ -7,9 +7,9 @@ application). The core's changes arrive already differenced (the core's one diff
 sent) and a full state is read from the core's own table: the binding neither compares again nor
 keeps a second copy.
 Sans-I/O: fed names and numbers, returns items to send; used by the Type I code port
-(`emulator.codeport`), the IXL's Type II side (`emulator.ixl`, `console.demo`), and by virtual
+(`emulator.code_link`), the IXL's Type II side (`emulator.ixl`, `console.demo`), and by virtual
 links alike.
-Imports only `codes`. Must not import asyncio, the cores (`ixl`, `field`,
+Imports only `station_codes`. Must not import asyncio, the cores (`ixl`, `field`,
 `atc`: they plug in by the names they give and take), the link protocols (`type1`, `type2`),
 `transport`, `emulator`, `ctc` or `console`.
 """

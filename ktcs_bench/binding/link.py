@@ -1,8 +1,8 @@
 """A core's side of one link: its codes by name one way, the link's code numbers the other.
 
 `LinkBinding(tx, rx, state)` holds the chart the core sends (`tx`), the chart it reads (`rx`) --
-a station device's pair is `codes.link_charts(view, link)` -- and where the core's state of the tx
-codes is read (`state()`: the core's own table, so there is one).
+a station device's pair is `station_codes.link_charts(view, link)` -- and where the core's state
+of the tx codes is read (`state()`: the core's own table, so there is one).
 Out: `send(changes)` takes the core's code changes -- already the one difference against what was
 sent, which the core works out -- and returns them as (number, state) items; while the link is
 down nothing is returned and what changed is owed: `link_up()` returns it, `link_down()` owes
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
-from ktcs_bench.codes.chart import CodeChart
+from ktcs_bench.station_codes.chart import CodeChart
 
 StateOf = Callable[[], Mapping[str, int]]
 

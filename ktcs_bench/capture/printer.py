@@ -16,7 +16,7 @@ from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.codec.render import DIM, RESET, YELLOW, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
-from ktcs_bench.codes.chart import CodeChart
+from ktcs_bench.station_codes.chart import CodeChart
 
 
 def print_json_line(obj: dict[str, Any], stream: TextIO = sys.stdout) -> None:

@@ -1,7 +1,8 @@
 """`ktcs-bench chart generate|check`: code charts from station data, and their consistency check.
 
-Thin front over `ktcs_bench.charts` (`files.generate`, `check.check_charts`). `check` exits 1 when a chart disagrees with the
-station data or the emulators (unknown, duplicate, missing or misordered codes), 0 when all agree.
+Thin front over `ktcs_bench.chart_files` (`files.generate`, `check.check_charts`). `check` exits 1
+when a chart disagrees with the station data or the emulators (unknown, duplicate, missing or
+misordered codes), 0 when all agree.
 """
 
 from __future__ import annotations
@@ -10,8 +11,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from ktcs_bench.charts.check import check_charts
-from ktcs_bench.charts.files import generate
+from ktcs_bench.chart_files.check import check_charts
+from ktcs_bench.chart_files.files import generate
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.station.loader import load_line

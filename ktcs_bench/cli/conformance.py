@@ -126,8 +126,8 @@ def _codes(args: argparse.Namespace, protocol: str) -> int | None:
         return int(args.codes)
     if args.station is None:
         return None
-    from ktcs_bench.codes.stations import station_chart
     from ktcs_bench.lab.topology import load_lab, resolve_lab_path
+    from ktcs_bench.station_codes.stations import station_chart
 
     line = load_lab(resolve_lab_path(args.lab)).load_line()
     if args.station not in line.stations:

@@ -17,15 +17,15 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-from ktcs_bench.charts.files import load_chart
+from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.codec.frame import Frame, Record
 from ktcs_bench.codec.hextext import TEXT_WINDOW, Chunk, HexTextParser, TextWatch, text_encoding
 from ktcs_bench.codec.profile import FrameProfile, get_profile, profile_names
 from ktcs_bench.codec.render import BOLD, RESET, json_line, payload, to_json, to_text
 from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.codec.vote import DECODE_SLICE, ProfileVote
-from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.errors import UsageError
+from ktcs_bench.station_codes.chart import CodeChart
 
 HELP = "decode hex frames (console captures, hex dumps, hex logs) into fields and CRC verdicts"
 DESCRIPTION = """\

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ktcs_bench.charts.files import load_chart
+from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.codec.profile import FrameProfile, get_profile, load_profiles, shipped_profiles
 from ktcs_bench.dissector import PLUGIN_NAME, generate, personal_lua_plugins
 from ktcs_bench.errors import UsageError

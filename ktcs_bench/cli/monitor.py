@@ -13,7 +13,7 @@ import serial
 
 from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
 from ktcs_bench.capture.printer import FramePrinter
-from ktcs_bench.charts.files import load_chart
+from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.errors import PeerError, UsageError

@@ -18,7 +18,7 @@ from ktcs_bench.capture import (
     reverse_direction,
 )
 from ktcs_bench.capture.printer import FramePrinter
-from ktcs_bench.charts.files import load_chart
+from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.errors import UsageError
 from ktcs_bench.replay import (

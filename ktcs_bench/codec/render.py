@@ -12,7 +12,7 @@ from typing import Any, Literal
 from ktcs_bench.codec.frame import Frame, Garbage, Record
 from ktcs_bench.codec.opcodes import Opcode, PayloadError
 from ktcs_bench.codec.profile import FrameProfile
-from ktcs_bench.codes.chart import CodeChart
+from ktcs_bench.station_codes.chart import CodeChart
 
 GREEN, RED, YELLOW, DIM, BOLD, RESET = (
     "\x1b[32m", "\x1b[31m", "\x1b[33m", "\x1b[2m", "\x1b[1m", "\x1b[0m"

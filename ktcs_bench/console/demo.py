@@ -15,12 +15,12 @@ import asyncio
 from dataclasses import replace
 
 from ktcs_bench.binding import ControlLink
-from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ixl.interlocking import IxlEvent
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station.model import Line, Station
+from ktcs_bench.station_codes.stations import link_charts
 from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport.ixl_client import IxlClient
 

@@ -57,7 +57,6 @@ from ktcs_bench.codec.frame import Frame
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.codec.render import to_text
 from ktcs_bench.codec.stream import StreamDecoder
-from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.console.diagram import build
 from ktcs_bench.console.gate import Gate, Page
 from ktcs_bench.console.trains import EndpointTrains, TrainPosition, TrainSource
@@ -66,6 +65,7 @@ from ktcs_bench.ctc.log import command_words
 from ktcs_bench.ctc.model import Action
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.runtime import client_token
+from ktcs_bench.station_codes.chart import CodeChart
 from ktcs_bench.tap.registry import resolve_tap
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.transport import jsonlines

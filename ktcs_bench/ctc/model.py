@@ -2,7 +2,7 @@
 commands as control codes (pure: no sockets, no clock).
 
 `StationModel` pairs one station's data with its two Type II code charts, both derived from the
-station data (`codes.stations.station_chart`, as the IXL derives its own), and reads an
+station data (`station_codes.stations.station_chart`, as the IXL derives its own), and reads an
 indication table once (`read`) into mode, routes, track circuits, points, signals and traffic
 directions. Two renderings of that one reading: `picture` (what the web console draws) and
 `summary` (what `ktcs-bench ctc show` and `lab status` print). Operator commands become `Action`s:
@@ -20,13 +20,13 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from ktcs_bench.codes import names as n
-from ktcs_bench.codes.chart import CodeChart
-from ktcs_bench.codes.stations import station_chart
 from ktcs_bench.ctc.tables import IndicationTable, IndicationTables
 from ktcs_bench.errors import UsageError
 from ktcs_bench.messages import Control, Mode, OperatorCommand, Point, Route, Signal
 from ktcs_bench.station.model import Line, Station, StationView
+from ktcs_bench.station_codes import names as n
+from ktcs_bench.station_codes.chart import CodeChart
+from ktcs_bench.station_codes.stations import station_chart
 
 UNKNOWN = "unknown"  # what the CTC does not know now (link down, no full state yet, no indication)
 # a point's indications, in the order they are read: the first one on gives its position

@@ -22,8 +22,8 @@ from ktcs_bench.codec.crc import CrcSpec
 from ktcs_bench.codec.opcodes import FieldSpec, Opcode
 from ktcs_bench.codec.profile import DEFAULT_PROFILE, FrameProfile
 from ktcs_bench.codec.stream import GARBAGE_HOLD
-from ktcs_bench.codes.chart import CodeChart
 from ktcs_bench.errors import UsageError
+from ktcs_bench.station_codes.chart import CodeChart
 
 DATA_MARK = "-- @KTCS_DATA@"
 PLUGIN_NAME = "ktcs.lua"

@@ -24,8 +24,7 @@ from typing import Any, ClassVar, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench.binding import LinkBinding
-from ktcs_bench.codes.stations import link_charts
-from ktcs_bench.emulator.codeport import CodePort
+from ktcs_bench.emulator.code_link import CodePort
 from ktcs_bench.emulator.rails import RailsClient
 from ktcs_bench.messages import (
     DEVICE,
@@ -43,6 +42,7 @@ from ktcs_bench.messages import (
 )
 from ktcs_bench.runtime import server_token
 from ktcs_bench.station.model import Line, StationView
+from ktcs_bench.station_codes.stations import link_charts
 from ktcs_bench.timed import Out, Sink, Timed
 from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport import jsonlines, net

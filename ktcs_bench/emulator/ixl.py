@@ -12,9 +12,8 @@ from typing import Any
 
 from ktcs_bench import kinds
 from ktcs_bench.binding import ControlLink
-from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.emulator import variants
-from ktcs_bench.emulator.codeport import CodePort
+from ktcs_bench.emulator.code_link import CodePort
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.ixl.interlocking import LINKS, Interlocking, IxlOutput
 from ktcs_bench.ixl.modes import Mode
@@ -30,6 +29,7 @@ from ktcs_bench.messages import (
     Refused,
 )
 from ktcs_bench.station.model import Line
+from ktcs_bench.station_codes.stations import link_charts
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.transport.ixl_client import IxlClient
 from ktcs_bench.type1 import LinkConfig

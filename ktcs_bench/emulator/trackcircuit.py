@@ -7,8 +7,8 @@ from __future__ import annotations
 from typing import Any
 
 from ktcs_bench import kinds
-from ktcs_bench.atc.codes import AtcCode
 from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
+from ktcs_bench.atc.track_codes import AtcCode
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.messages import (
     TRACK_CIRCUITS,

@@ -4,7 +4,7 @@
 occupancy from the track-circuit model, runs point throws against `now`, takes injected faults,
 and reports the IO->IXL chart codes (SNI/SRN/SRI/SNR, LPS/LFI, TC relays) as changes.
 
-Must not import the station-code files (`charts`), the links (`type1`, `binding`, `transport`),
+Must not import the station-code files (`chart_files`), the links (`type1`, `binding`, `transport`),
 `emulator` or the IXL; no socket, pty or clock: the trackside device binds it to its links.
 """
 

@@ -15,15 +15,15 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ktcs_bench.codes import names as n
-from ktcs_bench.codes.names import Function as F
-from ktcs_bench.codes.stations import StationCodes
 from ktcs_bench.field import points as point_faults
 from ktcs_bench.field import relays as relay_faults
 from ktcs_bench.field.points import PointMachine
 from ktcs_bench.field.relays import TrackRelay
 from ktcs_bench.field.signals import SignalHead
 from ktcs_bench.station.model import StationView
+from ktcs_bench.station_codes import names as n
+from ktcs_bench.station_codes.names import Function as F
+from ktcs_bench.station_codes.stations import StationCodes
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,7 +5,7 @@ indication, ATC and trackside code changes, control results, events and its next
 Modules: `modes` (center/local, CMR), `routes` (locking and release), `points`, `signals`,
 `reasons` (CONTROL_RESULT reason numbers), `interlocking` (the station as a whole).
 
-Must not import the station-code files (`charts`), the links (`type1`, `type2`, `binding`,
+Must not import the station-code files (`chart_files`), the links (`type1`, `type2`, `binding`,
 `transport`), `emulator`, `ctc` or `console`; no socket, pty or clock (`timed` drives it).
 """
 

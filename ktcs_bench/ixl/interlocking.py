@@ -32,9 +32,6 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from ktcs_bench import kinds
-from ktcs_bench.codes import names as n
-from ktcs_bench.codes.names import Function as F
-from ktcs_bench.codes.stations import StationCodes
 from ktcs_bench.ixl.modes import Mode, ModeControl
 from ktcs_bench.ixl.points import BITS, Detection, PointState
 from ktcs_bench.ixl.reasons import Reason
@@ -42,6 +39,9 @@ from ktcs_bench.ixl.routes import RouteState, RouteStatus
 from ktcs_bench.ixl.signals import SignalState, downgrade, fit
 from ktcs_bench.station.loader import onward
 from ktcs_bench.station.model import Direction, Interval, PointPosition, Route, StationView
+from ktcs_bench.station_codes import names as n
+from ktcs_bench.station_codes.names import Function as F
+from ktcs_bench.station_codes.stations import StationCodes
 
 LINKS = kinds.TYPE1_ROLES
 """The Type I links, by peer role: the ATC's and the trackside's."""

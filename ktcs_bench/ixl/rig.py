@@ -14,11 +14,11 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 
 from ktcs_bench import kinds
-from ktcs_bench.codes import names as n
 from ktcs_bench.field.trackside import Trackside
 from ktcs_bench.ixl.interlocking import ControlResult, Interlocking, IxlEvent, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.station.model import StationView
+from ktcs_bench.station_codes import names as n
 from ktcs_bench.timed.virtual import VirtualClock
 
 

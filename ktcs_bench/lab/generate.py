@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ktcs_bench.charts.files import generate
+from ktcs_bench.chart_files.files import generate
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.generate import (
     CHARTS_DIR,

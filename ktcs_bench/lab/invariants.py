@@ -33,10 +33,10 @@ from typing import Any
 
 from ktcs_bench import kinds
 from ktcs_bench import messages as msg
-from ktcs_bench.codes.stations import station_chart
 from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.messages import Message
 from ktcs_bench.station.model import Line, TrackCircuit
+from ktcs_bench.station_codes.stations import station_chart
 
 # Route states in which a route's locked elements protect a train on them: a route being set is
 # still throwing its points; an idle route holds nothing.

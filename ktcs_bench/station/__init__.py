@@ -3,8 +3,8 @@
 `load_line()` reads `emulators/lines/reference.yaml` and the station files it names; every error
 is a `ConfigError` naming the file, the key path and the problem.
 
-Must not import anything built on station data (`codes`, `charts`, the cores, `lab`): it is the
-bottom of the signalling layers.
+Must not import anything built on station data (`station_codes`, `chart_files`, the cores,
+`lab`): it is the bottom of the signalling layers.
 """
 
 from ktcs_bench.station.loader import default_line_path, load_line, load_station

@@ -13,13 +13,13 @@ from typing import Any
 
 from ktcs_bench import kinds
 from ktcs_bench import messages as msg
-from ktcs_bench.codes.chart import CodeChart
-from ktcs_bench.codes.names import Function
-from ktcs_bench.codes.stations import StationCodes, station_chart
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.state import lab_dir, running_labs
 from ktcs_bench.lab.topology import load_lab
 from ktcs_bench.station.model import Line
+from ktcs_bench.station_codes.chart import CodeChart
+from ktcs_bench.station_codes.names import Function
+from ktcs_bench.station_codes.stations import StationCodes, station_chart
 from ktcs_bench.transport import jsonlines
 
 ASK_TIMEOUT = 5.0

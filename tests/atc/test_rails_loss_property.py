@@ -25,12 +25,12 @@ from hypothesis.stateful import (
 
 from ktcs_bench.atc import WaysideAtc
 from ktcs_bench.atc.wayside import AtcOutput
-from ktcs_bench.codes import names as n
 from ktcs_bench.field import Trackside
 from ktcs_bench.field.trackside import FieldOutput
 from ktcs_bench.ixl import Interlocking, Mode
 from ktcs_bench.ixl.interlocking import IxlOutput
 from ktcs_bench.station import load_line
+from ktcs_bench.station_codes import names as n
 
 LINE = load_line()
 ALL_TCS = [t.name for t in LINE.all_track_circuits()]

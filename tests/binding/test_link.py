@@ -7,10 +7,10 @@ from __future__ import annotations
 import pytest
 
 from ktcs_bench.binding import ControlLink, LinkBinding
-from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station import Line, load_line
+from ktcs_bench.station_codes.stations import link_charts
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 
-from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.console.diagram import Scale, build, lane_order
 from ktcs_bench.console.trains import EndpointTrains, TrainPosition
 from ktcs_bench.ctc.model import CtcModel
@@ -18,6 +17,7 @@ from ktcs_bench.errors import UsageError
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station.loader import load_line
+from ktcs_bench.station_codes.stations import link_charts
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import TrainConfig
 from tests.console.conftest import make_train

@@ -102,7 +102,7 @@ IO_AND_CLOCKS = {"asyncio", "time", "socket", "serial", "threading", "select", "
                  "subprocess", "signal"}  # fmt: skip
 """What a sans-I/O core must never import, even through another module: I/O and clocks."""
 
-CORES = ("codec", "codes", "binding", "type1", "type2", "faults", "station", "ixl", "field",
+CORES = ("codec", "station_codes", "binding", "type1", "type2", "faults", "station", "ixl", "field",
          "atc", "train", "scenario",
          "timed", "tap.core", "tap.control", "tap.recorder", "ctc.model", "ctc.tables",
          "ctc.log", "ctc.ars", "ctc.describer")  # fmt: skip

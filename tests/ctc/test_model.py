@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import pytest
 
-from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ctc.log import CommandLog, command_words
 from ktcs_bench.ctc.model import UNKNOWN, CtcModel
 from ktcs_bench.ctc.tables import IndicationTable
@@ -14,6 +13,7 @@ from ktcs_bench.errors import UsageError
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station.loader import load_line
+from ktcs_bench.station_codes.stations import link_charts
 
 LINE = load_line()
 

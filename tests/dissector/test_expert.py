@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ktcs_bench.capture import CaptureRecord
-from ktcs_bench.charts.files import load_chart
+from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.datafiles import data_dir
 
 from .harness import make_dissector, run_tshark, tshark_json, write_pcapng

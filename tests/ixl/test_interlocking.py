@@ -6,11 +6,11 @@ import pytest
 
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.binding import ControlLink
-from ktcs_bench.codes import names as n
-from ktcs_bench.codes.stations import link_charts
 from ktcs_bench.ixl import Interlocking, Mode, Reason, RouteStatus
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station import Line, load_line
+from ktcs_bench.station_codes import names as n
+from ktcs_bench.station_codes.stations import link_charts
 
 
 @pytest.fixture(scope="module")

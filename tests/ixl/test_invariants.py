@@ -36,13 +36,13 @@ from hypothesis.stateful import (
     run_state_machine_as_test,
 )
 
-from ktcs_bench.codes import names as n
-from ktcs_bench.codes.names import CodeName, Function
-from ktcs_bench.codes.stations import StationCodes
 from ktcs_bench.ixl import Interlocking, Mode, RouteStatus
 from ktcs_bench.ixl.interlocking import IxlOutput
 from ktcs_bench.station import load_line
 from ktcs_bench.station.model import Route
+from ktcs_bench.station_codes import names as n
+from ktcs_bench.station_codes.names import CodeName, Function
+from ktcs_bench.station_codes.stations import StationCodes
 
 LINE = load_line()
 STEPS = {"count": 0}

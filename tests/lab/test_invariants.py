@@ -13,7 +13,6 @@ from pathlib import Path
 
 import pytest
 
-from ktcs_bench.codes.stations import station_chart
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.lab.invariants import (
     Geometry,
@@ -30,6 +29,7 @@ from ktcs_bench.lab.invariants import (
 )
 from ktcs_bench.lab.safety import Replay, load_replay
 from ktcs_bench.station import load_line
+from ktcs_bench.station_codes.stations import station_chart
 
 LINE = load_line()
 GEO = Geometry(LINE)

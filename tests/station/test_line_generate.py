@@ -12,7 +12,7 @@ import yaml
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from ktcs_bench.charts.check import check_charts
+from ktcs_bench.chart_files.check import check_charts
 from ktcs_bench.cli.main import main
 from ktcs_bench.lab.generate import write_line
 from ktcs_bench.lab.topology import load_lab

@@ -16,7 +16,7 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ktcs_bench.atc.codes import braking_speed_kmh, quantise
+from ktcs_bench.atc.track_codes import braking_speed_kmh, quantise
 from ktcs_bench.station import load_line
 from ktcs_bench.train.ato import sbi_margin
 from ktcs_bench.train.deceleration import GradientProfile

@@ -11,9 +11,9 @@ import asyncio
 
 from ktcs_bench.binding import LinkBinding
 from ktcs_bench.codec import Frame, StreamDecoder
-from ktcs_bench.codes.stations import link_charts
-from ktcs_bench.emulator.codeport import CodePort
+from ktcs_bench.emulator.code_link import CodePort
 from ktcs_bench.station import load_line
+from ktcs_bench.station_codes.stations import link_charts
 from ktcs_bench.transport import SerialTransport
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.type1 import LinkConfig

@@ -5,10 +5,16 @@ from __future__ import annotations
 
 import pytest
 
-from ktcs_bench.codes import names as n
-from ktcs_bench.codes.names import CodeName, Function
-from ktcs_bench.codes.stations import LINKS, StationCodes, link_charts, station_chart, totalisers
 from ktcs_bench.station import Line, load_line
+from ktcs_bench.station_codes import names as n
+from ktcs_bench.station_codes.names import CodeName, Function
+from ktcs_bench.station_codes.stations import (
+    LINKS,
+    StationCodes,
+    link_charts,
+    station_chart,
+    totalisers,
+)
 from tests.ctc.test_layers import package_imports, reaches
 
 
@@ -77,8 +83,8 @@ def test_link_charts_are_the_link_and_its_reverse(line: Line) -> None:
 @pytest.mark.parametrize(
     ("package", "only"),
     [
-        ("codes", {"station"}),
-        ("binding", {"codes", "station"}),
+        ("station_codes", {"station"}),
+        ("binding", {"station_codes", "station"}),
     ],
 )
 def test_the_code_layer_and_the_binding_import_only_what_is_under_them(
@@ -90,11 +96,13 @@ def test_the_code_layer_and_the_binding_import_only_what_is_under_them(
 
 
 def test_station_data_reaches_nothing_built_on_it() -> None:
-    assert not reaches(package_imports(), "station") & {"codes", "charts", "lab", "binding"}
+    above = {"station_codes", "chart_files", "lab", "binding"}
+    assert not reaches(package_imports(), "station") & above
 
 
 @pytest.mark.parametrize("core", ["ixl", "field", "atc"])
 def test_the_cores_never_reach_the_chart_files_links_or_processes(core: str) -> None:
     reached = reaches(package_imports(), core)
-    assert "codes" in reached
-    assert not reached & {"charts", "binding", "emulator", "type1", "type2", "transport", "tap"}
+    assert "station_codes" in reached
+    links = {"type1", "type2", "transport", "tap"}
+    assert not reached & ({"chart_files", "binding", "emulator"} | links)

@@ -2,7 +2,7 @@
 
 A code's number is its 1-based position in the chart (Table 2 "Sequence"); Type I ALL_INFO byte
 k-1 carries code k, a Type II item names code k by k. The charts a station's links carry are
-derived from its data (`codes.stations`); `charts.files` reads and writes them as YAML.
+derived from its data (`station_codes.stations`); `chart_files.files` reads and writes them as YAML.
 """
 
 from __future__ import annotations

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from ktcs_bench.charts.files import load_chart
+from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.cli.main import main
-from ktcs_bench.codes.stations import LINKS, build_specs, station_chart
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.station import load_line
+from ktcs_bench.station_codes.stations import LINKS, build_specs, station_chart
 
 CHARTS = data_dir("code_charts")
 

@@ -18,11 +18,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ktcs_bench.codes.chart import Code, CodeChart
-from ktcs_bench.codes.stations import ONE_ZERO, ChartSpec, build_specs
 from ktcs_bench.datafiles import load_mapping
 from ktcs_bench.errors import ConfigError, excerpt
 from ktcs_bench.station.model import Line
+from ktcs_bench.station_codes.chart import Code, CodeChart
+from ktcs_bench.station_codes.stations import ONE_ZERO, ChartSpec, build_specs
 
 
 def load_chart(path: str | Path) -> CodeChart:

@@ -14,10 +14,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ktcs_bench import kinds
-from ktcs_bench.codes.chart import Code, CodeChart
-from ktcs_bench.codes.names import CodeName
-from ktcs_bench.codes.names import Function as F
 from ktcs_bench.station.model import Line, StationView
+from ktcs_bench.station_codes.chart import Code, CodeChart
+from ktcs_bench.station_codes.names import CodeName
+from ktcs_bench.station_codes.names import Function as F
 
 # (link, protocol, direction): the links of a station, each of the IXL's peers each way
 # (`kinds.charts`), and the file stem suffix of each chart

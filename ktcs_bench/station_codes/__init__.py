@@ -5,13 +5,13 @@ the code chart (`chart`: numbered codes of one link and direction), and what sta
 (`stations`: each station link's chart, `StationCodes.parse_code` for what a name means, the TTC
 totalisers). Pure: no files, no links, no clock.
 Imports only station data (`ktcs_bench.station.model`). Must not import the cores (`ixl`,
-`field`, `atc`), `charts` (the YAML files and `chart check`, built on this), the links (`type1`,
-`type2`, `binding`, `transport`), `emulator`, `ctc` or `console`.
+`field`, `atc`), `chart_files` (the YAML files and `chart check`, built on this), the links
+(`type1`, `type2`, `binding`, `transport`), `emulator`, `ctc` or `console`.
 """
 
-from ktcs_bench.codes.chart import Code, CodeChart
-from ktcs_bench.codes.names import CodeName, Function
-from ktcs_bench.codes.stations import (
+from ktcs_bench.station_codes.chart import Code, CodeChart
+from ktcs_bench.station_codes.names import CodeName, Function
+from ktcs_bench.station_codes.stations import (
     LINKS,
     ChartSpec,
     StationCodes,

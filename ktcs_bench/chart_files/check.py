@@ -1,11 +1,11 @@
 """`chart check`: the chart files against the station data, and against what the emulators send.
 
 Against the data: every station link has its file, and each file's header and codes (names,
-types, order) are what `codes.stations` derives. Against the emulators: each station's cores (the
-interlocking, the trackside, the wayside ATC, and the CTC's model) are built and bound to their
-links as the emulator processes bind them (`binding.LinkBinding`), and every code a link carries
--- the number each end puts on the wire or reads from it -- must be the file's code of that
-number; and every code a core gives or takes must be one its link carries.
+types, order) are what `station_codes.stations` derives. Against the emulators: each station's
+cores (the interlocking, the trackside, the wayside ATC, and the CTC's model) are built and bound
+to their links as the emulator processes bind them (`binding.LinkBinding`), and every code a link
+carries -- the number each end puts on the wire or reads from it -- must be the file's code of
+that number; and every code a core gives or takes must be one its link carries.
 """
 
 from __future__ import annotations
@@ -18,14 +18,14 @@ from pathlib import Path
 from ktcs_bench import kinds
 from ktcs_bench.atc.wayside import WaysideAtc
 from ktcs_bench.binding import LinkBinding
-from ktcs_bench.charts.files import load_chart
-from ktcs_bench.codes.chart import CodeChart
-from ktcs_bench.codes.stations import ChartSpec, build_specs, link_charts
+from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.ctc.model import StationModel
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.field.trackside import Trackside
 from ktcs_bench.ixl.interlocking import Interlocking
 from ktcs_bench.station.model import Line
+from ktcs_bench.station_codes.chart import CodeChart
+from ktcs_bench.station_codes.stations import ChartSpec, build_specs, link_charts
 
 
 def check_charts(line: Line, chart_dir: Path, emulators: bool = True) -> list[str]:

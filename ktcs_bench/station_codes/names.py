@@ -10,8 +10,9 @@ its station already (`TC1853A`); an interval code names the interval, west stati
 their `TC` (`TTC1861A1867` over TC1861A..TC1867).
 
 `CodeName` is a name taken apart; its `text` is the name. Which names a station has, and so what a
-name means (`StationCodes.parse_code`), comes from the station data (`codes.stations`): a name
-cannot be split by reading it alone, since neither station numbers nor aspects have a fixed length.
+name means (`StationCodes.parse_code`), comes from the station data (`station_codes.stations`): a
+name cannot be split by reading it alone, since neither station numbers nor aspects have a fixed
+length.
 """
 
 from __future__ import annotations
