@@ -44,6 +44,11 @@ class Message(msgspec.Struct, tag_field="cmd", forbid_unknown_fields=True, kw_on
         return tag
 
 
+JsonObject = dict[str, object]
+"""A JSON object whose keys and values are whatever its sender put there (a rails peer's hello, as
+it said it): read it by checking each value's type."""
+
+
 # -- every device -------------------------------------------------------------------------------
 
 

@@ -561,7 +561,12 @@ class ConsoleServer:
                         detail = " ".join(
                             f"{k}={v}" for k, v in item.items() if k not in ("time", "event")
                         )
-                        t = float(item.get("time") or time.time())
+                        stamp = item.get("time")
+                        t = (
+                            float(stamp)
+                            if isinstance(stamp, (int, float)) and stamp
+                            else time.time()
+                        )
                         entries = [{"time": _clock(t), "direction": "", "ok": True,
                                     "text": f"-- {item.get('event')}: {detail}"}]  # fmt: skip
                     feed.entries.extend(entries)

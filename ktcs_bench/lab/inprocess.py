@@ -42,7 +42,8 @@ from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.runner import device_args, lab_command, start_in_order
 from ktcs_bench.lab.state import read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec, load_lab, resolve_lab_path
-from ktcs_bench.messages import Message
+from ktcs_bench.lab.view import LinkEntry
+from ktcs_bench.messages import JsonObject, Message
 from ktcs_bench.runtime import server_token, this_process
 from ktcs_bench.tap.runner import Tap
 from ktcs_bench.tap.tcp import TcpTap
@@ -366,12 +367,12 @@ class InProcessLab:
             "taps": {n: t.status() for n, t in self.taps.items()},
         }
 
-    def link_map(self) -> list[dict[str, Any]]:
-        out = []
+    def link_map(self) -> list[LinkEntry]:
+        out: list[LinkEntry] = []
         for link in self.topology.links:
-            entry: dict[str, Any] = {"link": link.name, "type": link.type, "a": link.a, "b": link.b,
-                                     "a_end": self.endpoints.get(link.a, {}).get(
-                                         self.topology.peer_role(link, link.a), "")}  # fmt: skip
+            a_end = self.endpoints.get(link.a, {}).get(self.topology.peer_role(link, link.a), "")
+            entry: LinkEntry = {"link": link.name, "type": link.type, "a": link.a, "b": link.b,
+                                "a_end": a_end}  # fmt: skip
             tap = self.taps.get(link.name)
             if tap is not None and tap.control_address:
                 entry["tap"] = f"{tap.control_address[0]}:{tap.control_address[1]}"
@@ -531,7 +532,7 @@ def _as_on_the_wire(answer: dict[str, Any]) -> dict[str, Any]:
 class _NoPeer:
     """A device command from the lab itself, not from a connection."""
 
-    info: dict[str, Any] = {}
+    info: JsonObject = {}
     address = "in-process"
 
 

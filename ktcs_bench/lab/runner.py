@@ -30,6 +30,7 @@ from ktcs_bench.errors import KtcsError, UsageError
 from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
+from ktcs_bench.lab.view import LinkEntry
 from ktcs_bench.runtime import private_dir, server_token, this_process
 from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.runner import Tap
@@ -194,7 +195,7 @@ class LabCommands(Protocol):
 
     async def status(self) -> dict[str, Any]: ...
 
-    def link_map(self) -> list[dict[str, Any]]: ...
+    def link_map(self) -> list[LinkEntry]: ...
 
     async def restart(self, name: str) -> None: ...
 
@@ -470,20 +471,20 @@ class LabRunner:
             return summary.get("link") == "up"
         return bool(taps.get(link.name, {}).get("connected"))
 
-    def link_map(self) -> list[dict[str, Any]]:
-        out = []
+    def link_map(self) -> list[LinkEntry]:
+        out: list[LinkEntry] = []
         for link in self.lab.links:
             tap = self.taps.get(link.name)
-            entry: dict[str, Any] = {"link": link.name, "type": link.type, "a": link.a, "b": link.b}
+            entry: LinkEntry = {"link": link.name, "type": link.type, "a": link.a, "b": link.b}
             if isinstance(tap, PtyTap):
-                entry.update(a_end=tap.paths[link.a],
-                             b_end=tap.paths.get(link.b) or tap.external[link.b])  # fmt: skip
+                entry["a_end"] = tap.paths[link.a]
+                entry["b_end"] = tap.paths.get(link.b) or tap.external[link.b]
             elif isinstance(tap, TcpTap) and tap.listen_address:
-                entry.update(a_end=f"tcp://{tap.listen_address[0]}:{tap.listen_address[1]}",
-                             b_end=f"tcp://{tap.target[0]}:{tap.target[1]}")  # fmt: skip
+                entry["a_end"] = f"tcp://{tap.listen_address[0]}:{tap.listen_address[1]}"
+                entry["b_end"] = f"tcp://{tap.target[0]}:{tap.target[1]}"
             else:
-                entry.update(
-                    a_end=self.endpoints.get(link.a, {}).get(self.lab.peer_role(link, link.a), "")
+                entry["a_end"] = self.endpoints.get(link.a, {}).get(
+                    self.lab.peer_role(link, link.a), ""
                 )
             external = [n for n in (link.a, link.b) if self.lab.devices[n].external is not None]
             if external:

@@ -4,7 +4,7 @@ platform stops it made -- in colour on a terminal."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Required, TypedDict
 
 from ktcs_bench import kinds
 
@@ -20,7 +20,22 @@ def _c(text: str, colour: str, on: bool) -> str:
     return f"{colour}{text}{RESET}" if on else text
 
 
-def link_map_text(entries: list[dict[str, Any]], colour: bool) -> str:
+class LinkEntry(TypedDict, total=False):
+    """One row of a lab's link map (`{"cmd": "map"}`): a link, its ends and tap, or a device's
+    listening port or console (no `a`, `b`)."""
+
+    link: Required[str]
+    type: Required[str]
+    a: str
+    b: str
+    a_end: str
+    b_end: str
+    tap: str
+    capture: str
+    external: list[str]
+
+
+def link_map_text(entries: list[LinkEntry], colour: bool) -> str:
     rows = [_c("link map", BOLD, colour)]
     for e in entries:
         ends = f"{e.get('a', '')} {e.get('a_end', '')}"

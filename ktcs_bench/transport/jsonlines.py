@@ -20,7 +20,7 @@ from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
 from ktcs_bench.errors import PeerError
-from ktcs_bench.messages import Message, encode
+from ktcs_bench.messages import JsonObject, Message, encode
 from ktcs_bench.runtime import client_token, token_matches
 from ktcs_bench.transport import memory, net
 from ktcs_bench.transport.tcp import open_tcp
@@ -29,7 +29,9 @@ log = logging.getLogger("ktcs_bench.control")
 
 LIMIT = 1 << 20  # one line at most 1 MiB: a full status of a large station is a few kB
 
-Handler = Callable[[dict[str, Any], "Peer"], Awaitable[dict[str, Any] | None]]
+Handler = Callable[[JsonObject, "Peer"], Awaitable[Mapping[str, object] | None]]
+"""Takes each object an admitted peer sends (any JSON object: the handler checks it); its answer, if
+any, is sent back."""
 
 
 class Peer:
@@ -37,7 +39,7 @@ class Peer:
 
     def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         self.reader, self.writer = reader, writer
-        self.info: dict[str, Any] = {}
+        self.info: JsonObject = {}  # what it said it is (its hello)
         peer = writer.get_extra_info("peername")
         self.address = f"{peer[0]}:{peer[1]}" if isinstance(peer, tuple) else str(peer)
 
@@ -45,7 +47,7 @@ class Peer:
         if not self.writer.is_closing():
             self.writer.write(json.dumps(obj, separators=(",", ":")).encode() + b"\n")
 
-    async def read(self) -> dict[str, Any] | None:
+    async def read(self) -> JsonObject | None:
         """The next object; None at end of stream. Bad lines raise ValueError."""
         try:
             line = await self.reader.readline()
