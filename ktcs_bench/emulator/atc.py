@@ -4,12 +4,15 @@ Until the rails connect, and whenever their connection is lost, every track circ
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import astuple
 from typing import Any
 
 from ktcs_bench import kinds
+from ktcs_bench.atc.track_codes import AtcCode
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.emulator.device import IxlPeerDevice
+from ktcs_bench.messages import JsonObject
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
 
@@ -32,7 +35,7 @@ class AtcDevice(IxlPeerDevice):
     def rails_changed(self, up: bool) -> None:
         self.apply(self.atc.rails_state(up, self.now()))
 
-    def from_rails(self, obj: dict[str, Any]) -> None:
+    def from_rails(self, obj: JsonObject) -> None:
         occ = obj.get("occupancy")
         if isinstance(occ, dict):
             if "full" in obj:  # the rails (back): every track circuit reported
@@ -42,7 +45,7 @@ class AtcDevice(IxlPeerDevice):
                 self.rails.send({"codes": self._wire(self.atc.track_codes())})
 
     @staticmethod
-    def _wire(codes: dict[str, Any]) -> dict[str, list[float]]:
+    def _wire(codes: Mapping[str, AtcCode]) -> dict[str, list[float]]:
         return {tc: list(astuple(code)) for tc, code in codes.items()}
 
     def apply(self, out: AtcOutput) -> None:

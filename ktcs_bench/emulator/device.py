@@ -25,13 +25,14 @@ from typing import Any, ClassVar, TypedDict
 from ktcs_bench import kinds
 from ktcs_bench.binding import LinkBinding
 from ktcs_bench.emulator.code_link import CodePort
-from ktcs_bench.emulator.rails import RailsClient
+from ktcs_bench.emulator.rails import Hello, RailsClient
 from ktcs_bench.messages import (
     DEVICE,
     Answer,
     BadMessage,
     Events,
     EventsAnswer,
+    JsonObject,
     Message,
     Refused,
     Status,
@@ -277,7 +278,7 @@ class IxlPeerDevice(Device):
             )  # fmt: skip
         self.rails: RailsClient | None = None
         if kinds.RAILS in links:
-            hello = {"role": self.kind, "name": name}
+            hello: Hello = {"role": self.kind, "name": name}
             lost = partial(self.rails_changed, False)
             self.rails = RailsClient(links[kinds.RAILS], hello, self.from_rails, lost)
 
@@ -287,7 +288,7 @@ class IxlPeerDevice(Device):
     def link_changed(self, up: bool) -> None:
         raise NotImplementedError
 
-    def from_rails(self, obj: dict[str, Any]) -> None:
+    def from_rails(self, obj: JsonObject) -> None:
         raise NotImplementedError
 
     def rails_changed(self, up: bool) -> None:

@@ -14,13 +14,38 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable
-from typing import Any
+from typing import Required, TypedDict
 
+from ktcs_bench.messages import JsonObject
 from ktcs_bench.transport import jsonlines
 from ktcs_bench.transport.endpoints import Endpoint
 
 log = logging.getLogger("ktcs_bench.emulator")
 RETRY = 0.5  # s between connection attempts to the rails
+
+
+class Hello(TypedDict, total=False):
+    """Who a client is: its role (its kind, or "observer"), its name, a train its id (under its
+    kind's name: the track circuits read it as `kinds.TRAIN`)."""
+
+    role: Required[str]
+    name: Required[str]
+    train: str
+
+
+class Position(TypedDict, total=False):
+    """Where a train is: its head and tail in metres, the track it is on if it is on one."""
+
+    head: Required[float]
+    tail: Required[float]
+    track: str
+
+
+class ToRails(TypedDict, total=False):
+    """What a client sends once it has said hello: an ATC its codes, a train its position."""
+
+    codes: dict[str, list[float]]
+    position: Position
 
 
 class RailsClient:
@@ -32,29 +57,24 @@ class RailsClient:
     def __init__(
         self,
         endpoint: Endpoint,
-        hello: dict[str, Any],
-        on_message: Callable[[dict[str, Any]], None],
+        hello: Hello,
+        on_message: Callable[[JsonObject], None],
         on_lost: Callable[[], None] | None = None,
     ) -> None:
         self.endpoint, self.hello, self.on_message = endpoint, hello, on_message
         self.on_lost = on_lost
         self.peer: jsonlines.Peer | None = None
-        self._last: dict[
-            str, dict[str, Any]
-        ] = {}  # last object sent per key, replayed on reconnect
+        self._last: ToRails = {}  # the last of each key sent, replayed on reconnect
 
     @property
     def connected(self) -> bool:
         return self.peer is not None
 
-    def send(self, obj: dict[str, Any]) -> None:
-        for key, value in obj.items():
-            if key in ("codes", "position"):
-                self._last.setdefault(key, {})
-                if key == "codes":
-                    self._last[key].update(value)
-                else:
-                    self._last[key] = value
+    def send(self, obj: ToRails) -> None:
+        if "codes" in obj:
+            self._last.setdefault("codes", {}).update(obj["codes"])
+        if "position" in obj:
+            self._last["position"] = obj["position"]
         if self.peer is not None:
             self.peer.send(obj)
 

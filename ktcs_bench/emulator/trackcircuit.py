@@ -4,6 +4,7 @@ under its antenna -- with injectable track-circuit failures."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from ktcs_bench import kinds
@@ -15,6 +16,7 @@ from ktcs_bench.messages import (
     Answer,
     Clear,
     Fail,
+    JsonObject,
     Message,
     Place,
     Refused,
@@ -71,7 +73,7 @@ class TrackCircuitDevice(Device):
                 peer.info["last_code"] = wire
                 peer.send({"code": wire, "tc": self.model.under_antenna(train)})
 
-    async def _rails(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any] | None:
+    async def _rails(self, obj: JsonObject, peer: jsonlines.Peer) -> Mapping[str, object] | None:
         if "hello" in obj and isinstance(obj["hello"], dict):
             peer.info.update(obj["hello"])
             self.peers[peer] = None

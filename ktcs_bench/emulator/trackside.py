@@ -16,6 +16,7 @@ from ktcs_bench.messages import (
     FailLamp,
     FailPoint,
     FailTrackCircuit,
+    JsonObject,
     Message,
     Refused,
 )
@@ -43,7 +44,7 @@ class TracksideDevice(IxlPeerDevice):
     def rails_changed(self, up: bool) -> None:
         self.apply(self.io.rails_state(up, self.now()))
 
-    def from_rails(self, obj: dict[str, Any]) -> None:
+    def from_rails(self, obj: JsonObject) -> None:
         occ = obj.get("occupancy")
         if isinstance(occ, dict):
             if "full" in obj:  # the rails (back): every track circuit reported

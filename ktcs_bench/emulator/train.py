@@ -29,7 +29,7 @@ from typing import Any
 
 from ktcs_bench import kinds
 from ktcs_bench.emulator.device import Device
-from ktcs_bench.emulator.rails import RailsClient
+from ktcs_bench.emulator.rails import Hello, Position, RailsClient
 from ktcs_bench.errors import ConfigError, UsageError
 from ktcs_bench.messages import (
     TRAIN,
@@ -37,6 +37,7 @@ from ktcs_bench.messages import (
     DataAnswer,
     Dispatch,
     Hold,
+    JsonObject,
     Message,
     Refused,
     ReleaseEb,
@@ -178,8 +179,8 @@ class TrainDevice(Device):
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None
-        self.rails = RailsClient(rails, {"role": kinds.TRAIN, "name": name, kinds.TRAIN: config.train_id},
-                                 self._from_rails)  # fmt: skip
+        hello = Hello(role=kinds.TRAIN, name=name, train=config.train_id)  # its kind names its key
+        self.rails = RailsClient(rails, hello, self._from_rails)
         self.last: Any = None
         self.release = False
         self.origin: float | None = None  # the device clock's reading at the train's start
@@ -222,15 +223,16 @@ class TrainDevice(Device):
         )
         return cls(name, line, cfg, links[kinds.RAILS], control)
 
-    def _from_rails(self, obj: dict[str, Any]) -> None:
+    def _from_rails(self, obj: JsonObject) -> None:
         if "code" not in obj:
             return
         wire, tc = obj["code"], obj.get("tc")
         fields = _code_fields(wire)
-        if fields is None or tc not in self.tcs:
+        if fields is None or not isinstance(tc, str) or tc not in self.tcs:
             if wire is not None:
                 self.note("bad_code", f"code {wire!r} for {tc!r} not understood: stop")
-            self.code, self.code_tc = None, tc  # fail-safe: see `_code_now`
+            # fail-safe: see `_code_now`
+            self.code, self.code_tc = None, tc if isinstance(tc, str) else None
             return
         speed_kmh, gradient, distance = fields
         circuit = self.tcs[tc]  # up direction: the code counts from the entry end
@@ -242,12 +244,12 @@ class TrainDevice(Device):
             return TrackCode.stop_here(self.endpoint.dynamics.state.position)
         return self.code
 
-    def _position(self) -> dict[str, Any]:
+    def _position(self) -> Position:
         head = self.endpoint.dynamics.state.position
         tail = head - self.config.params.length
         if self.endpoint.left:  # off the end of the line: on no track circuit of the lab
             return {"head": self.line.end_m + head - tail + 1.0, "tail": self.line.end_m + 1.0}
-        out: dict[str, Any] = {"head": head, "tail": tail}
+        out: Position = {"head": head, "tail": tail}
         track = next((t for lo, hi, t in self.tracks if lo <= head < hi), None)
         track = track or next((t for lo, hi, t in self.tracks if lo < tail < hi), None)
         if track is not None:
