@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import serial
 
 from ktcs_bench import kinds
@@ -80,7 +81,7 @@ class ArsSpec:
     start_on: tuple[int, ...]
 
 
-ARS_KEYS = ("start_on",)
+ARS_KEYS = ("start_on",)  # _ArsShape's
 
 
 @dataclass(frozen=True)
@@ -147,6 +148,48 @@ def resolve_lab_path(name: str | None) -> Path:
     raise ConfigError(name, "", "no such lab file (and no shipped lab of that name)")
 
 
+class _Type1Shape(Shape):
+    """The lab file's `type1:` (the numbers' bounds are checked in code, in their own words)."""
+
+    profile: str = "ktcs-type1"
+    line_rate: Any = 9600.0  # bit/s; null: unpaced
+    longest_frame_data: Any = 132  # null: the profile's maximum DATA length
+
+
+class _Type2Shape(Shape):
+    """The lab file's `type2:`."""
+
+    profile: str = "ktcs-type2"
+    port: Any = None  # the CTC's Type II port (0: any free port)
+
+
+class _ConsoleShape(Shape):
+    """The lab file's `console:`."""
+
+    port: Any = None
+    origins: Any = None  # web origins besides its own whose pages may operate
+
+
+class _LabShape(Shape):
+    """The lab file's top level: a key no reader knows is refused. The sections' settings are
+    converted on their own, after their type is checked in the words the tests know."""
+
+    lab: str | int | float
+    line: str
+    devices: Any
+    links: Any
+    description: str | None = None
+    timetable: str | None = None
+    ixl_mode: Any = "center"
+    ars: Any = None
+    type1: Any = None
+    type2: Any = None
+    console: Any = None
+
+
+_SECTIONS = ("type1", "type2", "console")
+
+
 def load_lab(path: str | Path | None = None) -> Lab:
     file = Path(path) if path is not None else default_lab_path()
     raw = load_mapping(file, "lab")
@@ -154,84 +197,80 @@ def load_lab(path: str | Path | None = None) -> Lab:
     def fail(place: str, problem: str) -> ConfigError:
         return located(file, place, problem)
 
-    for key in ("lab", "line", "devices", "links"):
-        if key not in raw:
-            raise fail(key, "missing key")
-    line_file = (file.parent / str(raw["line"])).resolve()
-    if not line_file.is_file():
-        raise fail("line", f"no such line file: {line_file}")
-    devices = _devices(raw["devices"], fail)
-    links = _links(raw["links"], devices, file, fail)
-    sections: dict[str, dict[str, Any]] = {}
-    for key in ("type1", "type2", "console"):
+    for key in _SECTIONS:  # a section's type before the file's keys (its message is known)
         section = raw.get(key) or {}
         if not isinstance(section, dict):
             raise fail(key, f"must be a mapping of settings, not {excerpt(section)}")
-        sections[key] = section
-    t1, t2, console = sections["type1"], sections["type2"], sections["console"]
-    origins = console.get("origins") or []
+    top = convert(raw, _LabShape, file)
+    line_file = (file.parent / top.line).resolve()
+    if not line_file.is_file():
+        raise fail("line", f"no such line file: {line_file}")
+    devices = _devices(top.devices, file, fail)
+    links = _links(top.links, devices, file, fail)
+    t1 = convert(top.type1 or {}, _Type1Shape, file, "type1")
+    t2 = convert(top.type2 or {}, _Type2Shape, file, "type2")
+    console = convert(top.console or {}, _ConsoleShape, file, "console")
+    origins = console.origins or []
     if not isinstance(origins, list) or not all(
         isinstance(o, str) and _ORIGIN.fullmatch(o) for o in origins
     ):
         raise fail("console.origins", "a list of web origins, e.g. [http://ctc.lab:8020]")
     timetable_file = None
-    if raw.get("timetable") is not None:
-        timetable_file = (file.parent / str(raw["timetable"])).resolve()
+    if top.timetable is not None:
+        timetable_file = (file.parent / top.timetable).resolve()
         if not timetable_file.is_file():
             raise fail("timetable", f"no such timetable file: {timetable_file}")
-    mode = raw.get("ixl_mode", "center")
+    mode = top.ixl_mode
     if mode not in ("center", "local"):
         raise fail("ixl_mode", f"must be center or local, not {excerpt(mode)}")
     lab = Lab(
-        name=str(raw["lab"]),
+        name=str(top.lab),
         file=file.resolve(),
         line_file=line_file,
         devices=devices,
         links=tuple(links),
-        type1_profile=str(t1.get("profile", "ktcs-type1")),
-        line_rate=_number(t1, "line_rate", 9600.0, "type1.line_rate", fail),  # null: unpaced
+        type1_profile=t1.profile,
+        line_rate=_number(t1.line_rate, 9600.0, "type1.line_rate", fail),  # null: unpaced
         # null: the profile's maximum DATA length
         longest_frame_data=_whole(
-            _number(t1, "longest_frame_data", 132, "type1.longest_frame_data", fail)
+            _number(t1.longest_frame_data, 132, "type1.longest_frame_data", fail)
         ),
-        type2_profile=str(t2.get("profile", "ktcs-type2")),
-        type2_port=_port(t2, "type2.port", fail) or 0,
-        console_port=_port(console, "console.port", fail),
+        type2_profile=t2.profile,
+        type2_port=_port(t2.port, "type2.port", fail) or 0,
+        console_port=_port(console.port, "console.port", fail),
         console_origins=tuple(origins),
         ixl_mode=mode,
         timetable_file=timetable_file,
     )
     _check_lab(lab, fail)
-    if raw.get("ars") is not None:
-        lab = replace(lab, ars=_ars(raw["ars"], lab, fail))
+    if top.ars is not None:
+        lab = replace(lab, ars=_ars(top.ars, lab, file, fail))
     return lab
 
 
 _Fail = Callable[[str, str], ConfigError]
 
 
-def _port(section: dict[str, Any], place: str, fail: _Fail) -> int | None:
+def _port(value: object, place: str, fail: _Fail) -> int | None:
     """A port the lab serves on: 0..65535 (0: any free port), or None when not given."""
-    value = section.get("port")
     try:
         return None if value is None else check_port(value, any_free=True)
     except UsageError as exc:
         raise fail(place, str(exc)) from None
 
 
-def _number(
-    section: dict[str, Any], key: str, default: float, place: str, fail: _Fail
-) -> float | None:
-    """A positive setting (a rate, a size), whole where the default is; null stays None."""
-    if key in section and section[key] is None:
+def _number(given: object, default: float, place: str, fail: _Fail) -> float | None:
+    """A positive setting (a rate, a size; absent: `default`), whole where the default is;
+    null stays None."""
+    if given is None:
         return None
-    value = section.get(key, default)
     whole = isinstance(default, int)
+    value = given
     if isinstance(value, bool) or not isinstance(value, int if whole else (int, float)):
         value = None
     if value is None or not math.isfinite(value) or value <= 0:
         what = "a positive whole number" if whole else "a positive number"
-        raise fail(place, f"must be {what}, not {excerpt(section.get(key))}")
+        raise fail(place, f"must be {what}, not {excerpt(given)}")
     return float(value)
 
 
@@ -239,7 +278,19 @@ def _whole(value: float | None) -> int | None:
     return None if value is None else int(value)
 
 
-def _devices(section: object, fail: _Fail) -> dict[str, DeviceSpec]:
+class _DeviceShape(msgspec.Struct):
+    """The keys of a device every kind knows; the others are its kind's options, free-form."""
+
+    kind: str
+    station: Any = None  # a station's kinds need its number
+    host: Any = "127.0.0.1"
+    external: Any = None  # a real device: its shape hangs on its kind (_SerialShape, _AddressShape)
+
+
+_DEVICE_KEYS = frozenset(_DeviceShape.__struct_fields__)
+
+
+def _devices(section: object, file: Path, fail: _Fail) -> dict[str, DeviceSpec]:
     """The lab file's `devices:` (NAME -> {kind, station, host, external, options...})."""
     devices: dict[str, DeviceSpec] = {}
     if not isinstance(section, dict) or not section:
@@ -254,21 +305,19 @@ def _devices(section: object, fail: _Fail) -> dict[str, DeviceSpec]:
             raise fail(
                 f"{place}.kind", f"must be one of {', '.join(kinds.NAMES)}, not {excerpt(kind)}"
             )
-        station = spec.get("station")
+        known = convert(spec, _DeviceShape, file, place)
+        station = known.station
         if kinds.KINDS[kind].station and not isinstance(station, int):
             raise fail(f"{place}.station", f"a {kind} needs its station number")
-        host = spec.get("host", "127.0.0.1")
-        if not isinstance(host, str):
+        if not isinstance(known.host, str):
             raise fail(f"{place}.host", "must be an address")
-        options = {
-            k: v for k, v in spec.items() if k not in ("kind", "station", "host", "external")
-        }
+        options = {k: v for k, v in spec.items() if k not in _DEVICE_KEYS}
         if "port" in options:
-            options["port"] = _port(spec, f"{place}.port", fail)
+            options["port"] = _port(options["port"], f"{place}.port", fail)
         external = None
         if "external" in spec:
-            external = _external(spec["external"], str(kind), f"{place}.external", fail)
-        devices[name] = DeviceSpec(name, kind, station, host, options, external)
+            external = _external(known.external, kind, f"{place}.external", file, fail)
+        devices[name] = DeviceSpec(name, kind, station, known.host, options, external)
     for kind in (k.name for k in kinds.KINDS.values() if k.single):
         count = sum(1 for d in devices.values() if d.kind == kind)
         if count > 1:
@@ -360,7 +409,20 @@ def _check_lab(lab: Lab, fail: _Fail) -> None:
             )
 
 
-def _external(raw: Any, kind: str, place: str, fail: _Fail) -> External:
+class _SerialShape(Shape):
+    """An external Type I device (atc, trackside): where its serial port is."""
+
+    serial: str
+    rails: bool = False  # it joins the lab's rails itself
+
+
+class _AddressShape(Shape):
+    """An external CTC or IXL: where it serves, or where the tap serves it."""
+
+    address: str
+
+
+def _external(raw: Any, kind: str, place: str, file: Path, fail: _Fail) -> External:
     """A device's `external` mapping, checked: the key for its kind, a usable endpoint."""
     key = kinds.KINDS[kind].external
     if key is None:
@@ -368,26 +430,24 @@ def _external(raw: Any, kind: str, place: str, fail: _Fail) -> External:
         raise fail(place, f"a {kind} cannot be external ({can})")
     if not isinstance(raw, dict):
         raise fail(place, f"must be a mapping, e.g. {{{key}: {_EXAMPLE[key]}}}")
-    allowed = (key, "rails") if key == "serial" else (key,)
-    for k in raw:
-        if k not in allowed:
-            raise fail(
-                f"{place}.{k}", f"unknown key (an external {kind} takes {', '.join(allowed)})"
-            )
-    if key not in raw:
-        raise fail(f"{place}.{key}", f"missing key: where the real {kind} is, e.g. {_EXAMPLE[key]}")
-    value = raw[key]
-    if not isinstance(value, str) or not value.strip():
-        raise fail(f"{place}.{key}", f"must be text, e.g. {_EXAMPLE[key]}, not {excerpt(value)}")
-    rails = raw.get("rails", False)
-    if not isinstance(rails, bool):
-        raise fail(f"{place}.rails", f"must be true or false, not {excerpt(rails)}")
-    if key == "address":  # a CTC is connected to (a port); an IXL is served (0: any free port)
+    if key == "address":  # a CTC is connected to; an IXL is served (0: any free port)
+        address = convert(raw, _AddressShape, file, place).address
+        _text(address, f"{place}.address", fail)
         try:
-            return External(address=parse_host_port(value, any_free=kind == kinds.IXL))
+            return External(address=parse_host_port(address, any_free=kind == kinds.IXL))
         except UsageError as exc:
             raise fail(f"{place}.address", str(exc)) from None
-    return External(serial=_serial_url(value.strip(), f"{place}.serial", fail), rails=rails)
+    shape = convert(raw, _SerialShape, file, place)
+    _text(shape.serial, f"{place}.serial", fail)
+    return External(
+        serial=_serial_url(shape.serial.strip(), f"{place}.serial", fail), rails=shape.rails
+    )
+
+
+def _text(value: str, place: str, fail: _Fail) -> None:
+    if not value.strip():
+        key = place.rsplit(".", 1)[-1]
+        raise fail(place, f"must be text, e.g. {_EXAMPLE[key]}, not {excerpt(value)}")
 
 
 _EXAMPLE = {"serial": '"/dev/ttyUSB0" or "rfc2217://10.0.0.2:4000"', "address": '"10.0.0.5:6000"'}
@@ -415,7 +475,14 @@ def _serial_url(text: str, place: str, fail: _Fail) -> str:
     return text
 
 
-def _ars(section: object, lab: Lab, fail: _Fail) -> ArsSpec:
+class _ArsShape(Shape):
+    """The lab file's `ars:` (its unknown keys are refused first, in words that name the one
+    it takes: a boolean key is `on:` read by YAML)."""
+
+    start_on: Any = "all"  # a list of the lab's stations, or all
+
+
+def _ars(section: object, lab: Lab, file: Path, fail: _Fail) -> ArsSpec:
     """The `ars:` section, ARS in the CTC from the lab's `timetable:` -- `start_on`: the stations
     where it starts on (a list of the lab's stations, or `all`, the default; the others start
     off). Not `on:`: YAML reads that key as true."""
@@ -427,11 +494,11 @@ def _ars(section: object, lab: Lab, fail: _Fail) -> ArsSpec:
                        "stations where ARS starts on are `start_on`")  # fmt: skip
         if key not in ARS_KEYS:
             raise fail(f"ars.{key}", f"unknown key (ars takes {', '.join(ARS_KEYS)})")
+    on = convert(section, _ArsShape, file, "ars").start_on
     if not lab.ours(kinds.CTC):
         raise fail("ars", "the lab runs no CTC to set routes (an external CTC sets its own)")
     if lab.timetable_file is None:
         raise fail("ars", "ARS sets the routes of the lab's timetable: give it (timetable: FILE)")
-    on = section.get("start_on", "all")
     if on == "all":
         stations = tuple(lab.stations)
     elif isinstance(on, list):

@@ -304,3 +304,38 @@ def test_a_link_entry_is_declared_a_misspelt_key_refused_with_its_line(tmp_path:
     line = path.read_text(encoding="utf-8").splitlines().index("     tapp: false}") + 1
     assert err.value.place == "links[0].tapp"
     assert err.value.problem == f"unknown key (line {line})", str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("extra", "place", "problem"),
+    [
+        ("colour: blue\n", "colour", "unknown key"),
+        ("type1: {profile: ktcs-type1, linerate: 9600}\n", "type1.linerate", "unknown key"),
+        ("console: {port: 0, origin: []}\n", "console.origin", "unknown key"),
+        ("type2: {profile: 5}\n", "type2.profile", "must be a string, not int"),
+        ("timetable: [a]\n", "timetable", "must be a string, not list"),
+    ],
+    ids=["top", "type1", "console", "type2-profile", "timetable"],
+)
+def test_the_lab_file_top_level_and_sections_are_declared(
+    tmp_path: Path, extra: str, place: str, problem: str
+) -> None:
+    """A key no reader knows at the top of a lab file or in its settings, silently ignored before,
+    is refused naming the key path and its line; a value of the wrong type too."""
+    path = write_lab(tmp_path, "declared", "  ixl18: {kind: ixl, station: 18}\n", "  []\n")
+    path.write_text(path.read_text(encoding="utf-8") + extra, encoding="utf-8")
+    with pytest.raises(ConfigError) as err:
+        load_lab(path)
+    line = path.read_text(encoding="utf-8").splitlines().index(extra.strip()) + 1
+    assert err.value.place == place, str(err.value)
+    assert err.value.problem == f"{problem} (line {line})", str(err.value)
+
+
+def test_a_device_s_known_keys_are_declared_its_options_free(tmp_path: Path) -> None:
+    """kind, station, host and external have their types; the other keys are the kind's options."""
+    path = write_lab(tmp_path, "host", "  ixl18: {kind: ixl, station: 18, host: [a]}\n", "  []\n")
+    with pytest.raises(ConfigError) as err:
+        load_lab(path)
+    assert err.value.place == "devices.ixl18.host", str(err.value)
+    good = write_lab(tmp_path, "opts", "  ixl18: {kind: ixl, station: 18, whatever: 3}\n", "  []\n")
+    assert load_lab(good).devices["ixl18"].options == {"whatever": 3}
