@@ -17,14 +17,16 @@ ConfigError naming the file, the step (or key) and what is wrong.
       - expect: ctc 18 signal 01 is not R
         within: 10s
 
-The step kinds are in `steps`, the expectation words in `expect`.
+The top level and `setup:` are declared in `shapes` (a key no reader knows is refused with its
+line); the step kinds are in `steps`, the expectation words in `expect`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+
+import msgspec
 
 from ktcs_bench import kinds
 from ktcs_bench.argtypes import say_seconds
@@ -32,6 +34,7 @@ from ktcs_bench.datafiles import YamlReader, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
 from ktcs_bench.lab.topology import Lab, load_lab, resolve_lab_path
 from ktcs_bench.procedure.names import LabNames, StepError
+from ktcs_bench.procedure.shapes import ProcedureShape, Texts
 from ktcs_bench.procedure.steps import (
     KINDS,
     MAX_DURATION_S,
@@ -41,6 +44,7 @@ from ktcs_bench.procedure.steps import (
     WaitStep,
     parse_step,
 )
+from ktcs_bench.schema import READER, convert, finite
 
 MODES = ("center", "local")
 
@@ -79,11 +83,9 @@ class Procedure:
         return out
 
 
-def _texts(r: YamlReader, doc: dict[str, Any], key: str) -> tuple[str, ...]:
-    value = doc.get(key, [])
-    if isinstance(value, (str, int)) and not isinstance(value, bool):
-        return (str(value),)
-    return tuple(r.word(v, f"{key}[{i}]") for i, v in enumerate(r.seq(value, key)))
+def _texts(value: Texts) -> tuple[str, ...]:
+    """One text or a list of them, as texts."""
+    return (str(value),) if isinstance(value, (str, int)) else tuple(str(v) for v in value)
 
 
 def _longest(step: Step) -> float:
@@ -112,25 +114,22 @@ def _lab(r: YamlReader, path: Path, word: str) -> Lab:
 def load_procedure(path: str | Path) -> Procedure:
     p = Path(path)
     r = YamlReader(p)
-    doc = load_mapping(p, "procedure")
-    r.known(doc, {"id", "title", "verifies", "tags", "setup", "steps"}, "")
-    setup_m = r.mapping(doc.get("setup", {}), "setup")
-    r.known(setup_m, {"lab", "trains", "modes", "ars", "restart"}, "setup")
-    lab = _lab(r, p, r.text(setup_m, "lab", "setup", default="reference"))
+    doc = convert(load_mapping(p, "procedure"), ProcedureShape, p, style=READER)
+    finite(doc, p, style=READER)
+    setup_m = doc.setup
+    lab = _lab(r, p, str(setup_m.lab))
     try:
         line = lab.load_line()
     except ConfigError as exc:
         raise r.fail("setup.lab", f"its line: {exc}") from None
     names = LabNames(lab, line)
     ghosts: list[Ghost] = []
-    for i, t in enumerate(r.seq(setup_m.get("trains", []), "setup.trains")):
+    for i, tm in enumerate(setup_m.trains):
         place = f"setup.trains[{i}]"
-        tm = r.mapping(t, place)
-        r.known(tm, {"id", "head", "length_m", "track"}, place)
-        train = r.text(tm, "id", place)
+        train = str(tm.id)
         if names.train_device(train) is not None or train in {g.train for g in ghosts}:
             raise r.fail(f"{place}.id", f"train {train} is there already")
-        head_word = r.text(tm, "head", place)
+        head_word = str(tm.head)
         try:
             head = float(head_word)
         except ValueError:
@@ -139,11 +138,10 @@ def load_procedure(path: str | Path) -> Procedure:
             except StepError as exc:
                 raise r.fail(f"{place}.head", str(exc)) from None
             head = (tc.from_m + tc.to_m) / 2
-        length = r.num(tm, "length_m", place, default=40.0, minimum=1.0)
-        ghosts.append(Ghost(train, head, length, r.text(tm, "track", place, default="1")))
+        ghosts.append(Ghost(train, head, tm.length_m, str(tm.track)))
         names.trains.add(train)
     modes = {}
-    for key, mode in r.mapping(setup_m.get("modes", {}), "setup.modes").items():
+    for key, mode in setup_m.modes.items():
         try:
             st = names.station(str(key))
         except StepError as exc:
@@ -151,17 +149,14 @@ def load_procedure(path: str | Path) -> Procedure:
         if mode not in MODES:
             raise r.fail(f"setup.modes.{key}", f"center or local, not {excerpt(mode)}")
         modes[st] = str(mode)
-    ars = setup_m.get("ars")
-    if ars is not None and not isinstance(ars, bool):
-        raise r.fail("setup.ars", f"expected true or false, got {excerpt(ars)}")
     restart = []
-    for i, word in enumerate(r.seq(setup_m.get("restart", []), "setup.restart")):
+    for i, word in enumerate(setup_m.restart):
         try:
-            restart.append(names.device(r.word(word, f"setup.restart[{i}]")))
+            restart.append(names.device(str(word)))
         except StepError as exc:
             raise r.fail(f"setup.restart[{i}]", str(exc)) from None
     steps = []
-    raw_steps = r.seq(doc.get("steps"), "steps")
+    raw_steps = doc.steps
     if not raw_steps:
         raise r.fail("steps", "a procedure has at least one step")
     for i, raw in enumerate(raw_steps, start=1):
@@ -179,11 +174,11 @@ def load_procedure(path: str | Path) -> Procedure:
         )
     return Procedure(
         path=p,
-        id=r.text(doc, "id", "", default=p.stem),
-        title=r.text(doc, "title", "", default=p.stem),
-        verifies=_texts(r, doc, "verifies"),
-        tags=_texts(r, doc, "tags"),
-        setup=Setup(lab, tuple(ghosts), modes, ars, tuple(restart)),
+        id=p.stem if doc.id is msgspec.UNSET else str(doc.id),
+        title=p.stem if doc.title is msgspec.UNSET else str(doc.title),
+        verifies=_texts(doc.verifies),
+        tags=_texts(doc.tags),
+        setup=Setup(lab, tuple(ghosts), modes, setup_m.ars, tuple(restart)),
         steps=tuple(steps),
         names=names,
     )

@@ -115,3 +115,34 @@ def test_the_shipped_suite_reads_clean_and_covers_the_issue() -> None:
     kinds = {type(s) for p in procedures for s in p.steps}
     assert {CtcStep, ExpectStep, FaultStep, TrainStep, WaitStep} <= kinds
     assert all(p.verifies and p.title and p.tags for p in procedures)
+
+
+@pytest.mark.parametrize(
+    ("head", "place", "problem"),
+    [
+        ("id: p\nsetup:\n  lab: reference\n  arss: true\nsteps:\n", "setup.arss", "unknown key"),
+        ("id: p\nsetup:\n  ars: 5\nsteps:\n", "setup.ars", "expected true or false, got a number 5"),
+        ("id: p\nsetup:\n  trains: [{id: T1, head: TC1851, length_m: 0.5}]\nsteps:\n",
+         "setup.trains[0].length_m", "must be at least 1, got 0.5"),
+        ("id: p\nsetup:\n  trains: [{id: T1, head: TC1851, lenght_m: 40}]\nsteps:\n",
+         "setup.trains[0].lenght_m", "unknown key"),
+        ("id: p\ntags: {a: 1}\nsteps:\n", "tags", "expected text, got a mapping"),
+    ],
+    ids=["setup-key", "ars", "length", "train-key", "tags"],
+)  # fmt: skip
+def test_the_top_level_and_setup_are_declared_each_mistake_with_its_line(
+    tmp_path: Path, head: str, place: str, problem: str
+) -> None:
+    path = write(tmp_path, "  - wait: 1s\n", head)
+    with pytest.raises(ConfigError) as err:
+        load_procedure(path)
+    assert err.value.place == place, str(err.value)
+    assert err.value.problem.startswith(problem), str(err.value)
+    assert err.value.problem.endswith(")") and "(line " in err.value.problem, str(err.value)
+
+
+def test_one_text_or_a_list_of_them_and_the_file_name_by_default(tmp_path: Path) -> None:
+    path = write(tmp_path, "  - wait: 1s\n", "verifies: 7\ntags: [a, 2]\nsteps:\n")
+    procedure = load_procedure(path)
+    assert (procedure.id, procedure.title) == ("p", "p")
+    assert procedure.verifies == ("7",) and procedure.tags == ("a", "2")
