@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any, Literal, get_args
+from typing import Any, Literal, TypedDict, get_args
 
 import msgspec
 
@@ -47,6 +47,24 @@ class Message(msgspec.Struct, tag_field="cmd", forbid_unknown_fields=True, kw_on
 JsonObject = dict[str, object]
 """A JSON object whose keys and values are whatever its sender put there (a rails peer's hello, as
 it said it): read it by checking each value's type."""
+
+
+class ReadyInfo(TypedDict, total=False):
+    """Where a started device can be reached: its control port, its Type II or rails port
+    (`listen`), its web console, its ptys (peer -> path)."""
+
+    control: str
+    listen: str
+    console: str
+    ptys: dict[str, str]
+
+
+class ReadyLine(ReadyInfo, total=False):
+    """A device process's ready line (its first line on stdout): its name and kind, and its
+    `ReadyInfo`."""
+
+    ready: str
+    kind: str
 
 
 # -- every device -------------------------------------------------------------------------------

@@ -34,6 +34,8 @@ from ktcs_bench.messages import (
     EventsAnswer,
     JsonObject,
     Message,
+    ReadyInfo,
+    ReadyLine,
     Refused,
     Status,
     StatusAnswer,
@@ -72,7 +74,7 @@ class Device:
         self.timer: LoopTimer[Any] | None = None  # the device's core on the wall clock
         self._stop: asyncio.Event | None = None
         self._server: net.Server | None = None
-        self.ready_info: dict[str, Any] = {}
+        self.ready_info: ReadyInfo = {}
         self.lifeline: int | None = None  # fd: end of file there means the launcher is gone
         self.token_file: str | None = None  # the token its control port requires (runtime)
         self.token = ""
@@ -205,7 +207,7 @@ class Device:
             sys.stdout.write(json.dumps({"error": str(exc)}) + "\n")
             sys.stdout.flush()
             return 3
-        ready = {"ready": self.name, "kind": self.kind, **self.ready_info}
+        ready: ReadyLine = {"ready": self.name, "kind": self.kind, **self.ready_info}
         sys.stdout.write(json.dumps(ready) + "\n")
         sys.stdout.flush()
         waiter = asyncio.ensure_future(self._stop.wait())

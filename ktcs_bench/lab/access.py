@@ -52,11 +52,11 @@ class LabAccess(Protocol):
         and its answer (`{"ok": ..., ...}`)."""
         ...
 
-    async def link(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:
+    async def link(self, name: str, obj: Mapping[str, object]) -> dict[str, Any]:
         """A link's tap command (faults, restore, clear, status) and its answer."""
         ...
 
-    async def lab(self, obj: dict[str, Any]) -> dict[str, Any]:
+    async def lab(self, obj: Mapping[str, object]) -> dict[str, Any]:
         """The lab's own command (status, map, restart, kill) and its answer."""
         ...
 

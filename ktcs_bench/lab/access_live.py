@@ -89,10 +89,10 @@ class LiveLabAccess:
             self._refresh()  # restarted elsewhere? try once more where the state says it is
             return await self._request(self._device_address(name), sent)
 
-    async def link(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:
+    async def link(self, name: str, obj: Mapping[str, object]) -> dict[str, Any]:
         return await self._request(self._link_address(name), obj)
 
-    async def lab(self, obj: dict[str, Any]) -> dict[str, Any]:
+    async def lab(self, obj: Mapping[str, object]) -> dict[str, Any]:
         timeout = RESTART_TIMEOUT_S if obj.get("cmd") == "restart" else REQUEST_TIMEOUT_S
         answer = await self._request(str(self._state.get("control")), obj, timeout)
         if obj.get("cmd") in ("restart", "kill"):
@@ -106,7 +106,7 @@ class LiveLabAccess:
 
     # -- the connections -------------------------------------------------------------------------
     async def _request(
-        self, address: str, obj: dict[str, Any], timeout: float = REQUEST_TIMEOUT_S
+        self, address: str, obj: Mapping[str, object], timeout: float = REQUEST_TIMEOUT_S
     ) -> dict[str, Any]:
         host, _, port = address.rpartition(":")
         if not host or not port.isdigit():

@@ -43,7 +43,7 @@ from ktcs_bench.lab.runner import device_args, lab_command, start_in_order
 from ktcs_bench.lab.state import read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec, load_lab, resolve_lab_path
 from ktcs_bench.lab.view import LinkEntry
-from ktcs_bench.messages import JsonObject, Message
+from ktcs_bench.messages import JsonObject, Message, ReadyInfo
 from ktcs_bench.runtime import server_token, this_process
 from ktcs_bench.tap.runner import Tap
 from ktcs_bench.tap.tcp import TcpTap
@@ -109,7 +109,7 @@ class InProcessLab:
         self.net: MemoryNetwork | None = None
         self.objects: dict[str, Device] = {}  # the running device objects
         self.running: dict[str, list[asyncio.Task[None]]] = {}
-        self.ready: dict[str, dict[str, Any]] = {}  # what each device reported at its start
+        self.ready: dict[str, ReadyInfo] = {}  # what each device reported at its start
         self.endpoints: dict[str, dict[str, str]] = {}
         self.taps: dict[str, Tap] = {}
         self.crashed: dict[str, str] = {}
@@ -187,7 +187,7 @@ class InProcessLab:
             return {"ok": False, "error": 'a command is a JSON object {"cmd": ...}'}
         return _as_on_the_wire(await device._handle(dict(obj), _NO_PEER))
 
-    async def link(self, name: str, obj: dict[str, Any]) -> dict[str, Any]:
+    async def link(self, name: str, obj: Mapping[str, object]) -> dict[str, Any]:
         spec = self._link(name)
         tap = self.taps.get(name)
         if tap is None:
@@ -199,7 +199,7 @@ class InProcessLab:
             self._note_lab(spec.name, "tap", str(answer.get("command", obj.get("cmd"))))
         return _as_on_the_wire(answer)
 
-    async def lab(self, obj: dict[str, Any]) -> dict[str, Any]:
+    async def lab(self, obj: Mapping[str, object]) -> dict[str, Any]:
         """The lab's commands as on a live lab's control port (`runner.lab_command`); `down`
         asks whoever runs the lab to stop it (`stop_requested`)."""
         if not isinstance(obj, dict):
@@ -286,7 +286,7 @@ class InProcessLab:
                            endpoints=self.endpoints.get(name, {}), token_file=None,
                            console=self.console)  # fmt: skip
 
-    async def _start(self, name: str) -> dict[str, Any]:
+    async def _start(self, name: str) -> ReadyInfo:
         """Build the device from its command line and launch it as its own 'process': what it
         makes on the memory network is marked as its own (`memory.OWNER`)."""
         loop = self._require_loop()
@@ -299,7 +299,7 @@ class InProcessLab:
         tasks = await loop.create_task(device.launch(self.token), context=context)
         self.objects[name] = device
         self.running[name] = tasks
-        self.ready[name] = dict(device.ready_info)
+        self.ready[name] = device.ready_info.copy()
         self.crashed.pop(name, None)
         for task in tasks:
             task.add_done_callback(partial(self._task_done, name, device))
@@ -522,7 +522,7 @@ class InProcessLab:
         return f"crashed: {self.crashed[name]}" if name in self.crashed else "stopped"
 
 
-def _as_on_the_wire(answer: dict[str, Any]) -> dict[str, Any]:
+def _as_on_the_wire(answer: Mapping[str, object]) -> dict[str, Any]:
     """An answer as a control port's client reads it (JSON: lists, not tuples; string keys), so
     a procedure sees the same answer from a lab in one process as from a live one."""
     out: dict[str, Any] = json.loads(json.dumps(answer))

@@ -19,7 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+import msgspec
+
 from ktcs_bench.errors import PeerError
+from ktcs_bench.messages import ReadyLine
 from ktcs_bench.runtime import process_started
 
 READY_TIMEOUT = 30.0
@@ -32,14 +35,14 @@ class Child:
     argv: list[str]
     log_path: Path
     proc: subprocess.Popen[bytes] | None = None
-    ready: dict[str, Any] = field(default_factory=dict)
+    ready: ReadyLine = field(default_factory=lambda: ReadyLine())
     starts: int = 0
     exit_code: int | None = None
     started: int | None = None  # the process's start time (runtime.process_started)
     _log: IO[bytes] | None = None
     _lifeline: int | None = None  # our end of the child's lifeline pipe
 
-    def start(self, env: dict[str, str] | None = None) -> dict[str, Any]:
+    def start(self, env: dict[str, str] | None = None) -> ReadyLine:
         """Start and wait for the ready line; PeerError if it dies, stays silent or says why it
         cannot start (`{"error": ...}`, e.g. its port is taken)."""
         self.stop()  # what is left of a previous run (its pipes, its log file)
@@ -67,7 +70,13 @@ class Child:
                 raise PeerError(f"{self.name} did not start: {ready['error']}")
             tail = _tail(self.log_path)
             raise PeerError(f"{self.name} did not start (exit {code}); its log ends:\n{tail}")
-        self.ready = ready
+        try:
+            self.ready = msgspec.convert(ready, ReadyLine)
+        except msgspec.ValidationError as exc:
+            self.stop()
+            raise PeerError(
+                f"{self.name} started with a ready line not understood: {exc}"
+            ) from None
         # keep draining stdout so the child never blocks on a full pipe
         threading.Thread(target=_drain, args=(self.proc,), daemon=True).start()
         return self.ready

@@ -18,7 +18,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import os
-from collections.abc import Awaitable, Coroutine
+from collections.abc import Awaitable, Coroutine, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
@@ -31,6 +31,7 @@ from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
 from ktcs_bench.lab.view import LinkEntry
+from ktcs_bench.messages import ReadyInfo, ReadyLine
 from ktcs_bench.runtime import private_dir, server_token, this_process
 from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.runner import Tap
@@ -48,7 +49,7 @@ def device_args(
     lab: Lab,
     name: str,
     *,
-    before: dict[str, Any],
+    before: ReadyInfo,
     endpoints: dict[str, str],
     token_file: Path | None,
     unpaced: bool = False,
@@ -92,7 +93,7 @@ class LabStarter(Protocol):
     """How a lab makes its links and starts its devices (`start_in_order`): as processes on
     ptys and TCP (`LabRunner`), or as objects in one process (`inprocess.InProcessLab`)."""
 
-    async def _start(self, name: str) -> dict[str, Any]:
+    async def _start(self, name: str) -> ReadyInfo:
         """Start device `name` (its endpoints are set); its ready line."""
         ...
 
@@ -202,7 +203,7 @@ class LabCommands(Protocol):
     async def kill(self, name: str) -> None: ...
 
 
-async def lab_command(lab: LabCommands, obj: dict[str, Any]) -> dict[str, Any]:
+async def lab_command(lab: LabCommands, obj: Mapping[str, object]) -> dict[str, Any]:
     """The lab's own commands -- status, map, restart, kill, down -- and their answers."""
     cmd = obj.get("cmd")
     try:
@@ -256,7 +257,7 @@ class LabRunner:
             token_file=self.token_file, unpaced=self.unpaced, console=self.console,
         ))  # fmt: skip
 
-    async def _start(self, name: str) -> dict[str, Any]:
+    async def _start(self, name: str) -> ReadyLine:
         child = self.children.get(name) or Child(name, [], self.dir / "logs" / f"{name}.log")
         child.argv = self._argv(name)
         self.children[name] = child
