@@ -167,7 +167,7 @@ class _ConsoleShape(Shape):
     """The lab file's `console:`."""
 
     port: Any = None
-    origins: Any = None  # web origins besides its own whose pages may operate
+    origins: tuple[str, ...] | None = None  # web origins besides its own whose pages may operate
 
 
 class _LabShape(Shape):
@@ -210,10 +210,8 @@ def load_lab(path: str | Path | None = None) -> Lab:
     t1 = convert(top.type1 or {}, _Type1Shape, file, "type1")
     t2 = convert(top.type2 or {}, _Type2Shape, file, "type2")
     console = convert(top.console or {}, _ConsoleShape, file, "console")
-    origins = console.origins or []
-    if not isinstance(origins, list) or not all(
-        isinstance(o, str) and _ORIGIN.fullmatch(o) for o in origins
-    ):
+    origins = console.origins or ()
+    if not all(_ORIGIN.fullmatch(o) for o in origins):
         raise fail("console.origins", "a list of web origins, e.g. [http://ctc.lab:8020]")
     timetable_file = None
     if top.timetable is not None:
@@ -282,8 +280,8 @@ class _DeviceShape(msgspec.Struct):
     """The keys of a device every kind knows; the others are its kind's options, free-form."""
 
     kind: str
-    station: Any = None  # a station's kinds need its number
-    host: Any = "127.0.0.1"
+    station: int | None = None  # a station's kinds need its number
+    host: str = "127.0.0.1"
     external: Any = None  # a real device: its shape hangs on its kind (_SerialShape, _AddressShape)
 
 
@@ -307,10 +305,8 @@ def _devices(section: object, file: Path, fail: _Fail) -> dict[str, DeviceSpec]:
             )
         known = convert(spec, _DeviceShape, file, place)
         station = known.station
-        if kinds.KINDS[kind].station and not isinstance(station, int):
+        if kinds.KINDS[kind].station and station is None:
             raise fail(f"{place}.station", f"a {kind} needs its station number")
-        if not isinstance(known.host, str):
-            raise fail(f"{place}.host", "must be an address")
         options = {k: v for k, v in spec.items() if k not in _DEVICE_KEYS}
         if "port" in options:
             options["port"] = _port(options["port"], f"{place}.port", fail)

@@ -337,5 +337,6 @@ def test_a_device_s_known_keys_are_declared_its_options_free(tmp_path: Path) -> 
     with pytest.raises(ConfigError) as err:
         load_lab(path)
     assert err.value.place == "devices.ixl18.host", str(err.value)
+    assert err.value.problem == "must be a string, not list (line 4)", str(err.value)
     good = write_lab(tmp_path, "opts", "  ixl18: {kind: ixl, station: 18, whatever: 3}\n", "  []\n")
     assert load_lab(good).devices["ixl18"].options == {"whatever": 3}
