@@ -37,6 +37,7 @@ import dataclasses
 import math
 import random
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -247,7 +248,7 @@ _FRAME_FAULTS = (DropFrame, DuplicateFrame, ReorderFrames, CorruptFrame, Truncat
 FrameFault = DropFrame | DuplicateFrame | ReorderFrames | CorruptFrame | TruncateFrame
 
 
-def fault_from_json(obj: dict[str, Any]) -> Fault:
+def fault_from_json(obj: Mapping[str, object]) -> Fault:
     """`{"cmd": "ber", "rate": 0.001, "direction": "a>b"}` -> BitErrors(0.001, direction="a>b").
     Other keys are ignored; a missing or mistyped field is a UsageError naming it."""
     verb = obj.get("cmd")
@@ -270,7 +271,7 @@ def fault_from_json(obj: dict[str, Any]) -> Fault:
     return cls(**args)
 
 
-def _value(verb: str, key: str, kind: str, value: Any) -> Any:
+def _value(verb: str, key: str, kind: str, value: object) -> bytes | int | float:
     if kind == "bytes":
         if isinstance(value, str):
             try:

@@ -449,7 +449,7 @@ class InProcessLab:
         self.write_state()
 
     async def _serve_device(self, name: str) -> None:
-        async def handle(obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any]:
+        async def handle(obj: JsonObject, peer: jsonlines.Peer) -> dict[str, Any]:
             return await self.device(name, obj)
 
         server = await jsonlines.serve("127.0.0.1", 0, handle, token=self.token, real=True)

@@ -31,7 +31,7 @@ from ktcs_bench.lab.processes import Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
 from ktcs_bench.lab.view import LinkEntry
-from ktcs_bench.messages import ReadyInfo, ReadyLine
+from ktcs_bench.messages import JsonObject, ReadyInfo, ReadyLine
 from ktcs_bench.runtime import private_dir, server_token, this_process
 from ktcs_bench.tap.pty import PtyTap
 from ktcs_bench.tap.runner import Tap
@@ -361,7 +361,7 @@ class LabRunner:
         }
         write_state(self.lab.name, state)
 
-    async def _handle(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any]:
+    async def _handle(self, obj: JsonObject, peer: jsonlines.Peer) -> dict[str, Any]:
         return await lab_command(self, obj)
 
     async def kill(self, name: str) -> None:

@@ -44,7 +44,7 @@ find the token and send it themselves.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -110,7 +110,7 @@ class Command:
         return self.verb + (f" {self.direction}" if self.direction else "")
 
     @classmethod
-    def from_json(cls, obj: dict[str, Any]) -> Command:
+    def from_json(cls, obj: Mapping[str, object]) -> Command:
         verb = obj.get("cmd")
         if not isinstance(verb, str) or verb not in VERBS:
             raise UsageError(f"unknown command {verb!r}; try: {', '.join(VERBS)}")
@@ -185,7 +185,7 @@ def parse_command(line: str, names: tuple[str, str] | None = None) -> Command:
     spec = _FAULT_ARGS[verb]
     if len(args) > len(spec):
         raise UsageError(f"{verb}: unexpected arguments {' '.join(args[len(spec) :])}")
-    fields: dict[str, Any] = {"cmd": verb, "direction": direction}
+    fields: dict[str, object] = {"cmd": verb, "direction": direction}
     for i, (name, convert, required) in enumerate(spec):
         if i >= len(args):
             if required:

@@ -23,7 +23,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Coroutine, Iterable
+from collections.abc import Callable, Coroutine, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -31,6 +31,7 @@ from ktcs_bench.capture import CaptureRecord, CaptureWriter
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.faults import Cut, Fault, FaultInjector
+from ktcs_bench.messages import JsonObject
 from ktcs_bench.runtime import server_token
 from ktcs_bench.tap import registry
 from ktcs_bench.tap.control import HELP, Command, parse_command
@@ -276,7 +277,7 @@ class Tap:
     def status(self) -> dict[str, Any]:
         return self._call(self._status)
 
-    def execute(self, command: str | dict[str, Any]) -> dict[str, Any]:
+    def execute(self, command: str | Mapping[str, object]) -> dict[str, Any]:
         """One control command, as words (`ber 1e-3 a>b`) or JSON; its JSON answer."""
         try:
             if isinstance(command, str):
@@ -355,7 +356,7 @@ class Tap:
             self.timer.poke()
 
     # -- the control port ------------------------------------------------------------------------
-    async def _handle(self, obj: dict[str, Any], peer: jsonlines.Peer) -> dict[str, Any] | None:
+    async def _handle(self, obj: JsonObject, peer: jsonlines.Peer) -> dict[str, Any] | None:
         try:
             cmd = Command.from_json(obj)
         except KtcsError as exc:
