@@ -6,7 +6,6 @@ them as `ktcs_bench/_data/<name>` (hatchling force-include). Every loader asks h
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
@@ -247,15 +246,11 @@ def load_mapping(path: str | Path, what: str) -> dict[Any, Any]:
     return doc
 
 
-def join(place: str, key: object) -> str:
-    """The key path of `key` under `place` ("" is the top of the file)."""
-    return f"{place}.{key}" if place else str(key)
-
-
 class YamlReader:
-    """Checks the parts of one parsed YAML file; each mistake is one ConfigError naming the file,
-    the place (a key path) and what is wrong -- quoting at most an `excerpt` of a value. Shared
-    by the loaders of scenario and procedure files."""
+    """Checks what a declared shape leaves free in one parsed YAML file (a step's words, a
+    mapping of arguments); each mistake is one ConfigError naming the file, the place (a key path)
+    and what is wrong -- quoting at most an `excerpt` of a value. Shared by the loaders of
+    scenario and procedure files; their shapes are converted by `schema.convert`."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
@@ -270,71 +265,8 @@ class YamlReader:
             raise self.fail(place, f"expected a mapping, got {kind_of(obj)}")
         return obj
 
-    def seq(self, obj: object, place: str) -> list[Any]:
-        if not isinstance(obj, list):
-            raise self.fail(place, f"expected a list, got {kind_of(obj)}")
-        return obj
-
-    def num(
-        self,
-        m: dict[str, Any],
-        key: str,
-        place: str,
-        default: float | None = None,
-        minimum: float | None = None,
-        infinite: bool = False,
-        maximum: float | None = None,
-    ) -> float:
-        """A number at `m[key]`; never NaN, and infinite only where `infinite` says it means
-        "for ever" (a zone active until the end)."""
-        if key not in m:
-            if default is None:
-                raise self.fail(join(place, key), "missing")
-            return default
-        return self.value(m[key], join(place, key), minimum, infinite, maximum)
-
-    def value(
-        self,
-        v: Any,
-        place: str,
-        minimum: float | None = None,
-        infinite: bool = False,
-        maximum: float | None = None,
-    ) -> float:
-        """One number of the file (a list item, a field), checked as `num` checks."""
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(place, f"expected a number, got {kind_of(v)} {excerpt(v)}")
-        if math.isnan(v) or (math.isinf(v) and not infinite):
-            raise self.fail(place, f"expected a finite number, got {v!r}")
-        if minimum is not None and v < minimum:
-            raise self.fail(place, f"must be at least {minimum:g}, got {excerpt(v)}")
-        if maximum is not None and v > maximum:
-            raise self.fail(place, f"must be at most {maximum:g}, got {excerpt(v)}")
-        return float(v)
-
-    def text(self, m: dict[str, Any], key: str, place: str, default: str | None = None) -> str:
-        if key not in m:
-            if default is None:
-                raise self.fail(join(place, key), "missing")
-            return default
-        return self.word(m[key], join(place, key))
-
     def word(self, v: object, place: str) -> str:
         """One text value of the file (a number is taken as its digits)."""
         if not isinstance(v, (str, int)) or isinstance(v, bool):
             raise self.fail(place, f"expected text, got {kind_of(v)} {excerpt(v)}")
         return str(v)
-
-    def flag(self, m: dict[str, Any], key: str, place: str, default: bool) -> bool:
-        v = m.get(key, default)
-        if not isinstance(v, bool):
-            raise self.fail(join(place, key), f"expected true or false, got {excerpt(v)}")
-        return v
-
-    def known(self, m: dict[str, Any], keys: set[str], place: str) -> None:
-        extra = sorted((str(k) for k in set(m) - keys), key=str)
-        if extra:
-            raise self.fail(
-                join(place, excerpt(extra[0], 40) if len(extra[0]) > 40 else extra[0]),
-                f"unknown key (known: {', '.join(sorted(keys))})",
-            )
