@@ -17,7 +17,7 @@ import asyncio
 import json
 import logging
 from collections.abc import Awaitable, Callable, Mapping
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 from ktcs_bench.errors import PeerError
 from ktcs_bench.messages import JsonObject, Message, encode
@@ -64,7 +64,15 @@ class Peer:
         self.writer.close()
 
 
-def refusal(why: str) -> dict[str, Any]:
+class Refusal(TypedDict):
+    """What a port answers who does not present its lab's token."""
+
+    ok: Literal[False]
+    refused: Literal[True]
+    error: str
+
+
+def refusal(why: str) -> Refusal:
     return {"ok": False, "refused": True, "error": f"refused: {why}. {WHO_MAY}"}
 
 
