@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench import messages as msg
@@ -113,6 +113,16 @@ class LabSnapshot:
     stations: Mapping[int, StationState]
 
 
+class ViolationJson(TypedDict):
+    """A violation as a report writes it (`Violation.to_json`)."""
+
+    invariant: int
+    kind: str
+    where: str
+    time: float
+    text: str
+
+
 @dataclass(frozen=True, slots=True)
 class Violation:
     """One broken invariant: which (1-4), what kind, where (a track circuit, point, train or
@@ -127,7 +137,7 @@ class Violation:
     def __str__(self) -> str:
         return f"t={self.time:.3f} s invariant {self.invariant} ({self.kind}) at {self.where}: {self.text}"
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> ViolationJson:
         return {"invariant": self.invariant, "kind": self.kind, "where": self.where,
                 "time": self.time, "text": self.text}  # fmt: skip
 

@@ -29,7 +29,7 @@ import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench import messages as msg
@@ -164,6 +164,16 @@ async def replay_steps(access: LabAccess, replay: Replay, line: Line) -> list[St
 # ------------------------------------------------------------------------------------ replay files
 
 
+class ReplayJson(TypedDict):
+    """A replay file's contents (`Replay.to_json`)."""
+
+    lab: str
+    seed: int
+    warm_up_s: float
+    steps: list[Mapping[str, Any]]
+    violations: list[str]
+
+
 @dataclass(frozen=True)
 class Replay:
     lab: str  # the lab file
@@ -172,7 +182,7 @@ class Replay:
     steps: tuple[Mapping[str, Any], ...]
     violations: tuple[str, ...] = ()  # what the search saw (for the reader)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> ReplayJson:
         return {"lab": self.lab, "seed": self.seed, "warm_up_s": self.warm_up_s,
                 "steps": list(self.steps), "violations": list(self.violations)}  # fmt: skip
 
