@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench.ctc.tables import IndicationTable, IndicationTables
 from ktcs_bench.errors import UsageError
@@ -77,6 +77,61 @@ class StationReading:
     points: dict[str, PointReading]
     signals: dict[str, SignalReading]
     directions: dict[str, str | None]  # interval -> "up" / "down" / None
+
+
+class RoutePicture(TypedDict):
+    entry: str
+    exit: str
+    set: bool
+    approach_locked: bool
+
+
+class TrackCircuitPicture(TypedDict):
+    occupied: bool | None
+    locked: bool
+
+
+class PointPicture(TypedDict):
+    position: str
+    moving: bool
+    locked: bool
+
+
+class SignalPicture(TypedDict):
+    kind: str
+    aspect: str | None
+    held: bool
+    lamp_failed: bool
+
+
+class StationPicture(TypedDict):
+    """A station as the web console draws it (`StationModel.picture`)."""
+
+    station: int
+    name: str
+    connected: bool
+    synced: bool
+    mode: str
+    track_circuits: dict[str, TrackCircuitPicture]
+    points: dict[str, PointPicture]
+    signals: dict[str, SignalPicture]
+    routes: dict[str, RoutePicture]
+    directions: dict[str, str | None]
+
+
+class StationSummary(TypedDict):
+    """A station as `ktcs-bench ctc show` prints it (`StationModel.summary`)."""
+
+    station: int
+    link: str
+    synced: bool
+    known: bool
+    mode: str
+    center_requested: bool
+    routes: list[str]
+    points: dict[str, str]
+    signals: dict[str, str]
+    occupied: list[str]
 
 
 class StationModel:
@@ -147,12 +202,12 @@ class StationModel:
         chart = self.indications
         return {chart.name_of(code) or str(code): v for code, v in state.items()}
 
-    def picture(self, state: Mapping[int, int], connected: bool, synced: bool) -> dict[str, Any]:
+    def picture(self, state: Mapping[int, int], connected: bool, synced: bool) -> StationPicture:
         """The station as the web console draws it; what is not indicated reads None / unknown."""
         r = self.read(state)
         mode = "center" if r.mode == "center" else "requested" if r.center_requested else r.mode
         locked_tcs: set[str] = set()
-        routes: dict[str, dict[str, Any]] = {}
+        routes: dict[str, RoutePicture] = {}
         for route in self.station.routes:
             rset = route.name in r.routes_set
             routes[route.name] = {"entry": route.entry, "exit": route.exit, "set": rset,
@@ -190,7 +245,7 @@ class StationModel:
             "directions": r.directions,
         }
 
-    def summary(self, table: IndicationTable | None) -> dict[str, Any]:
+    def summary(self, table: IndicationTable | None) -> StationSummary:
         """Mode, routes, points, signals, occupancy and link, as `ktcs-bench ctc show` prints them.
 
         The CTC knows them only while the link is up and has brought a full state: otherwise
@@ -342,13 +397,13 @@ class CtcModel:
         table = self.table(station)
         return table.state if table is not None else {}
 
-    def picture(self, station: int) -> dict[str, Any]:
+    def picture(self, station: int) -> StationPicture:
         table = self.table(station)
         if table is None:
             return self.station(station).picture({}, False, False)
         return self.station(station).picture(table.state, table.connected, table.synced)
 
-    def summary(self, station: int) -> dict[str, Any]:
+    def summary(self, station: int) -> StationSummary:
         return self.station(station).summary(self.table(station))
 
     def named(self, station: int) -> dict[str, int]:
