@@ -47,7 +47,7 @@ from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypedDict
 from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
@@ -112,6 +112,25 @@ def _clock(t: float) -> str:
     return time.strftime("%H:%M:%S", time.localtime(t)) + f".{int((t % 1) * 1000):03d}"
 
 
+class FrameEntry(TypedDict):
+    """One line of a tap's panel: a frame (or a tap event) as the page shows it."""
+
+    time: str
+    direction: str
+    ok: bool
+    text: str
+
+
+class LogPanelEntry(TypedDict):
+    """One entry of the page's Log panel."""
+
+    time: str
+    t: float
+    text: str
+    level: str
+    source: str
+
+
 @dataclass(eq=False)
 class _Client:
     ws: web.WebSocketResponse
@@ -134,7 +153,7 @@ class _TapFeed:
 
     spec: TapSpec
     label: str
-    entries: deque[dict[str, Any]] = field(default_factory=lambda: deque(maxlen=FRAMES_KEEP))
+    entries: deque[FrameEntry] = field(default_factory=lambda: deque(maxlen=FRAMES_KEEP))
     status: str = "not connected"
     station: int | None = None  # Type II: learnt from the IDENT frame, to name codes
     task: asyncio.Task[None] | None = None
@@ -170,7 +189,7 @@ class ConsoleServer:
         self._port = port
         self.origins = frozenset(o.rstrip("/").lower() for o in origins)
         self.token = token
-        self.log_entries: deque[dict[str, Any]] = deque(maxlen=LOG_KEEP)
+        self.log_entries: deque[LogPanelEntry] = deque(maxlen=LOG_KEEP)
         self.gate = gate or Gate()
         self.busy_answers = 0  # requests answered busy, over all pages
         self._clients: set[_Client] = set()
@@ -298,11 +317,17 @@ class ConsoleServer:
 
     def _log(
         self, text: str, level: str = "info", source: str = "console", echo: bool = True
-    ) -> dict[str, Any]:
+    ) -> LogPanelEntry:
         """An entry in the page's Log panel (`source`: console, ars); `echo`: to Python logging
         too (ARS's entries are there already, as the CTC device's events)."""
         now = time.time()
-        entry = {"time": _clock(now), "t": now, "text": text, "level": level, "source": source}
+        entry: LogPanelEntry = {
+            "time": _clock(now),
+            "t": now,
+            "text": text,
+            "level": level,
+            "source": source,
+        }
         self.log_entries.append(entry)
         if echo:
             pylevel = logging.WARNING if level in ("error", "busy") else logging.INFO
@@ -526,7 +551,7 @@ class ConsoleServer:
                    "entries": list(feed.entries)}  # fmt: skip
         await self._send(client, json.dumps(payload))
 
-    def _tap_push(self, index: int, entries: list[dict[str, Any]], reset: bool = False) -> None:
+    def _tap_push(self, index: int, entries: list[FrameEntry], reset: bool = False) -> None:
         feed = self.taps[index]
         payload = {"type": "frames", "tap": index, "reset": reset, "status": feed.status,
                    "entries": entries}  # fmt: skip
@@ -567,8 +592,8 @@ class ConsoleServer:
                             if isinstance(stamp, (int, float)) and stamp
                             else time.time()
                         )
-                        entries = [{"time": _clock(t), "direction": "", "ok": True,
-                                    "text": f"-- {item.get('event')}: {detail}"}]  # fmt: skip
+                        entries = [FrameEntry(time=_clock(t), direction="", ok=True,
+                                              text=f"-- {item.get('event')}: {detail}")]  # fmt: skip
                     feed.entries.extend(entries)
                     self._tap_push(index, entries)
             except asyncio.CancelledError:
@@ -598,12 +623,12 @@ class ConsoleServer:
 
     def _render(
         self, feed: _TapFeed, item: Mapping[str, Any], profile: FrameProfile
-    ) -> list[dict[str, Any]]:
+    ) -> list[FrameEntry]:
         data = bytes.fromhex(str(item["hex"]))
         t = float(item.get("time") or time.time())
         direction = str(item.get("direction", ""))
         dec = StreamDecoder(profile)
-        out = []
+        out: list[FrameEntry] = []
         for rec in dec.feed(data) + dec.close():
             ok = isinstance(rec, Frame) and rec.error is None
             chart = self._chart_for(feed, rec, profile) if isinstance(rec, Frame) else None
