@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ def tap_file(name: str) -> Path:
     return run_dir() / "taps" / f"{name}.json"
 
 
-def announce(name: str, info: dict[str, Any]) -> Path:
+def announce(name: str, info: Mapping[str, object]) -> Path:
     path = tap_file(name)
     private_dir(path.parent)
     tmp = path.with_suffix(f".{this_process()['pid']}.tmp")
