@@ -20,7 +20,7 @@ import threading
 import tty
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Required, TypedDict
 
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap.runner import Tap
@@ -32,6 +32,14 @@ PTY_PENDING_MAX = 1 << 20  # bytes queued for a pty nobody reads before the olde
 REOPEN = 1.0  # s between attempts to open an external serial end that is not there
 JOIN_TIMEOUT = 10.0  # s; an open in progress (an RFC 2217 server negotiating) ends first
 POLL = 0.05  # s, how long the reader of an external end waits before it checks for stop
+
+
+class PtyEnds(TypedDict, total=False):
+    """A pty tap's ends: the pty path of each end it made, the serial endpoint of each external
+    one (only when it has one)."""
+
+    paths: Required[dict[str, str]]
+    external: dict[str, str]
 
 
 @dataclass
@@ -106,8 +114,11 @@ class PtyTap(Tap):
         s = self._serials.get(end)
         return s is not None and s.transport is not None
 
-    def _ends_info(self) -> dict[str, Any]:
-        return {"paths": self.paths, **({"external": self.external} if self._serials else {})}
+    def _ends_info(self) -> PtyEnds:
+        ends: PtyEnds = {"paths": self.paths}
+        if self._serials:
+            ends["external"] = self.external
+        return ends
 
     def _status(self) -> dict[str, Any]:
         out = super()._status()

@@ -229,7 +229,8 @@ class Tap:
     def _deliver(self, direction: str, data: bytes) -> None:
         raise NotImplementedError
 
-    def _ends_info(self) -> dict[str, Any]:
+    def _ends_info(self) -> Mapping[str, object]:
+        """Where its ends are, as its info says (each kind of tap its own keys)."""
         return {}
 
     def _link_cut(self) -> None:

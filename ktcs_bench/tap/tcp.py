@@ -11,13 +11,20 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench.tap.runner import Tap
 from ktcs_bench.transport import net
 from ktcs_bench.transport.tcp import open_tcp
 
 CONNECT_TIMEOUT = 5.0
+
+
+class TcpEnds(TypedDict):
+    """A TCP tap's ends: the address it listens at and the one it connects to ([host, port])."""
+
+    listen: list[str | int]
+    target: list[str | int]
 
 
 @dataclass
@@ -50,7 +57,7 @@ class TcpTap(Tap):
         self._conn: _Conn | None = None
         self.connections = 0
 
-    def _ends_info(self) -> dict[str, Any]:
+    def _ends_info(self) -> TcpEnds:
         addr = self.listen_address or self.listen
         return {"listen": list(addr), "target": list(self.target)}
 

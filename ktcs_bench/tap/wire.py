@@ -11,11 +11,17 @@ from __future__ import annotations
 
 import asyncio
 from functools import partial
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench.errors import UsageError
 from ktcs_bench.tap.runner import Tap
 from ktcs_bench.transport.memory import VIRTUAL_SCHEME, SerialEnd, network_of
+
+
+class WireEnds(TypedDict):
+    """A virtual wire tap's ends: the endpoint each device opens."""
+
+    paths: dict[str, str]
 
 
 class WireTap(Tap):
@@ -34,7 +40,7 @@ class WireTap(Tap):
         """The endpoint each device opens."""
         return {end: f"{VIRTUAL_SCHEME}{self.name}/{end}" for end in self.names}
 
-    def _ends_info(self) -> dict[str, Any]:
+    def _ends_info(self) -> WireEnds:
         return {"paths": self.paths}
 
     async def _open_ends(self) -> None:
