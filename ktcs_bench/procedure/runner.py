@@ -16,7 +16,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench import messages as msg
@@ -40,6 +40,20 @@ ACTIONS = (kinds.CTC, "local", kinds.TRAIN, "fault")
 LAB_ERRORS = (KtcsError, OSError, TimeoutError, ConnectionError, ValueError)
 
 
+class StepJson(TypedDict):
+    """A step's result as the JSON report gives it (`StepResult.as_dict`)."""
+
+    step: int
+    kind: str
+    text: str
+    note: str
+    verdict: str
+    message: str
+    seen: str
+    start_s: float
+    duration_s: float
+
+
 @dataclass
 class StepResult:
     index: int
@@ -58,7 +72,7 @@ class StepResult:
     def title(self) -> str:
         return f"{self.kind}: {self.text}"
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> StepJson:
         return {"step": self.index, "kind": self.kind, "text": self.text, "note": self.note,
                 "verdict": self.verdict, "message": self.message, "seen": self.seen,
                 "start_s": round(self.start, 3), "duration_s": round(self.duration, 3)}  # fmt: skip

@@ -4,9 +4,23 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypedDict
 
 _GREEN, _RED, _YELLOW, _BOLD, _RESET = "\x1b[32m", "\x1b[31m", "\x1b[33m", "\x1b[1m", "\x1b[0m"
+
+
+class ThreatResultJson(TypedDict):
+    """A threat's result as the JSON report gives it (`ThreatResult.as_dict`)."""
+
+    threat: str
+    link: str
+    injection: str
+    defence: str
+    caught: bool
+    outcome: str
+    safe: bool | None
+    ran: bool
+    evidence: list[str]
 
 
 @dataclass
@@ -28,7 +42,7 @@ class ThreatResult:
     def passed(self) -> bool:
         return not self.ran or (self.caught and self.safe is not False)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> ThreatResultJson:
         return {"threat": self.threat, "link": self.link, "injection": self.injection,
                 "defence": self.defence, "caught": self.caught, "outcome": self.outcome,
                 "safe": self.safe, "ran": self.ran, "evidence": self.evidence}  # fmt: skip
