@@ -27,7 +27,8 @@ def test_generated_three_station_lab_comes_up_in_center_mode_with_links_up(
 ) -> None:
     write_line(3, tmp_path / "line3")
     line = load_line(tmp_path / "line3" / "line.yaml")
-    with start_lab(tmp_path, "line3", path=tmp_path / "line3" / "lab.yaml") as lab:
+    # not an empty line: the timetable's trains stand at station 12 from the start
+    with start_lab(tmp_path, "line3", path=tmp_path / "line3" / "lab.yaml", clear=False) as lab:
 
         def every_station_up() -> bool:
             stations = lab.ctc({"cmd": "status"})["status"]["stations"]
