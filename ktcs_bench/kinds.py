@@ -39,6 +39,13 @@ IO = "io"
 """The trackside's link role: the IXL's name for its trackside peer (`--link io=...`, the charts
 `ixl_to_io`/`io_to_ixl`, `st20-io` taps in the shipped labs)."""
 
+WEST, EAST = "west", "east"
+NEIGHBOUR_ROLES: tuple[str, ...] = (WEST, EAST)
+"""The IXL's link roles to its neighbouring IXLs (SPEC §6.6): the one at the west end of the
+interval between them is its `east` peer's `west`. A vital Type I link per pair of stations, its
+charts `ixl_to_east`/`east_to_ixl` (and `..._west`), carrying each shared interval's traffic
+permission; not a kind of its own (the peer is an IXL)."""
+
 RAILS = "rails"
 """The bench's own link from a device to the track-circuit emulator (not a kTCS protocol)."""
 
@@ -121,9 +128,10 @@ PEER_ROLES: tuple[str, ...] = tuple(k.role for k in IXL_PEERS)
 
 LINK_ROLES: tuple[str, ...] = (
     *(k.role for k in KINDS.values() if k.link is not None or k.name == IXL),
+    *NEIGHBOUR_ROLES,
     RAILS,
 )
-"""Every peer name `--link` takes: the IXL, its peers, the rails."""
+"""Every peer name `--link` takes: the IXL, its peers, its neighbouring IXLs, the rails."""
 
 
 def externals(key: str) -> tuple[str, ...]:

@@ -59,6 +59,11 @@ class Function(StrEnum):
     TDU = "TDU"  # traffic direction up
     TDD = "TDD"  # traffic direction down
     IZC = "IZC"  # interval occupied (its totalisers)
+    # an interval's traffic permission (SPEC §6.6): IXL <-> IXL, and to the CTC
+    PHI = "PHI"  # the sender holds the interval's traffic permission
+    PRQ = "PRQ"  # the sender asks for the permission
+    DRL = "DRL"  # a departure route of the sender's into the interval is locked
+    DRC = "DRC"  # CTC -> IXL: ask the neighbour for the interval's permission
     TTC = "TTC"  # totaliser over a run of track circuits: occupied
     TC = "TC"  # track circuit occupied
 
@@ -66,7 +71,17 @@ class Function(StrEnum):
 STATION_FUNCTIONS = frozenset(
     {Function.LOC, Function.CTC, Function.CMR, Function.CMQ, Function.LMQ}
 )
-INTERVAL_FUNCTIONS = frozenset({Function.TDU, Function.TDD, Function.IZC})
+INTERVAL_FUNCTIONS = frozenset(
+    {
+        Function.TDU,
+        Function.TDD,
+        Function.IZC,
+        Function.PHI,
+        Function.PRQ,
+        Function.DRL,
+        Function.DRC,
+    }
+)
 ASPECT_FUNCTIONS = frozenset({Function.ASP, Function.SGC, Function.LPS})
 
 
@@ -248,3 +263,23 @@ def tdd(interval: str) -> str:
 
 def izc(interval: str) -> str:
     return CodeName(Function.IZC, None, interval).text
+
+
+def phi(interval: str) -> str:
+    """The sender holds the interval's traffic permission (IXL -> IXL, IXL -> CTC)."""
+    return CodeName(Function.PHI, None, interval).text
+
+
+def prq(interval: str) -> str:
+    """The sender asks its neighbour for the interval's permission (IXL -> IXL, IXL -> CTC)."""
+    return CodeName(Function.PRQ, None, interval).text
+
+
+def drl(interval: str) -> str:
+    """A departure route of the sender's into the interval is locked (IXL -> IXL)."""
+    return CodeName(Function.DRL, None, interval).text
+
+
+def drc(interval: str) -> str:
+    """CTC -> IXL: ask the neighbour for the interval's permission ahead of a route."""
+    return CodeName(Function.DRC, None, interval).text

@@ -57,6 +57,10 @@ ONE_ZERO: dict[str, str] = {
     F.TC: "1 occupied, 0 clear",
     F.TTC: "1 occupied, 0 clear",
     F.IZC: "1 TTC occupied, 0 TTC clear",
+    F.PHI: "1 holds the interval's traffic permission",
+    F.PRQ: "1 asks for the interval's traffic permission",
+    F.DRL: "1 a departure route into the interval is locked",
+    F.DRC: "1 ask the neighbour for the interval's traffic permission",
 }
 
 
