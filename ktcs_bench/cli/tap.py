@@ -33,8 +33,8 @@ examples:
   ktcs-bench tap run --pty --names ixl,atc --name st18-ixl-atc --write st18.hex
   ktcs-bench tap run --tcp 127.0.0.1:6020 127.0.0.1:5020 --names ixl,ctc --write t2.pcapng
   ktcs-bench tap fault st18-ixl-atc ber 1e-3
-  ktcs-bench tap fault 127.0.0.1:40111 drop-frame ixl->atc
-  ktcs-bench tap fault st18-ixl-atc garbage ixl->atc 02 ff 00
+  ktcs-bench tap fault 127.0.0.1:40111 drop-frame 'ixl->atc'
+  ktcs-bench tap fault st18-ixl-atc garbage 'ixl->atc' 02 ff 00
   ktcs-bench tap fault st18-ixl-atc cut        # ... later: restore, clear
   ktcs-bench tap status st18-ixl-atc
   ktcs-bench monitor st18-ixl-atc
