@@ -187,7 +187,9 @@ class TrainDevice(Device):
         # time (0 at the start); it is on the rails from its first cycle
         first = CYCLE if run is None else max(CYCLE, run.enter_s)
         onboard = train_line(line) if run is None else run.line
-        self.endpoint = TrainEndpoint(config, onboard, sense=self._sense, first=first)
+        self.endpoint = TrainEndpoint(
+            config, onboard, sense=self._sense, first=first, chainage=self.frame.x
+        )
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None

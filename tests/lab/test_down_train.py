@@ -7,6 +7,7 @@ chainage end."""
 from __future__ import annotations
 
 import asyncio
+import json
 from pathlib import Path
 from typing import Any
 
@@ -71,6 +72,12 @@ def test_a_down_train_runs_22_20_18_under_ars_stopping_within_half_a_metre(
     assert all(abs(x["tail"] - x["head"] - 200.0) < 1e-6 for x in seen), seen[-1]
     # on the station's main track at each stop (the rails occupy track 1's circuits there)
     assert s["track"] == "1", s
+    # what it says of its stops names the chainage too
+    events = [json.loads(e) for e in (out / "events.jsonl").read_text().splitlines()]
+    said = [e["text"] for e in events if e["device"] == "train2001" and e["kind"] == "arrival"]
+    assert [x.split(" m,")[0] for x in said] == [
+        f"{a['station']}: front at {a['head_m']:.2f}" for a in s["arrivals"]
+    ], said
     # ARS set its routes -- the down home and starting routes of each station -- and nobody else
     log = result["log"]
     assert log and {e["source"] for e in log} == {"ars"}, log
