@@ -12,11 +12,19 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from ktcs_bench.emulator.train import ENTRY_SHORT_M, PSM_M, line_frame, timetable_run, train_line
+from ktcs_bench.emulator.train import (
+    ENTRY_SHORT_M,
+    PSM_M,
+    TrainDevice,
+    line_frame,
+    timetable_run,
+    train_line,
+)
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station import load_line
 from ktcs_bench.station.timetable import load_timetable
 from ktcs_bench.train.frame import Frame
+from ktcs_bench.transport.endpoints import Endpoint
 
 TIMETABLE = Path(__file__).parents[1] / "lab" / "down_train.yaml"  # 2001: 22 -> 20 -> 18
 MARKS = {"22": 12120.0, "20": 6220.0, "18": 620.0}
@@ -126,3 +134,19 @@ def test_a_down_timetable_train_starts_and_stops_in_its_own_frame() -> None:
         (6000.0, 7000.0, "1"),
         (500.0, 1200.0, "1"),
     ]
+
+
+def test_the_train_process_speaks_chainage_to_the_rails_for_a_down_train() -> None:
+    """Its position on the rails: head at the lower end, leading; a code from the rails located
+    from the circuit's upper end; gone off the line's low end once it has left."""
+    run = timetable_run(load_timetable(TIMETABLE, LINE).train("2001"), LINE, 0.5)
+    rails = Endpoint("tcp", "", "127.0.0.1", 9)  # never connected: nothing here runs
+    device = TrainDevice("train2001", LINE, run.config, rails, run=run)
+    assert device._position() == {"head": 12850.0, "tail": 13050.0, "track": "1"}
+    # TC2255 (12100-12700 m, track 1 at 22): stop 20 m short of down starting signal 21
+    device._from_rails({"code": [3, 45, -2.0, 580.0], "tc": "TC2255"})
+    assert device.code is not None and device.code.speed == pytest.approx(45 / 3.6)
+    assert DOWN.x(device.code.target_point) == 12120.0
+    assert device.status()["code"] == [45.0, -2.0, 12120.0]
+    device.endpoint.left = True  # off the end of its line: below the lab's west edge
+    assert device._position() == {"head": -201.0, "tail": -1.0}
