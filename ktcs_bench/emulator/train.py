@@ -311,6 +311,7 @@ class TrainDevice(Device):
         return {
             **super().status(),
             kinds.TRAIN: self.config.train_id,
+            "direction": self.frame.sense,
             **self._position(),
             "time_s": round(now, 1),
             "state": ep.service_state(now) if self.on_line else "waiting",
@@ -321,7 +322,7 @@ class TrainDevice(Device):
             "arrivals": [
                 {
                     "station": a.station,
-                    "stop_m": at(a.stop_mark),
+                    "stop_m": round(self.frame.x(a.stop_mark), 3),
                     "head_m": round(self.frame.x(a.head), 3),
                     "error_m": round(a.error, 3),
                     "time_s": round(a.time, 1),

@@ -56,7 +56,7 @@ def test_a_down_train_runs_22_20_18_under_ars_stopping_within_half_a_metre(
     out = tmp_path / "run"
     result = InProcessLab(down_lab(tmp_path), out=out).run(main)
     s = result["status"]
-    assert s["state"] == "finished", s
+    assert s["state"] == "finished" and s["direction"] == "down", s
     assert s["emergency_brakes"] == 0, s
     assert [a["station"] for a in s["arrivals"]] == ["22", "20", "18"], s
     assert [d["station"] for d in s["departures"]] == ["22", "20"], s
