@@ -86,7 +86,8 @@ ATO_REACTION = 1.0
 
 @dataclass(frozen=True)
 class TrackCode:
-    """A kTCS track-circuit code as read by the antenna, located on the line (up direction)."""
+    """A kTCS track-circuit code as read by the antenna, located on the train's line (rising
+    positions in its direction of travel: `train.frame`)."""
 
     speed: float
     """Target speed at the track circuit's exit, m/s (0: stop at the exit)."""
