@@ -10,7 +10,11 @@ antenna (none received yet, a dead track circuit, the rails lost) means stop her
 runs on the absence of a code.
 
 The train's line data (tags, gradients, speed limits) come from the lab's line file, so the ATP
-and the wayside ATC see the same line. Runs in the up direction (rising chainage).
+and the wayside ATC see the same line. A train runs up (rising chainage) or down: the onboard
+keeps one coordinate, the distance run in its own direction, and the process maps the line into
+it (`train.frame.Frame`: for a down train mirrored, a rise up a fall down, each code's track
+circuit entered by its upper end) and each position it reports back to chainage (a down train's
+head is its lower end). Orders and status speak chainage.
 
 A train of the lab's timetable (`train: ID` with a lab-level `timetable:`) runs its entry
 (`timetable_run`): its train data, its platform stops for the ATO (with precision-stop markers
@@ -46,9 +50,8 @@ from ktcs_bench.messages import (
     SpeedDistance,
     TrainOrder,
 )
-from ktcs_bench.station.model import Line
+from ktcs_bench.station.model import Direction, Line
 from ktcs_bench.station.timetable import TimetableTrain
-from ktcs_bench.train.deceleration import GradientProfile
 from ktcs_bench.train.dynamics import TrainParams
 from ktcs_bench.train.endpoint import (
     CYCLE,
@@ -60,29 +63,36 @@ from ktcs_bench.train.endpoint import (
     TrainConfig,
     TrainEndpoint,
 )
-from ktcs_bench.train.mrsp import Restriction
+from ktcs_bench.train.frame import Frame
 from ktcs_bench.train.speed_distance import endpoint_speed_distance
 from ktcs_bench.train.units import kmh
 from ktcs_bench.transport.endpoints import Endpoint
 
 
-def train_line(line: Line) -> LineData:
-    """The onboard view of a reference line: tags every `tag_spacing_m`, gradients, speed limits."""
+def line_frame(line: Line, direction: Direction = "up") -> Frame:
+    """The line as a train running `direction` sees it."""
+    return Frame(line.start_m, line.end_m, direction)
+
+
+def train_line(line: Line, frame: Frame | None = None) -> LineData:
+    """The onboard view of a reference line in the train's `frame` (default: up): tags every
+    `tag_spacing_m`, gradients, speed limits."""
+    frame = frame or line_frame(line)
     tags = []
     x = line.start_m
     while x <= line.end_m:
         tags.append(x)
         x += line.tag_spacing_m
-    grads = sorted(line.gradients, key=lambda g: g.from_m)
-    gradient = GradientProfile(tuple(g.from_m for g in grads), tuple(g.permille for g in grads))
-    restrictions = [Restriction(s.from_m, s.to_m, kmh(s.kmh)) for s in line.speed_limits]
-    return LineData(line.end_m, tags, gradient, restrictions, [])
+    gradient = frame.gradient((g.from_m, g.to_m, g.permille) for g in line.gradients)
+    restrictions = frame.restrictions((s.from_m, s.to_m, kmh(s.kmh)) for s in line.speed_limits)
+    return LineData(line.end_m, frame.tags(tags), gradient, restrictions, [])
 
 
 PSM_M = (50.0, 20.0, 5.0)
 """Precision-stop markers (seed 002 Table 1): tags this far before each platform stop mark."""
 ENTRY_SHORT_M = 50.0
-"""A train entering at a track circuit comes on with its front this far short of its far end."""
+"""A train entering at a track circuit comes on with its front this far short of its far end (the
+end it leaves by: the upper for an up train, the lower for a down one)."""
 BRAKE_BUILD_UP_S = 0.5
 
 
@@ -96,12 +106,12 @@ class TimetableRun:
     """Its own time (s from its start) at which it comes onto the line."""
     tracks: tuple[tuple[float, float, str], ...]
     """(from_m, to_m, track): the station track it uses where its stations' tracks lie."""
+    frame: Frame
+    """The line as it runs it (its direction): `config`, `line` and the stops are in it."""
 
 
 def timetable_run(train: TimetableTrain, line: Line, brake_build_up: float) -> TimetableRun:
     """The onboard data and start of a timetable train (see the module docstring)."""
-    if train.direction != "up":
-        raise UsageError(f"train {train.id}: the train emulator runs up trains only")
     d = train.data
     params = TrainParams(
         length=d.length_m,
@@ -111,12 +121,13 @@ def timetable_run(train: TimetableTrain, line: Line, brake_build_up: float) -> T
         emergency_decel=kmh(d.emergency_brake_kmh_per_s),
         brake_build_up=brake_build_up,
     )
-    onboard = train_line(line)
-    marks = [s.stop_m for s in train.stops]
+    frame = line_frame(line, train.direction)
+    onboard = train_line(line, frame)
+    marks = [frame.s(s.stop_m) for s in train.stops]
     onboard.tags = sorted({*onboard.tags, *(m - back for m in marks for back in PSM_M)})
     onboard.stations = [
-        Station(str(s.station), s.stop_m, s.dwell_s, train.depart_s if i == 0 else 0.0)
-        for i, s in enumerate(train.stops)
+        Station(str(s.station), mark, s.dwell_s, train.depart_s if i == 0 else 0.0)
+        for i, (s, mark) in enumerate(zip(train.stops, marks, strict=True))
     ]
     tracks = []
     for s in train.stops:
@@ -124,9 +135,9 @@ def timetable_run(train: TimetableTrain, line: Line, brake_build_up: float) -> T
         tracks.append((min(t.from_m for t in circuits), max(t.to_m for t in circuits), s.track))
     if train.enters is not None:
         entry = next(t for t in line.all_track_circuits() if t.name == train.enters.track_circuit)
-        start = entry.to_m - ENTRY_SHORT_M
+        start = frame.span(entry.from_m, entry.to_m)[1] - ENTRY_SHORT_M
     else:
-        start = train.stops[0].stop_m
+        start = marks[0]
     cfg = TrainConfig(
         train_id=train.id,
         params=params,
@@ -136,7 +147,7 @@ def timetable_run(train: TimetableTrain, line: Line, brake_build_up: float) -> T
         driver_speed=params.max_speed,
         leaves_line=train.leaves_lab,
     )
-    return TimetableRun(cfg, onboard, train.enters_at_s, tuple(tracks))
+    return TimetableRun(cfg, onboard, train.enters_at_s, tuple(tracks), frame)
 
 
 def _code_fields(wire: Any) -> tuple[float, float, float] | None:
@@ -171,11 +182,14 @@ class TrainDevice(Device):
         config = self.config
         self.run_ = run
         self.tracks = () if run is None else run.tracks
+        self.frame = line_frame(line) if run is None else run.frame  # placed by the lab: up
         # the first cycle one period after the start (or at its entry time), on the train's own
         # time (0 at the start); it is on the rails from its first cycle
         first = CYCLE if run is None else max(CYCLE, run.enter_s)
         onboard = train_line(line) if run is None else run.line
-        self.endpoint = TrainEndpoint(config, onboard, sense=self._sense, first=first)
+        self.endpoint = TrainEndpoint(
+            config, onboard, sense=self._sense, first=first, chainage=self.frame.x
+        )
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None
@@ -235,8 +249,10 @@ class TrainDevice(Device):
             self.code, self.code_tc = None, tc if isinstance(tc, str) else None
             return
         speed_kmh, gradient, distance = fields
-        circuit = self.tcs[tc]  # up direction: the code counts from the entry end
-        self.code = TrackCode.read(circuit.from_m, circuit.to_m, kmh(speed_kmh), gradient, distance)
+        circuit = self.tcs[tc]  # the code counts from the end the train enters by
+        self.code = self.frame.code(
+            circuit.from_m, circuit.to_m, kmh(speed_kmh), gradient, distance
+        )
         self.code_tc = tc
 
     def _code_now(self) -> TrackCode:
@@ -245,11 +261,15 @@ class TrainDevice(Device):
         return self.code
 
     def _position(self) -> Position:
-        head = self.endpoint.dynamics.state.position
-        tail = head - self.config.params.length
+        """Where the train is on the rails, in chainage (its head leads in its direction)."""
+        s = self.endpoint.dynamics.state.position
+        length = self.config.params.length
         if self.endpoint.left:  # off the end of the line: on no track circuit of the lab
-            return {"head": self.line.end_m + head - tail + 1.0, "tail": self.line.end_m + 1.0}
+            s = self.line.end_m + 1.0 + length
+        head, tail = self.frame.x(s), self.frame.x(s - length)
         out: Position = {"head": head, "tail": tail}
+        if self.endpoint.left:
+            return out
         track = next((t for lo, hi, t in self.tracks if lo <= head < hi), None)
         track = track or next((t for lo, hi, t in self.tracks if lo < tail < hi), None)
         if track is not None:
@@ -287,21 +307,23 @@ class TrainDevice(Device):
         verdict = self.last.verdict if self.last is not None else None
         ep = self.endpoint
         now = 0.0 if self.origin is None else self.now() - self.origin
+        at = self._chainage
         return {
             **super().status(),
             kinds.TRAIN: self.config.train_id,
+            "direction": self.frame.sense,
             **self._position(),
             "time_s": round(now, 1),
             "state": ep.service_state(now) if self.on_line else "waiting",
             "held": ep.held,
-            "stop_at": ep.commanded_stop,
+            "stop_at": at(ep.commanded_stop),
             "enters_s": None if self.run_ is None else self.run_.enter_s,
             "next_stop": None if ep.next_stop is None else ep.next_stop.name,
             "arrivals": [
                 {
                     "station": a.station,
-                    "stop_m": a.stop_mark,
-                    "head_m": round(a.head, 3),
+                    "stop_m": round(self.frame.x(a.stop_mark), 3),
+                    "head_m": round(self.frame.x(a.head), 3),
                     "error_m": round(a.error, 3),
                     "time_s": round(a.time, 1),
                 }
@@ -317,12 +339,16 @@ class TrainDevice(Device):
             else [
                 round(self.code.speed * 3.6, 1),
                 self.code.gradient,
-                self.code.target_point,
+                at(self.code.target_point),
             ],  # fmt: skip
             "status": None if verdict is None else verdict.status.value,
             "emergency_brakes": ep.eb_count,
-            "target_point": None if self.last is None else self.last.target_point,
+            "target_point": None if self.last is None else at(self.last.target_point),
         }
+
+    def _chainage(self, s: float | None) -> float | None:
+        """A place the onboard names (None or infinite: none) as chainage, for people."""
+        return s if s is None or not math.isfinite(s) else self.frame.x(s)
 
     def _order(self, order: TrainOrder) -> Answer:
         """The operator's orders to the ATO: hold, dispatch [now], run_to AT (m on the line)."""
@@ -335,7 +361,7 @@ class TrainDevice(Device):
                 case Dispatch(now=at_once):
                     text = ep.dispatch(now, at_once=at_once)
                 case RunTo(at=at):
-                    text = ep.run_to(now, at)
+                    text = ep.run_to(now, self.frame.s(at))
         except UsageError as exc:
             return Refused(error=str(exc))
         self.note(order.cmd(), text)

@@ -86,7 +86,8 @@ ATO_REACTION = 1.0
 
 @dataclass(frozen=True)
 class TrackCode:
-    """A kTCS track-circuit code as read by the antenna, located on the line (up direction)."""
+    """A kTCS track-circuit code as read by the antenna, located on the train's line (rising
+    positions in its direction of travel: `train.frame`)."""
 
     speed: float
     """Target speed at the track circuit's exit, m/s (0: stop at the exit)."""
@@ -264,9 +265,15 @@ def _no_inputs(now: float) -> CycleInputs:
     return CycleInputs()
 
 
+def _as_is(x: float) -> float:
+    return x
+
+
 class TrainEndpoint:
     """One train: plant + ATP + driver/ATO, cycling every `cycle` s from `first` (see the module
-    docstring); `sense(now)` gives a cycle its inputs."""
+    docstring); `sense(now)` gives a cycle its inputs. It works in rising positions; `chainage`
+    tells a place of its own as people name it on the line (a down train's runs against the
+    chainage: `train.frame`) in what it says, and `run_to` takes a place of its own."""
 
     def __init__(
         self,
@@ -276,8 +283,10 @@ class TrainEndpoint:
         sense: Callable[[float], CycleInputs] = _no_inputs,
         first: float = 0.0,
         cycle: float = CYCLE,
+        chainage: Callable[[float], float] = _as_is,
     ) -> None:
         self.cfg, self.line = cfg, line
+        self.chainage = chainage
         self.sense = sense
         self.first, self.cycle = first, cycle
         self.cycles = 0
@@ -671,11 +680,12 @@ class TrainEndpoint:
         there: it starts its service at this platform), then the dwell, no sooner than the
         station's departure time."""
         head = self.dynamics.state.position
+        at = self.chainage
         if self.dynamics.state.odometer > 0.0:
             arrival = Arrival(station.name, station.stop_mark, now, head)
             self.arrivals.append(arrival)
             events.append(TrainEvent(now, self.cfg.train_id, "arrival",
-                                     f"{station.name}: front at {head:.2f} m, "
+                                     f"{station.name}: front at {at(head):.2f} m, "
                                      f"{arrival.error:+.2f} m from the mark"))  # fmt: skip
         self._dwell_until = max(now + station.dwell, station.depart)
         self._berth = station
@@ -694,9 +704,9 @@ class TrainEndpoint:
         if abs(self.tacho.head(self.position) - x) > STOP_TOLERANCE:
             return False
         self._stop_at, self._hold = None, "here"
-        head = self.dynamics.state.position
+        head, at = self.dynamics.state.position, self.chainage
         events.append(TrainEvent(now, self.cfg.train_id, "stopped",
-                                 f"at the commanded stop {x:g} m: front at {head:.2f} m, "
+                                 f"at the commanded stop {at(x):g} m: front at {at(head):.2f} m, "
                                  f"{head - x:+.2f} m; waits for dispatch"))  # fmt: skip
         return True
 
@@ -717,7 +727,7 @@ class TrainEndpoint:
                 return "held: no platform stop ahead, a service-brake stop"
             return "held where it stands"
         self._hold = "platform"
-        return f"held at its next platform stop, {nxt.name} ({nxt.stop_mark:g} m)"
+        return f"held at its next platform stop, {nxt.name} ({self.chainage(nxt.stop_mark):g} m)"
 
     def dispatch(self, now: float, at_once: bool = False) -> str:
         """Cancel a hold and a commanded stop: the train goes on with its service when its dwell
@@ -744,14 +754,15 @@ class TrainEndpoint:
         s = self.dynamics.state
         head = self.tacho.head(self.position)
         reach = s.speed * s.speed / (2.0 * self.cfg.params.service_decel)
+        at = self.chainage
         if not math.isfinite(x) or not head + reach < x <= self.line.length:
             raise UsageError(
-                f"train {self.cfg.train_id}: cannot run to {x:g} m: a stop point ahead of its "
-                f"front ({head:.1f} m{f', {reach:.0f} m to stop' if reach else ''}) and on "
-                f"the line (to {self.line.length:g} m)"
+                f"train {self.cfg.train_id}: cannot run to {at(x):g} m: a stop point ahead of "
+                f"its front ({at(head):.1f} m{f', {reach:.0f} m to stop' if reach else ''}) and "
+                f"on the line (to {at(self.line.length):g} m)"
             )
         self._hold, self._stop_at = None, x
-        return f"runs to {x:g} m and stands there"
+        return f"runs to {at(x):g} m and stands there"
 
     @property
     def held(self) -> bool:
