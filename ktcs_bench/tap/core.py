@@ -19,7 +19,7 @@ from __future__ import annotations
 import random
 from collections import deque
 from dataclasses import dataclass, field
-from typing import TypedDict
+from typing import Literal, TypedDict
 
 from ktcs_bench.capture.records import CaptureRecord
 from ktcs_bench.codec.profile import FrameProfile
@@ -73,7 +73,7 @@ class CoreStatus(TypedDict):
 class CommandAnswer(TypedDict):
     """A command that changes the link, done: `{"ok": true, "command": WORDS}`."""
 
-    ok: bool
+    ok: Literal[True]
     command: str
 
 

@@ -25,7 +25,7 @@ import threading
 import time
 from collections.abc import Callable, Coroutine, Iterable, Mapping
 from pathlib import Path
-from typing import Any, TypedDict, TypeVar
+from typing import Any, Literal, TypedDict, TypeVar
 
 from ktcs_bench.capture import CaptureRecord, CaptureWriter
 from ktcs_bench.codec.profile import FrameProfile, get_profile
@@ -57,31 +57,32 @@ class TapStatus(TapInfo, CoreStatus):
     `PtyStatus`)."""
 
 
-class StatusAnswer(TypedDict):
-    ok: bool
+class TapStatusAnswer(TypedDict):
+    ok: Literal[True]
     status: TapStatus
 
 
-class HelpAnswer(TypedDict):
-    ok: bool
+class TapHelpAnswer(TypedDict):
+    ok: Literal[True]
     help: str
 
 
-class ErrorAnswer(TypedDict):
-    """`{"ok": false, "error": ...}`: not done, and why."""
+class TapRefused(TypedDict):
+    """`{"ok": false, "error": ...}`: not done, and why (the shape of every port's error,
+    `messages.Refused`)."""
 
-    ok: bool
+    ok: Literal[False]
     error: str
 
 
-class SubscribeAnswer(TapHeader):
+class TapSubscribeAnswer(TapHeader):
     """`{"ok": true, ...}` and the stream's header."""
 
-    ok: bool
+    ok: Literal[True]
 
 
-TapAnswer = CommandAnswer | StatusAnswer | HelpAnswer | ErrorAnswer
-"""A tap control port's answer to a command (`subscribe` is answered by `SubscribeAnswer`)."""
+TapAnswer = CommandAnswer | TapStatusAnswer | TapHelpAnswer | TapRefused
+"""A tap control port's answer to a command (`subscribe` is answered by `TapSubscribeAnswer`)."""
 
 
 class Tap:
@@ -412,7 +413,7 @@ class Tap:
         """Answer `subscribe`, then send every event until the subscriber or the tap goes."""
         sub = self.core.subscribe(history)
         wake = self._wakes[sub] = asyncio.Event()
-        header: SubscribeAnswer = {"ok": True, "profile": self.profile.name,
+        header: TapSubscribeAnswer = {"ok": True, "profile": self.profile.name,
                                    "protocol": self.profile.protocol, "names": list(self.names),
                                    "tap": self.name, "kind": self.kind}  # fmt: skip
         peer.send(header)
