@@ -8,7 +8,8 @@ import json
 import sys
 import time
 from collections import defaultdict
-from typing import Any, TextIO
+from collections.abc import Mapping
+from typing import TextIO
 
 from ktcs_bench.capture.arq import ArqTracker
 from ktcs_bench.capture.records import CaptureRecord
@@ -19,7 +20,7 @@ from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.station_codes.chart import CodeChart
 
 
-def print_json_line(obj: dict[str, Any], stream: TextIO = sys.stdout) -> None:
+def print_json_line(obj: Mapping[str, object], stream: TextIO = sys.stdout) -> None:
     stream.write(json.dumps(obj, ensure_ascii=False, separators=(", ", ": ")) + "\n")
 
 
@@ -67,10 +68,9 @@ class FramePrinter:
                 self.bad += rec.error is not None
                 events = self.arq.observe(record.direction, rec, record.time)
             if self.as_json:
-                obj: dict[str, Any] = {"time": record.time, "direction": record.direction}
-                obj.update(to_json(rec, self.profile))
-                obj["arq"] = events
-                print_json_line(obj, self.stream)
+                line = {"time": record.time, "direction": record.direction,
+                        **to_json(rec, self.profile), "arq": events}  # fmt: skip
+                print_json_line(line, self.stream)
                 continue
             label = f"{format_time(record.time)} {record.direction}{note}  "
             lines = [to_text(rec, self.profile, self.chart, self.colour, label)]
@@ -81,11 +81,13 @@ class FramePrinter:
         self.stream.flush()
         return decoded
 
-    def event(self, event: dict[str, Any]) -> None:
+    def event(self, event: Mapping[str, object]) -> None:
         """A tap event (fault command, connection) -- shown in text mode only."""
         if self.as_json:
             return
         detail = " ".join(f"{k}={v}" for k, v in event.items() if k not in ("time", "event"))
-        text = f"-- {format_time(event.get('time'))} {event.get('event')}: {detail}"
+        t = event.get("time")
+        when = format_time(t if isinstance(t, int | float) else None)
+        text = f"-- {when} {event.get('event')}: {detail}"
         self.stream.write((f"{DIM}{text}{RESET}" if self.colour else text) + "\n")
         self.stream.flush()

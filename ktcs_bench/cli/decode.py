@@ -249,7 +249,7 @@ class _Output:
                 obj = to_json(record, profile)
                 if record.__class__ is Frame:
                     self.frames += 1
-                    if obj["error"] is None:
+                    if obj.get("error") is None:
                         self.good += 1
                     else:
                         self.failed = True

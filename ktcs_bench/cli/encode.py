@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Any
 
 from ktcs_bench.codec.frame import FrameCodec
 from ktcs_bench.codec.hextext import hex_bytes
@@ -65,7 +64,7 @@ def build_data(opcode: Opcode | None, args: argparse.Namespace) -> bytes:
         if raw is None:
             raise UsageError(f"--data: {args.data!r} is not hex")
         return raw
-    values: dict[str, Any] = {}
+    values: dict[str, int | list[int] | list[list[int]]] = {}  # fields, "items", "statuses"
     for f in args.field:
         name, sep, value = f.partition("=")
         if not sep:

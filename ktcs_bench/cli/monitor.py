@@ -7,7 +7,6 @@ import os
 import socket
 import time
 from collections.abc import Iterator
-from typing import Any
 
 import serial
 
@@ -18,6 +17,7 @@ from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap.client import TapClient
+from ktcs_bench.tap.core import TapEvent
 from ktcs_bench.tap.recorder import Recorder
 from ktcs_bench.transport.endpoints import parse_endpoint
 
@@ -80,8 +80,8 @@ def _is_serial(source: str) -> bool:
 
 
 def _tap_records(
-    source: str, history: bool, deadline: float | None, header: dict[str, Any]
-) -> Iterator[CaptureRecord | dict[str, Any]]:
+    source: str, history: bool, deadline: float | None, header: TapEvent
+) -> Iterator[CaptureRecord | TapEvent]:
     with TapClient(source) as client:
         left = None if deadline is None else max(0.05, deadline - time.monotonic())
         events = client.subscribe(history=history, timeout=left)
@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     colour: bool = args.colour
     deadline = None if args.timeout is None else time.monotonic() + args.timeout
     source: str = args.source
-    items: Iterator[CaptureRecord | dict[str, Any]]
+    items: Iterator[CaptureRecord | TapEvent]
     profile: FrameProfile | None = get_profile(args.profile) if args.profile else None
     if os.path.isfile(source):
         capture = read_capture(source)
@@ -163,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
             profile = get_profile("ktcs-type2" if source.startswith("tcp://") else "ktcs-type1")
         items = _stream_records(source, profile, args.baud, deadline)
     else:
-        header: dict[str, Any] = {}
+        header: TapEvent = {}
         items = _tap_records(source, args.history, deadline, header)
         next(items)
         if profile is None:

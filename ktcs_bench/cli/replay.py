@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import select
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 from ktcs_bench.capture import (
     CaptureRecord,
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
                          f"(it has {', '.join(capture.directions)})")  # fmt: skip
     expect = read_capture(args.expect) if args.expect else None
     protocol = "type2" if args.to.startswith("tcp://") else "auto"
-    header: dict[str, object] = {}
+    header: Mapping[str, object] = {}
     target: ReplayTarget
     if is_tap(args.to):
         spec = args.to.removeprefix("tap://").removeprefix("tap:")

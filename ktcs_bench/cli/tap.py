@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any
+from collections.abc import Mapping
+from typing import TypedDict
 
-from ktcs_bench.capture import open_writer
-from ktcs_bench.codec.profile import get_profile
+from ktcs_bench.capture import CaptureWriter, open_writer
+from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.errors import UsageError
 from ktcs_bench.tap.client import TapClient
 from ktcs_bench.tap.control import HELP as CONTROL_HELP
@@ -117,11 +118,24 @@ def _names(text: str) -> tuple[str, str]:
     return parts[0], parts[1]
 
 
+class _TapOptions(TypedDict):
+    """What `tap run` gives a tap of either kind."""
+
+    names: tuple[str, str]
+    seed: int
+    control: tuple[str, int]
+    name: str | None
+    token_file: str | None
+    profile: FrameProfile
+    writers: list[CaptureWriter]
+
+
 def _print_info(tap: Tap, as_json: bool) -> None:
     info = tap.info()
     if as_json:
         print(json.dumps(info), flush=True)
         return
+    assert info["control"] is not None  # `tap run` always opens its control port
     host, port = info["control"]
     title = f"tap {info['name']}" if info["name"] else "tap"
     lines = [f"{title} ({info['kind']}, profile {info['profile']}); control {host}:{port}"]
@@ -139,13 +153,13 @@ def run_tap(args: argparse.Namespace) -> int:
     names = _names(args.names)
     faults = [parse_command(command, names) for command in args.fault]  # refused before the start
     control = _address(args.control, "--control", any_free=True)
-    common: dict[str, Any] = {"names": names, "seed": args.seed, "control": control,
-                              "name": args.name, "token_file": args.token_file}  # fmt: skip
     profile = get_profile(args.profile or ("ktcs-type1" if args.pty else "ktcs-type2"))
-    common["profile"] = profile
-    common["writers"] = [
-        open_writer(path, link=profile.protocol, profile=profile.name) for path in args.write
-    ]
+    common: _TapOptions = {
+        "names": names, "seed": args.seed, "control": control, "name": args.name,
+        "token_file": args.token_file, "profile": profile,
+        "writers": [open_writer(path, link=profile.protocol, profile=profile.name)
+                    for path in args.write],
+    }  # fmt: skip
     tap: Tap
     if args.pty:
         tap = PtyTap(**common)
@@ -182,6 +196,9 @@ def run_status(args: argparse.Namespace) -> int:
 def run_list(args: argparse.Namespace) -> int:
     for info in known_taps():
         host, port = info.get("control") or ("?", "?")
-        ends = info.get("paths") or {"listen": info.get("listen"), "target": info.get("target")}
+        ends: Mapping[str, object] = info.get("paths") or {
+            "listen": info.get("listen"),
+            "target": info.get("target"),
+        }
         print(f"{info.get('name')}  {info.get('kind')}  control {host}:{port}  {json.dumps(ends)}")
     return 0

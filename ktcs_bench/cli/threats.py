@@ -8,10 +8,33 @@ import contextlib
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 from ktcs_bench.cli._common import positive
 from ktcs_bench.errors import UsageError
+
+if TYPE_CHECKING:
+    from ktcs_bench.threats.report import ThreatResultJson
+
+
+class TargetJson(TypedDict):
+    """A tapped link of the campaign in its JSON report: who received the frames, from where the
+    application was read, the timings judged by."""
+
+    tap: str
+    protocol: str
+    dut: str
+    peer: str
+    application: str | None
+    timing: dict[str, float | int | None]
+
+
+class CampaignJson(TypedDict):
+    """`threats --json`: the targets and each threat's result."""
+
+    targets: list[TargetJson]
+    results: list[ThreatResultJson]
+
 
 HELP = "inject the EN 50159 threats into running links through their taps; report the defences"
 DESCRIPTION = """\
@@ -136,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
             except OSError as exc:
                 raise UsageError(f"cannot write {path}: {exc.strerror}") from None
     if args.json:
-        report: dict[str, Any] = {
+        report: CampaignJson = {
             "targets": [
                 {
                     "tap": t.tap.name,

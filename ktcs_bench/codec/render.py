@@ -7,12 +7,38 @@ JSON object has exactly the keys of SPEC §7; garbage is `{"garbage": hex, "offs
 from __future__ import annotations
 
 import json
-from typing import Any, Literal
+from typing import Any, Literal, TypedDict
 
 from ktcs_bench.codec.frame import Frame, Garbage, Record
 from ktcs_bench.codec.opcodes import Opcode, PayloadError
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.station_codes.chart import CodeChart
+
+
+class FrameJson(TypedDict):
+    """A frame as a JSON line (SPEC §7): where, its header, DATA (hex) and its items, the CRC."""
+
+    protocol: str
+    profile: str
+    offset: int
+    seq: int | None
+    op: int | None
+    op_name: str | None
+    sub: int | None
+    data: str
+    items: list[list[int]] | None
+    crc_ok: bool
+    crc_packet: int | None
+    crc_calc: int | None
+    error: str | None
+
+
+class GarbageJson(TypedDict):
+    """Bytes that are no frame, as a JSON line: their hex and where they start."""
+
+    garbage: str
+    offset: int
+
 
 GREEN, RED, YELLOW, DIM, BOLD, RESET = (
     "\x1b[32m", "\x1b[31m", "\x1b[33m", "\x1b[2m", "\x1b[1m", "\x1b[0m"
@@ -53,7 +79,7 @@ def payload(
         return opcode, None, str(exc)
 
 
-def to_json(record: Record, profile: FrameProfile) -> dict[str, Any]:
+def to_json(record: Record, profile: FrameProfile) -> FrameJson | GarbageJson:
     if record.__class__ is Garbage:
         return {"garbage": record.raw.hex(), "offset": record.offset}
     assert isinstance(record, Frame)

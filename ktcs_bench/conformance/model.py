@@ -12,7 +12,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import NotRequired, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench.conformance.timing import MeasuredTiming, SuiteTiming
@@ -93,6 +93,20 @@ class Case:
     roles: tuple[str, ...] = kinds.CONFORMANCE_KINDS
 
 
+class CaseJson(TypedDict):
+    """A case's result in the suite's JSON report; its frames (`EvidenceRecord.as_dict`) only
+    when the evidence is asked for."""
+
+    name: str
+    title: str
+    rule: str
+    verdict: str
+    message: str
+    duration: float
+    checks: list[str]
+    frames: NotRequired[list[dict[str, object]]]
+
+
 @dataclass
 class CaseResult:
     case: Case
@@ -102,8 +116,8 @@ class CaseResult:
     evidence: Evidence
     heard: int = 0  # bytes received from the device during the case
 
-    def as_dict(self, evidence: bool = True) -> dict[str, Any]:
-        out: dict[str, Any] = {
+    def as_dict(self, evidence: bool = True) -> CaseJson:
+        out: CaseJson = {
             "name": self.case.name,
             "title": self.case.title,
             "rule": self.case.rule,

@@ -4,9 +4,9 @@ colour on a terminal. Pure functions of a `SuiteResult` (threat reports: `threat
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import TypedDict
 
-from ktcs_bench.conformance.model import CaseResult, CaseVerdict
+from ktcs_bench.conformance.model import CaseJson, CaseResult, CaseVerdict
 from ktcs_bench.conformance.runner import SuiteResult
 from ktcs_bench.junit import JUnitCase, JUnitSuite
 from ktcs_bench.junit import junit_xml as write_junit
@@ -51,7 +51,23 @@ def junit_xml(suite: SuiteResult) -> bytes:
     return write_junit("ktcs-bench conformance", [JUnitSuite(name, cases, suite.duration, props)])
 
 
-def as_json(suite: SuiteResult, evidence: bool = True) -> dict[str, Any]:
+class SuiteJson(TypedDict):
+    """A suite run's JSON report: who was tested how, the timings, the verdicts and each case."""
+
+    role: str
+    target: str
+    protocol: str
+    profile: str
+    timings: str  # "auto" (measured first) or "given"
+    timing: dict[str, float | int | None]
+    measured: dict[str, float | int | None]
+    stopped: str | None
+    duration: float
+    summary: dict[str, int]  # verdict -> cases
+    cases: list[CaseJson]
+
+
+def as_json(suite: SuiteResult, evidence: bool = True) -> SuiteJson:
     return {
         "role": suite.role,
         "target": suite.target,

@@ -62,7 +62,7 @@ from ktcs_bench.console.gate import Gate, Page
 from ktcs_bench.console.trains import EndpointTrains, TrainPosition, TrainSource
 from ktcs_bench.ctc.desk import Desk
 from ktcs_bench.ctc.log import command_words
-from ktcs_bench.ctc.model import Action
+from ktcs_bench.ctc.model import Action, StationPicture
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.runtime import client_token
 from ktcs_bench.station_codes.chart import CodeChart
@@ -129,6 +129,21 @@ class LogPanelEntry(TypedDict):
     text: str
     level: str
     source: str
+
+
+class RequestResult(TypedDict):
+    """What came of a page's request: done (ok), or the reason it was not; in words."""
+
+    ok: bool
+    reason: str | None
+    text: str
+
+
+class ResultAnswer(RequestResult):
+    """`RequestResult` as sent to the page, with the request's id."""
+
+    type: str
+    id: object
 
 
 @dataclass(eq=False)
@@ -266,7 +281,7 @@ class ConsoleServer:
 
     # ------------------------------------------------------------------ state
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self) -> dict[str, StationPicture]:
         return {str(n): self.model.picture(n) for n in self.model.models}
 
     def ars_state(self) -> dict[str, bool] | None:
@@ -342,7 +357,7 @@ class ConsoleServer:
 
     # ------------------------------------------------------------------ operator actions
 
-    async def perform(self, msg: Mapping[str, Any]) -> dict[str, Any]:
+    async def perform(self, msg: Mapping[str, Any]) -> RequestResult:
         """Carry out one operator request; the result as sent to the page (and logged)."""
         kind = msg.get("type")
         if kind == "ars":
@@ -370,7 +385,7 @@ class ConsoleServer:
         self._log(text, "error")
         return {"ok": False, "reason": outcome.why, "text": text}
 
-    def _switch_ars(self, msg: Mapping[str, Any]) -> dict[str, Any]:
+    def _switch_ars(self, msg: Mapping[str, Any]) -> RequestResult:
         station, on = msg.get("station"), msg.get("on")
         what = f"station {station}: ARS {'on' if on else 'off'}"
         try:
@@ -502,8 +517,8 @@ class ConsoleServer:
             except Exception:  # a request failing must not stop the page's others
                 log.exception("console: request %r failed", msg)
                 result = {"ok": False, "reason": "internal error", "text": "internal error"}
-            result.update(type="result", id=msg.get("id"))
-            await self._send(client, json.dumps(result))
+            answer: ResultAnswer = {**result, "type": "result", "id": msg.get("id")}
+            await self._send(client, json.dumps(answer))
 
     def _station_busy(self, client: _Client, msg: Mapping[str, Any]) -> str | None:
         """Why `msg` may not go out now (its station's controls outstanding), or None."""

@@ -13,12 +13,22 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, TypedDict
 
-from ktcs_bench import kinds
 from ktcs_bench.train.endpoint import TrainEndpoint
 from ktcs_bench.train.speed_distance import SpeedDistance, endpoint_speed_distance
 from ktcs_bench.train.units import to_kmh
+
+
+class TrainPositionJson(TypedDict):
+    """A train's position as the page draws it (m and km/h to one decimal)."""
+
+    train: str
+    head_m: float
+    tail_m: float
+    speed_kmh: float
+    track: str | None
+    state: str | None
 
 
 @dataclass(frozen=True)
@@ -33,15 +43,15 @@ class TrainPosition:
     track: str | None = None
     state: str | None = None
 
-    def to_json(self) -> dict[str, Any]:
-        return {
-            kinds.TRAIN: self.train,
-            "head_m": round(self.head_m, 1),
-            "tail_m": round(self.tail_m, 1),
-            "speed_kmh": round(self.speed_kmh, 1),
-            "track": self.track,
-            "state": self.state,
-        }
+    def to_json(self) -> TrainPositionJson:
+        return TrainPositionJson(
+            train=self.train,
+            head_m=round(self.head_m, 1),
+            tail_m=round(self.tail_m, 1),
+            speed_kmh=round(self.speed_kmh, 1),
+            track=self.track,
+            state=self.state,
+        )
 
 
 OFF_LINE_STATES = ("waiting", "left")

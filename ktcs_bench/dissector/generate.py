@@ -15,7 +15,7 @@ import subprocess
 from collections.abc import Iterable, Mapping, Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import NotRequired, TypedDict
 
 from ktcs_bench import __version__
 from ktcs_bench.codec.crc import CrcSpec
@@ -56,12 +56,83 @@ def crc_table(spec: CrcSpec) -> list[int]:
     return table
 
 
-def _fields(specs: Iterable[FieldSpec]) -> list[dict[str, Any]]:
+class FieldData(TypedDict):
+    """A payload field or a header field (with its offset) for the Lua engine."""
+
+    name: str
+    size: int
+    offset: NotRequired[int]
+
+
+class OpcodeData(TypedDict):
+    """An opcode for the Lua engine: its payload layout, sub-opcode and reason names."""
+
+    name: str
+    fields: list[FieldData]
+    fixed_size: int
+    statuses: bool
+    control: bool
+    subs: dict[int, str]
+    reasons: dict[int, str]
+    items: NotRequired[list[FieldData]]
+    item_size: NotRequired[int]
+
+
+CrcData = TypedDict(
+    "CrcData",
+    {
+        "name": str, "width": int, "mask": int, "reflect": bool, "init": int, "xor_out": int,
+        "check": int | None, "table": list[int], "first": str, "last": str,
+        "from": int,  # where the CRC's span starts (a keyword: no class syntax)
+        "to_header": int | None, "size": int, "pad": int,
+    },
+)  # fmt: skip
+"""A profile's CRC for the Lua engine: the Rocksoft model, its table and the span it covers."""
+
+
+class ProfileData(TypedDict):
+    """What the Lua engine needs of one profile (`profile_data`)."""
+
+    name: str
+    protocol: str
+    description: str
+    source: str
+    stx: int
+    etx: int | None
+    little: bool
+    header: list[FieldData]
+    header_size: int
+    fixed_counted: int
+    max_len: int
+    trailer_size: int
+    seq_modulo: int
+    crc: CrcData
+    opcodes: dict[int, OpcodeData]
+    nak_reasons: dict[int, str]
+
+
+class ChartData(TypedDict):
+    name: str
+    codes: list[str]
+
+
+class DissectorData(TypedDict):
+    """The `KTCS` table: the profiles by name, which is each protocol's default, code names."""
+
+    version: str
+    garbage_hold: int
+    order: list[str]
+    defaults: dict[str, str]
+    profiles: dict[str, ProfileData]
+    chart: NotRequired[ChartData]
+
+
+def _fields(specs: Iterable[FieldSpec]) -> list[FieldData]:
     return [{"name": f.name, "size": f.size} for f in specs]
 
 
-def _opcode(o: Opcode) -> dict[str, Any]:
-    out: dict[str, Any] = {
+def _opcode(o: Opcode) -> OpcodeData:
+    out: OpcodeData = {
         "name": o.name,
         "fields": _fields(o.fields),
         "fixed_size": o.fixed_size,
@@ -76,9 +147,11 @@ def _opcode(o: Opcode) -> dict[str, Any]:
     return out
 
 
-def profile_data(p: FrameProfile) -> dict[str, Any]:
+def profile_data(p: FrameProfile) -> ProfileData:
     """What the Lua engine needs of one profile, with the layout derived by FrameProfile itself."""
-    header = [{"name": n, "size": s, "offset": p.offset_of(n)[0]} for n, s in p.header]
+    header: list[FieldData] = [
+        {"name": n, "size": s, "offset": p.offset_of(n)[0]} for n, s in p.header
+    ]
     spec = p.crc_spec
     width = spec.width_bits
     to_header = None if p.crc_last == "data" else sum(p.offset_of(p.crc_last))
@@ -200,7 +273,7 @@ def generate(profiles: Sequence[FrameProfile], chart: CodeChart | None = None) -
             raise UsageError(f"the dissector needs at least one {protocol} profile")
         bench = DEFAULT_PROFILE[protocol]
         defaults[protocol] = bench if bench in mine else mine[0]
-    data: dict[str, Any] = {
+    data: DissectorData = {
         "version": __version__,
         "garbage_hold": GARBAGE_HOLD,
         "order": names,

@@ -39,7 +39,7 @@ import random
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypedDict
 
 from ktcs_bench.codec.frame import Frame
 from ktcs_bench.codec.profile import FrameProfile
@@ -311,6 +311,20 @@ class FaultStats:
     garbage_inserted: int = 0
 
 
+class InjectorState(TypedDict):
+    """What a direction's injector does now (`FaultInjector.describe`, a tap's status)."""
+
+    cut: bool
+    ber: float
+    loss: float
+    noise: float
+    delay: float
+    drop_bytes_pending: int
+    frame_faults_pending: list[str]
+    holding: bool
+    stats: dict[str, int]  # FaultStats' counters by name
+
+
 @dataclass
 class _FrameOp:
     fault: FrameFault
@@ -411,7 +425,7 @@ class FaultInjector:
         self._held = None
         self._last_release = 0.0  # nothing queued is left to keep the next bytes behind
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> InjectorState:
         return {
             "cut": self.cut,
             "ber": self.ber,

@@ -34,7 +34,7 @@ from ktcs_bench.lab.view import LinkEntry
 from ktcs_bench.messages import JsonObject, ReadyInfo, ReadyLine
 from ktcs_bench.runtime import private_dir, server_token, this_process
 from ktcs_bench.tap.pty import PtyTap
-from ktcs_bench.tap.runner import Tap
+from ktcs_bench.tap.runner import Tap, TapStatus
 from ktcs_bench.tap.tcp import TcpTap
 from ktcs_bench.transport import jsonlines
 
@@ -285,7 +285,7 @@ class LabRunner:
         if b not in tap.external:
             return tap.paths[link.a], tap.paths[b]
         if not tap.external_open(b):  # the tap opens the real device's serial line itself
-            error = tap.status().get("external_ends", {}).get(b, {}).get("error")
+            error = tap.external_error(b)
             self.notices.append(f"{link.name}: {b} (external) is not there yet at "
                                 f"{tap.external[b]} ({error}); the tap keeps trying")  # fmt: skip
         return tap.paths[link.a], tap.external[b]
@@ -458,9 +458,7 @@ class LabRunner:
                 }  # fmt: skip
         return out
 
-    def _link_up(
-        self, link: LinkSpec, devices: dict[str, Any], taps: dict[str, dict[str, Any]]
-    ) -> bool:
+    def _link_up(self, link: LinkSpec, devices: dict[str, Any], taps: dict[str, TapStatus]) -> bool:
         """Whether `link` is up, as the device of ours on it sees it: the IXL's link to that peer,
         or the CTC's to that station; between two external devices, the tap's connection."""
         a, b = self.lab.devices[link.a], self.lab.devices[link.b]
@@ -470,7 +468,8 @@ class LabRunner:
         if b.external is None:
             summary = stations.get(a.station) or stations.get(str(a.station)) or {}
             return summary.get("link") == "up"
-        return bool(taps.get(link.name, {}).get("connected"))
+        tap = taps.get(link.name)
+        return tap is not None and bool(tap.get("connected"))
 
     def link_map(self) -> list[LinkEntry]:
         out: list[LinkEntry] = []

@@ -15,12 +15,11 @@ import re
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
-from ktcs_bench import kinds
 from ktcs_bench.capture import PcapngWriter
 from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml
-from ktcs_bench.procedure.runner import ProcedureResult
+from ktcs_bench.procedure.runner import ProcedureResult, StepJson
 
 _COLOUR = {"pass": "\x1b[32m", "fail": "\x1b[31m", "error": "\x1b[35m", "skipped": "\x1b[2m"}
 _RESET = "\x1b[0m"
@@ -83,7 +82,44 @@ def junit(results: Sequence[ProcedureResult]) -> bytes:
     return junit_xml("ktcs-bench procedures", [suite])
 
 
-def as_json(result: ProcedureResult) -> dict[str, Any]:
+class TimelineJson(TypedDict):
+    t_s: float
+    what: str
+    value: str
+
+
+class TrainSampleJson(TypedDict):
+    t_s: float
+    head_m: float
+    tail_m: float
+    speed_kmh: float
+
+
+class ProcedureJson(TypedDict):
+    """One procedure's run in the JSON report: what it is, its verdict, its steps, what the lab
+    did meanwhile (timeline, trains), the frames captured per link and the faults cleared."""
+
+    id: str
+    title: str
+    file: str
+    verifies: list[str]
+    tags: list[str]
+    mode: str
+    verdict: str
+    message: str
+    setup_error: str
+    started: float
+    duration_s: float
+    wall_s: float
+    interrupted: bool
+    steps: list[StepJson]
+    timeline: list[TimelineJson]
+    trains: dict[str, list[TrainSampleJson]]
+    captures: dict[str, int]  # link -> frames captured
+    cleared: list[str]
+
+
+def as_json(result: ProcedureResult) -> ProcedureJson:
     p = result.procedure
     return {
         "id": p.id, "title": p.title, "file": str(p.path), "verifies": list(p.verifies),
@@ -146,9 +182,13 @@ def _plots(result: ProcedureResult) -> str:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ktcs_bench.scenario.report import LIMITS, plot_speed_distance, plot_time_distance
+    from ktcs_bench.scenario.report import (
+        SpeedDistanceRow,
+        TimeDistanceRow,
+        plot_speed_distance,
+        plot_time_distance,
+    )
 
-    none = {"safe_front_m": None, **{f"{k}_kmh": None for k in LIMITS}}
     out = []
     running = {tid: series for tid, series in result.trains.items() if moved(series)}
     still = [f"{tid} (at {series[0][1]:.0f} m)" for tid, series in result.trains.items()
@@ -157,7 +197,9 @@ def _plots(result: ProcedureResult) -> str:
         n = len(running)
         fig, axes = plt.subplots(n, 1, figsize=(10, 3.2 * n), squeeze=False)
         for ax, (tid, series) in zip(axes[:, 0], running.items(), strict=True):
-            rows = [{kinds.TRAIN: tid, "t_s": t, "front_m": h, "speed_kmh": v, **none}
+            rows = [SpeedDistanceRow(train=tid, t_s=t, front_m=h, speed_kmh=v, safe_front_m=None,
+                                     mrsp_kmh=None, ebi_kmh=None, sbi_kmh=None, warning_kmh=None,
+                                     permitted_kmh=None)  # no limits: only the actual speed
                     for t, h, _tl, v in series]  # fmt: skip
             plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
         fig.tight_layout()
@@ -167,7 +209,7 @@ def _plots(result: ProcedureResult) -> str:
     if still:
         out.append(f'<p class="still">Did not move, so no speed-distance plot: '
                    f"{_e(', '.join(still))}.</p>")  # fmt: skip
-    td = [{kinds.TRAIN: tid, "t_s": t, "front_m": h, "rear_m": tl}
+    td = [TimeDistanceRow(train=tid, t_s=t, front_m=h, rear_m=tl)
           for tid, series in result.trains.items() for t, h, tl, _v in series]  # fmt: skip
     fig, ax = plt.subplots(figsize=(10, 4))
     plot_time_distance(ax, td, [], "train positions over time")

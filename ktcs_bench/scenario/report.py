@@ -17,14 +17,16 @@ CSV holds exactly what the plot shows:
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench.scenario.assertions import Outcome
-from ktcs_bench.scenario.runner import RunResult
+from ktcs_bench.scenario.runner import RunResult, Trace
 from ktcs_bench.train.units import to_kmh
 
 NO_LIMIT_KMH = 400.0
@@ -43,11 +45,71 @@ TIME_DISTANCE_COLUMNS = (kinds.TRAIN, "t_s", "front_m", "rear_m")
 MARK_COLUMNS = ("kind", "name", "from_m", "to_m", "active_from_s", "active_until_s")
 
 
-def summary(
-    result: RunResult, outcomes: list[Outcome], wall_s: float | None = None
-) -> dict[str, Any]:
+class AssertionSummary(TypedDict):
+    place: str
+    kind: str
+    passed: bool
+    detail: str
+
+
+class TrainSummary(TypedDict):
+    final_position_m: float | None
+    max_speed_kmh: float
+    emergency_brakes: int
+
+
+class Summary(TypedDict):
+    """summary.json (and `scenario run`'s JSON line): the verdict, each assertion, each train."""
+
+    scenario: str
+    file: str
+    virtual_time_s: float
+    passed: bool
+    assertions: list[AssertionSummary]
+    trains: dict[str, TrainSummary]
+    events: int
+    wall_time_s: NotRequired[float]
+    speed_up: NotRequired[float | None]
+
+
+class SpeedDistanceRow(TypedDict):
+    """A row of speed_distance.csv (`SPEED_DISTANCE_COLUMNS`); the limits None when not sampled."""
+
+    train: str
+    t_s: float
+    front_m: float
+    speed_kmh: float
+    safe_front_m: float | None
+    mrsp_kmh: float | None
+    ebi_kmh: float | None
+    sbi_kmh: float | None
+    warning_kmh: float | None
+    permitted_kmh: float | None
+
+
+class TimeDistanceRow(TypedDict):
+    """A row of time_distance.csv (`TIME_DISTANCE_COLUMNS`)."""
+
+    train: str
+    t_s: float
+    front_m: float
+    rear_m: float
+
+
+class MarkRow(TypedDict):
+    """A row of time_distance_marks.csv (`MARK_COLUMNS`): a stop mark has no active times."""
+
+    kind: str
+    name: str
+    from_m: float
+    to_m: float
+    active_from_s: NotRequired[float | None]
+    active_until_s: NotRequired[float | None]
+
+
+def summary(result: RunResult, outcomes: list[Outcome], wall_s: float | None = None) -> Summary:
     scn = result.scenario
-    trains = {}
+    trains: dict[str, TrainSummary] = {}
     for tid, tr in result.traces.items():
         trains[tid] = {
             "final_position_m": round(tr.head[-1], 3) if tr.head else None,
@@ -56,7 +118,7 @@ def summary(
                 1 for e in result.events if e.train == tid and e.kind == "emergency_brake"
             ),
         }
-    out: dict[str, Any] = {
+    out: Summary = {
         "scenario": scn.name,
         "file": str(scn.path),
         "virtual_time_s": round(result.end_time, 3),
@@ -83,35 +145,44 @@ def _kmh(v: float) -> float:
     return min(to_kmh(v), NO_LIMIT_KMH) if not math.isnan(v) else NO_LIMIT_KMH
 
 
-def speed_distance_rows(result: RunResult) -> list[dict[str, Any]]:
+def _limit(tr: Trace, k: int | None, name: str) -> float | None:
+    """Limit `name` at sample `k` of a trace, km/h; None: not sampled there."""
+    values = tr.limits.get(name)
+    return None if k is None or values is None else _kmh(values[k])
+
+
+def speed_distance_rows(result: RunResult) -> list[SpeedDistanceRow]:
     """The speed–distance plot's numbers (`SPEED_DISTANCE_COLUMNS`), km/h; None: not sampled."""
-    rows: list[dict[str, Any]] = []
+    rows: list[SpeedDistanceRow] = []
     for tid, tr in result.traces.items():
         sampled = dict(zip(tr.limits_row, range(len(tr.limits_row)), strict=True))
         for i, (t, x, v) in enumerate(zip(tr.t, tr.head, tr.speed, strict=True)):
-            row: dict[str, Any] = {kinds.TRAIN: tid, "t_s": t, "front_m": x, "speed_kmh": to_kmh(v)}
             k = sampled.get(i)
-            row["safe_front_m"] = None if k is None else tr.limits_x[k]
-            for name in LIMITS:
-                values = tr.limits.get(name)
-                row[f"{name}_kmh"] = None if k is None or values is None else _kmh(values[k])
-            rows.append(row)
+            limit = functools.partial(_limit, tr, k)
+            rows.append(
+                SpeedDistanceRow(
+                    train=tid, t_s=t, front_m=x, speed_kmh=to_kmh(v),
+                    safe_front_m=None if k is None else tr.limits_x[k],
+                    mrsp_kmh=limit("mrsp"), ebi_kmh=limit("ebi"), sbi_kmh=limit("sbi"),
+                    warning_kmh=limit("warning"), permitted_kmh=limit("permitted"),
+                )
+            )  # fmt: skip
     return rows
 
 
-def time_distance_rows(result: RunResult) -> list[dict[str, Any]]:
+def time_distance_rows(result: RunResult) -> list[TimeDistanceRow]:
     """The time–distance plot's numbers (`TIME_DISTANCE_COLUMNS`)."""
     return [
-        {kinds.TRAIN: tid, "t_s": t, "front_m": head, "rear_m": tail}
+        TimeDistanceRow(train=tid, t_s=t, front_m=head, rear_m=tail)
         for tid, tr in result.traces.items()
         for t, head, tail in zip(tr.t, tr.head, tr.tail, strict=True)
     ]
 
 
-def mark_rows(result: RunResult) -> list[dict[str, Any]]:
+def mark_rows(result: RunResult) -> list[MarkRow]:
     """What the time–distance plot draws behind the trains (`MARK_COLUMNS`)."""
     scn = result.scenario
-    rows: list[dict[str, Any]] = [
+    rows: list[MarkRow] = [
         {
             "kind": "protection_zone",
             "name": f"zone{i + 1}",
@@ -129,36 +200,38 @@ def mark_rows(result: RunResult) -> list[dict[str, Any]]:
     return rows
 
 
-def _write_csv(path: Path, columns: tuple[str, ...], rows: list[dict[str, Any]]) -> None:
+def _cell(value: object) -> object:
+    """A CSV cell: numbers to 4 decimals, text as it is, nothing (None) empty."""
+    if value is None or isinstance(value, str):
+        return "" if value is None else value
+    assert isinstance(value, int | float)
+    return round(value, 4)
+
+
+def _write_csv(path: Path, columns: tuple[str, ...], rows: Iterable[Mapping[str, object]]) -> None:
+    """Rows (of one of the row TypedDicts above) under `columns`, in that order."""
     with path.open("w", encoding="utf-8", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=columns, extrasaction="raise")
         w.writeheader()
         for row in rows:
-            w.writerow(
-                {
-                    c: ("" if row.get(c) is None else round(row[c], 4))
-                    if not isinstance(row.get(c), str)
-                    else row[c]
-                    for c in columns
-                }
-            )
+            w.writerow({c: _cell(row.get(c)) for c in columns})
 
 
-def plot_speed_distance(ax: Any, rows: list[dict[str, Any]], title: str) -> None:
+def plot_speed_distance(ax: Any, rows: list[SpeedDistanceRow], title: str) -> None:
     """One train's speed–distance panel from its rows (`SPEED_DISTANCE_COLUMNS`): the actual
     speed, and the supervision limits where they were sampled (none: only the actual speed)."""
-    styles = {
-        "mrsp": ("MRSP", "k", "--"),
-        "ebi": ("EBI", "r", "-"),
-        "sbi": ("SBI", "orange", "-"),
-        "warning": ("warning", "gold", "-"),
-        "permitted": ("permitted", "g", "-"),
-    }
+    styles: list[tuple[Callable[[SpeedDistanceRow], float | None], str, str, str]] = [
+        (lambda r: r["mrsp_kmh"], "MRSP", "k", "--"),
+        (lambda r: r["ebi_kmh"], "EBI", "r", "-"),
+        (lambda r: r["sbi_kmh"], "SBI", "orange", "-"),
+        (lambda r: r["warning_kmh"], "warning", "gold", "-"),
+        (lambda r: r["permitted_kmh"], "permitted", "g", "-"),
+    ]
     samples = [r for r in rows if r["safe_front_m"] is not None]
-    for key, (label, colour, ls) in styles.items() if samples else ():
+    for value, label, colour, ls in styles if samples else ():
         ax.plot(
             [r["safe_front_m"] for r in samples],
-            [r[f"{key}_kmh"] for r in samples],
+            [value(r) for r in samples],
             color=colour,
             ls=ls,
             lw=1.2,
@@ -169,18 +242,18 @@ def plot_speed_distance(ax: Any, rows: list[dict[str, Any]], title: str) -> None
     ax.set_title(title)
     ax.set_xlabel("front position (m)")
     ax.set_ylabel("speed (km/h)")
-    top = max([max(actual, default=0.0)] + [r["mrsp_kmh"] for r in samples])
+    top = max([max(actual, default=0.0)] + [m for r in samples if (m := r["mrsp_kmh"]) is not None])
     ax.set_ylim(0, top * 1.25 + 5)
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right", fontsize=8, ncol=3)
 
 
 def plot_time_distance(
-    ax: Any, td: list[dict[str, Any]], marks: list[dict[str, Any]], title: str
+    ax: Any, td: list[TimeDistanceRow], marks: list[MarkRow], title: str
 ) -> None:
     """Every train's front and rear over time (`TIME_DISTANCE_COLUMNS`), the marks behind them."""
-    for tid in dict.fromkeys(r[kinds.TRAIN] for r in td):
-        rows = [r for r in td if r[kinds.TRAIN] == tid]
+    for tid in dict.fromkeys(r.get(kinds.TRAIN) for r in td):
+        rows = [r for r in td if r.get(kinds.TRAIN) == tid]
         t = [r["t_s"] for r in rows]
         line = ax.plot(t, [r["front_m"] for r in rows], lw=1.4, label=f"{tid} front")
         ax.fill_between(
@@ -214,7 +287,7 @@ def write_report(
     n = len(result.traces)
     fig, axes = plt.subplots(n, 1, figsize=(11, 3.6 * n), squeeze=False)
     for ax, tid in zip(axes[:, 0], result.traces, strict=True):
-        rows = [r for r in sd if r[kinds.TRAIN] == tid]
+        rows = [r for r in sd if r.get(kinds.TRAIN) == tid]
         plot_speed_distance(ax, rows, f"{result.scenario.name}: train {tid} — speed vs distance")
     fig.tight_layout()
     paths["speed_distance"] = out_dir / "speed_distance.png"

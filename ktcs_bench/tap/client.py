@@ -10,13 +10,26 @@ from __future__ import annotations
 import contextlib
 import json
 import socket
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Iterator, Mapping
+from typing import cast
 
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.runtime import client_token
 from ktcs_bench.tap.control import Command, parse_command
+from ktcs_bench.tap.core import TapEvent
 from ktcs_bench.tap.registry import resolve_tap
+from ktcs_bench.tap.runner import TapStatus
+
+
+class TapLine(TapEvent, total=False):
+    """A line a tap's control port sends: an answer (`runner.TapAnswer`), the subscribe header
+    or an event of its stream (`TapEvent`). Every key may be missing: the client checks those it
+    needs before it trusts what answers to be a tap."""
+
+    ok: bool
+    refused: bool  # before the token: nothing was done
+    status: TapStatus
+    help: str
 
 
 class TapClient:
@@ -63,7 +76,7 @@ class TapClient:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _read(self) -> dict[str, Any]:
+    def _read(self) -> TapLine:
         try:
             line = self._file.readline()
         except OSError as exc:
@@ -72,27 +85,27 @@ class TapClient:
             raise PeerError("the tap closed its control port")
         return self._json(line.decode("utf-8", errors="replace"))
 
-    def _json(self, text: str) -> dict[str, Any]:
+    def _json(self, text: str) -> TapLine:
         try:
             obj = json.loads(text)
         except ValueError:
             obj = None
         if not isinstance(obj, dict):
             raise PeerError(self._not_a_tap(text))
-        return obj
+        return cast(TapLine, obj)  # each key is checked where it is used
 
     def _not_a_tap(self, reply: object) -> str:
         host, port = self.address
         return f"{host}:{port} is not a tap's control port (it answered {str(reply)[:60]!r})"
 
-    def _send(self, obj: dict[str, Any]) -> None:
+    def _send(self, obj: Mapping[str, object]) -> None:
         try:
             self._file.write(json.dumps(obj, separators=(",", ":")).encode() + b"\n")
             self._file.flush()
         except OSError as exc:
             raise PeerError(f"tap control port: {exc}") from None
 
-    def request(self, obj: dict[str, Any]) -> dict[str, Any]:
+    def request(self, obj: Mapping[str, object]) -> TapLine:
         """One JSON command, its answer. Raises UsageError when the tap refuses it, PeerError
         when what answers is not a tap."""
         self._send(obj)
@@ -119,18 +132,16 @@ class TapClient:
             return str(answer.get("help", ""))
         return str(answer.get("command", cmd.words()))
 
-    def _status(self, answer: dict[str, Any]) -> dict[str, Any]:
+    def _status(self, answer: TapLine) -> TapStatus:
         status = answer.get("status")
         if not (isinstance(status, dict) and isinstance(status.get("directions"), dict)):
             raise PeerError(self._not_a_tap(json.dumps(answer)))  # a device's port, say
         return status
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> TapStatus:
         return self._status(self.request({"cmd": "status"}))
 
-    def subscribe(
-        self, history: bool = False, timeout: float | None = None
-    ) -> Iterator[dict[str, Any]]:
+    def subscribe(self, history: bool = False, timeout: float | None = None) -> Iterator[TapEvent]:
         """The header ({profile, names, ...}) first, then one dict per record or event."""
         header = self.request(Command("subscribe", history=history).to_json())
         if not isinstance(header.get("names"), list) or "profile" not in header:

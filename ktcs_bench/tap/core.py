@@ -19,12 +19,13 @@ from __future__ import annotations
 import random
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Literal, TypedDict
 
 from ktcs_bench.capture.records import CaptureRecord
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.errors import UsageError
 from ktcs_bench.faults import Cut, FaultInjector
+from ktcs_bench.faults.injector import InjectorState
 from ktcs_bench.tap.control import Command
 from ktcs_bench.tap.recorder import Recorder
 
@@ -32,7 +33,51 @@ HISTORY = 10_000  # records kept for `records()` and `subscribe history`
 SUBSCRIBER_QUEUE = 10_000  # events waiting for one slow subscriber before it misses some
 
 
-def record_event(record: CaptureRecord) -> dict[str, Any]:
+class TapHeader(TypedDict, total=False):
+    """The answer to `subscribe` (after "ok"), the first line of the stream: the tap's frame
+    profile and protocol, its end names, its name and kind."""
+
+    profile: str
+    protocol: str
+    names: list[str]
+    tap: str | None
+    kind: str
+
+
+class TapEvent(TapHeader, total=False):
+    """One line of a tap's subscribe stream: the header first (`TapHeader`), then a record
+    {time, direction, hex} or an event of the tap's {time, event, ...}."""
+
+    time: float | None
+    direction: str  # a record: "a>b"
+    hex: str  # ... and its bytes
+    event: str  # fault, send, connected, disconnected; the adapter's (`TapCore.note`): refused,
+    #             target-failed (TCP), opened, closed (an external serial end)
+    command: str  # fault, send: the command's words
+    peer: list[str | int]  # connected, refused: the [host, port]
+    reason: str  # disconnected: why
+    error: str | None  # target-failed, closed: why
+    end: str  # opened, closed: the external end
+    endpoint: str  # ... and its serial endpoint
+
+
+class CoreStatus(TypedDict):
+    """The link as the core sees it: cut, records kept, subscribers, each direction's faults."""
+
+    cut: bool
+    records: int
+    subscribers: int
+    directions: dict[str, InjectorState]
+
+
+class CommandAnswer(TypedDict):
+    """A command that changes the link, done: `{"ok": true, "command": WORDS}`."""
+
+    ok: Literal[True]
+    command: str
+
+
+def record_event(record: CaptureRecord) -> TapEvent:
     return {"time": record.time, "direction": record.direction, "hex": record.data.hex()}
 
 
@@ -40,7 +85,7 @@ def record_event(record: CaptureRecord) -> dict[str, Any]:
 class TapOutput:
     deliveries: list[tuple[str, bytes]] = field(default_factory=list)
     records: list[CaptureRecord] = field(default_factory=list)
-    events: list[dict[str, Any]] = field(default_factory=list)
+    events: list[TapEvent] = field(default_factory=list)
     link_cut: bool = False  # the whole link was cut: an adapter that carries connections drops them
 
     def __bool__(self) -> bool:
@@ -53,15 +98,15 @@ class Subscription:
     def __init__(self, limit: int = SUBSCRIBER_QUEUE) -> None:
         self.limit = limit
         self.missed = 0
-        self._queue: deque[dict[str, Any]] = deque()
+        self._queue: deque[TapEvent] = deque()
 
-    def push(self, event: dict[str, Any]) -> None:
+    def push(self, event: TapEvent) -> None:
         if len(self._queue) < self.limit:
             self._queue.append(event)
         else:
             self.missed += 1
 
-    def take(self) -> list[dict[str, Any]]:
+    def take(self) -> list[TapEvent]:
         out = list(self._queue)
         self._queue.clear()
         return out
@@ -97,7 +142,7 @@ class TapCore:
         self.injectors[direction].feed(data, now)
         return self._pump(now, TapOutput())
 
-    def execute(self, cmd: Command, now: float) -> tuple[dict[str, Any], TapOutput]:
+    def execute(self, cmd: Command, now: float) -> tuple[CommandAnswer, TapOutput]:
         """A command that changes the link: a fault, `restore`, `clear` or `send`. Its answer
         ({"ok": true, "command": WORDS}) and what it caused; UsageError when it cannot be done."""
         out = TapOutput()
@@ -130,10 +175,11 @@ class TapCore:
         self._emit(out, {"time": now, "event": event, "command": words})
         return {"ok": True, "command": words}, self._pump(now, out)
 
-    def note(self, now: float, event: str, **detail: Any) -> TapOutput:
-        """An event of the carrier the adapter saw (`refused`, `target-failed`), into the stream."""
+    def note(self, now: float, said: TapEvent) -> TapOutput:
+        """An event of the carrier the adapter saw (`{"event": "refused", "peer": ...}`), into
+        the stream at `now`."""
         out = TapOutput()
-        self._emit(out, {"time": now, "event": event, **detail})
+        self._emit(out, {"time": now, **said})
         return out
 
     def connected(self, now: float, peer: tuple[str, int]) -> TapOutput:
@@ -181,7 +227,7 @@ class TapCore:
             self._subscriptions.remove(sub)
 
     # -- looking -----------------------------------------------------------------------------------
-    def status(self) -> dict[str, Any]:
+    def status(self) -> CoreStatus:
         return {
             "cut": self.cut_all,
             "records": len(self.history),
@@ -205,7 +251,7 @@ class TapCore:
             out.records.append(r)
             self._emit(out, record_event(r))
 
-    def _emit(self, out: TapOutput, event: dict[str, Any]) -> None:
+    def _emit(self, out: TapOutput, event: TapEvent) -> None:
         out.events.append(event)
         for sub in self._subscriptions:
             sub.push(event)

@@ -20,10 +20,12 @@ import threading
 import tty
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Required, TypedDict
+from typing import Any, TypedDict
 
 from ktcs_bench.errors import PeerError, UsageError
-from ktcs_bench.tap.runner import Tap
+from ktcs_bench.tap.core import TapEvent
+from ktcs_bench.tap.registry import TapEnds
+from ktcs_bench.tap.runner import Tap, TapStatus
 from ktcs_bench.transport.base import TransportClosed
 from ktcs_bench.transport.serialport import SerialTransport
 from ktcs_bench.type1.config import LINE_RATE
@@ -34,14 +36,6 @@ JOIN_TIMEOUT = 10.0  # s; an open in progress (an RFC 2217 server negotiating) e
 POLL = 0.05  # s, how long the reader of an external end waits before it checks for stop
 
 
-class PtyEnds(TypedDict, total=False):
-    """A pty tap's ends: the pty path of each end it made, the serial endpoint of each external
-    one (only when it has one)."""
-
-    paths: Required[dict[str, str]]
-    external: dict[str, str]
-
-
 @dataclass
 class _Pty:
     master: int
@@ -50,6 +44,22 @@ class _Pty:
     pending: bytearray = field(default_factory=bytearray)
     writing: bool = False
     dropped: int = 0
+
+
+class ExternalEnd(TypedDict):
+    """An external end in a pty tap's status: open or why not, how often opened, bytes lost."""
+
+    endpoint: str
+    open: bool
+    error: str | None
+    opens: int
+    dropped: int
+
+
+class PtyStatus(TapStatus):
+    """A pty tap's status, with external ends: how each one is."""
+
+    external_ends: dict[str, ExternalEnd]
 
 
 @dataclass
@@ -114,21 +124,26 @@ class PtyTap(Tap):
         s = self._serials.get(end)
         return s is not None and s.transport is not None
 
-    def _ends_info(self) -> PtyEnds:
-        ends: PtyEnds = {"paths": self.paths}
+    def _ends_info(self) -> TapEnds:
+        ends: TapEnds = {"paths": self.paths}
         if self._serials:
             ends["external"] = self.external
         return ends
 
-    def _status(self) -> dict[str, Any]:
+    def _status(self) -> TapStatus | PtyStatus:
         out = super()._status()
-        if self._serials:
-            out["external_ends"] = {
-                end: {"endpoint": s.endpoint, "open": s.transport is not None, "error": s.error,
-                      "opens": s.opens, "dropped": s.dropped}
-                for end, s in self._serials.items()
-            }  # fmt: skip
-        return out
+        if not self._serials:
+            return out
+        ends: dict[str, ExternalEnd] = {
+            end: {"endpoint": s.endpoint, "open": s.transport is not None, "error": s.error,
+                  "opens": s.opens, "dropped": s.dropped}
+            for end, s in self._serials.items()
+        }  # fmt: skip
+        return {**out, "external_ends": ends}
+
+    def external_error(self, end: str) -> str | None:
+        """Why external end `end` is not open (None: it is, or it has no error yet)."""
+        return self._call(lambda: self._serials[end].error)
 
     def _other(self, end: str) -> str:
         return self.names[1] if end == self.names[0] else self.names[0]
@@ -163,10 +178,12 @@ class PtyTap(Tap):
         s.transport, s.error = transport, error
         if transport is not None:
             s.opens += 1
-            self._apply(self.core.note(self._now(), "opened", end=end, endpoint=s.endpoint))
+            opened: TapEvent = {"event": "opened", "end": end, "endpoint": s.endpoint}
+            self._apply(self.core.note(self._now(), opened))
         elif was_open or error != was_error:  # said once, not at every attempt
-            self._apply(self.core.note(self._now(), "closed", end=end, endpoint=s.endpoint,
-                                       error=error))  # fmt: skip
+            closed: TapEvent = {"event": "closed", "end": end, "endpoint": s.endpoint,
+                                "error": error}  # fmt: skip
+            self._apply(self.core.note(self._now(), closed))
 
     def _serial_main(self, end: str, loop: asyncio.AbstractEventLoop) -> None:
         s, direction = self._serials[end], f"{end}>{self._other(end)}"

@@ -10,13 +10,41 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Required, TypedDict, cast
 
 from ktcs_bench.errors import UsageError
 from ktcs_bench.runtime import private_dir, process_alive, run_dir, this_process
 from ktcs_bench.transport.endpoints import check_port
+
+
+class TapEnds(TypedDict, total=False):
+    """Where a tap's ends are, as its info says: each kind of tap its own keys."""
+
+    paths: dict[str, str]  # pty: the pty path of each end it made; wire: each end's endpoint
+    external: dict[str, str]  # pty: the serial endpoint of each external end
+    listen: list[str | int]  # tcp: [host, port] it listens at
+    target: list[str | int]  # tcp: [host, port] it connects to
+
+
+class TapInfo(TapEnds, total=False):
+    """What a user needs to reach a tap (printed by `tap run`, announced by name)."""
+
+    name: Required[str | None]
+    kind: Required[str]
+    profile: Required[str]
+    protocol: Required[str]
+    names: Required[list[str]]
+    control: Required[list[str | int] | None]
+    token_file: Required[str]
+    pid: Required[int]
+
+
+class Announcement(TapInfo):
+    """A named tap's registry file: its info, and when its process started (`this_process`)."""
+
+    started: int | None
+
 
 _ADDRESS = re.compile(r"^(?:tap://)?(?:(?P<host>[\w.:-]+|\[[0-9a-fA-F:]+\]):)?(?P<port>\d{1,5})$")
 
@@ -27,7 +55,7 @@ def tap_file(name: str) -> Path:
     return run_dir() / "taps" / f"{name}.json"
 
 
-def announce(name: str, info: Mapping[str, object]) -> Path:
+def announce(name: str, info: TapInfo) -> Path:
     path = tap_file(name)
     private_dir(path.parent)
     tmp = path.with_suffix(f".{this_process()['pid']}.tmp")
@@ -44,7 +72,7 @@ def withdraw(name: str) -> None:
         path.unlink(missing_ok=True)
 
 
-def _live(path: Path) -> dict[str, Any] | None:
+def _live(path: Path) -> Announcement | None:
     """The tap a registry file announces, or None -- and the file removed -- if the process that
     held the tap is gone."""
     try:
@@ -58,10 +86,10 @@ def _live(path: Path) -> dict[str, Any] | None:
     ):
         path.unlink(missing_ok=True)
         return None
-    return info
+    return cast(Announcement, info)  # as `announce` wrote it; its readers check what they use
 
 
-def known_taps() -> list[dict[str, Any]]:
+def known_taps() -> list[Announcement]:
     """The named taps whose process still runs (the files of dead ones are dropped)."""
     folder = run_dir() / "taps"
     found = (_live(p) for p in sorted(folder.glob("*.json"))) if folder.is_dir() else ()
@@ -90,8 +118,11 @@ def resolve_tap(spec: str) -> tuple[str, int]:
     info = _live(path)
     if info is None:
         raise UsageError(f"no tap named {name!r} runs (looked in {path.parent})")
+    control = info.get("control")
     try:
-        host, port = info["control"]
+        if control is None:
+            raise ValueError("no control port")
+        host, port = control
         return str(host), int(port)
-    except (KeyError, TypeError, ValueError):
+    except (TypeError, ValueError):
         raise UsageError(f"tap file {path} is unreadable") from None

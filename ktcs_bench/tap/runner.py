@@ -25,7 +25,7 @@ import threading
 import time
 from collections.abc import Callable, Coroutine, Iterable, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypedDict, TypeVar
 
 from ktcs_bench.capture import CaptureRecord, CaptureWriter
 from ktcs_bench.codec.profile import FrameProfile, get_profile
@@ -35,12 +35,54 @@ from ktcs_bench.messages import JsonObject
 from ktcs_bench.runtime import server_token
 from ktcs_bench.tap import registry
 from ktcs_bench.tap.control import HELP, Command, parse_command
-from ktcs_bench.tap.core import HISTORY, Subscription, TapCore, TapOutput
+from ktcs_bench.tap.core import (
+    HISTORY,
+    CommandAnswer,
+    CoreStatus,
+    Subscription,
+    TapCore,
+    TapHeader,
+    TapOutput,
+)
+from ktcs_bench.tap.registry import TapEnds, TapInfo
 from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport import jsonlines, net
 
 T = TypeVar("T")
 START_TIMEOUT = 10.0
+
+
+class TapStatus(TapInfo, CoreStatus):
+    """A tap's status: its info and the core's (a kind of tap adds its own: `TcpStatus`,
+    `PtyStatus`)."""
+
+
+class TapStatusAnswer(TypedDict):
+    ok: Literal[True]
+    status: TapStatus
+
+
+class TapHelpAnswer(TypedDict):
+    ok: Literal[True]
+    help: str
+
+
+class TapRefused(TypedDict):
+    """`{"ok": false, "error": ...}`: not done, and why (the shape of every port's error,
+    `messages.Refused`)."""
+
+    ok: Literal[False]
+    error: str
+
+
+class TapSubscribeAnswer(TapHeader):
+    """`{"ok": true, ...}` and the stream's header."""
+
+    ok: Literal[True]
+
+
+TapAnswer = CommandAnswer | TapStatusAnswer | TapHelpAnswer | TapRefused
+"""A tap control port's answer to a command (`subscribe` is answered by `TapSubscribeAnswer`)."""
 
 
 class Tap:
@@ -229,14 +271,14 @@ class Tap:
     def _deliver(self, direction: str, data: bytes) -> None:
         raise NotImplementedError
 
-    def _ends_info(self) -> Mapping[str, object]:
+    def _ends_info(self) -> TapEnds:
         """Where its ends are, as its info says (each kind of tap its own keys)."""
         return {}
 
     def _link_cut(self) -> None:
         """`cut` with no direction: the kind of tap may do more than drop bytes (TCP closes)."""
 
-    def _status(self) -> dict[str, Any]:
+    def _status(self) -> TapStatus:
         return {**self.info(), **self.core.status()}
 
     # -- public, thread-safe API -------------------------------------------------------------
@@ -245,7 +287,7 @@ class Tap:
         """The fault injector of each direction (read them in the tap's thread or once stopped)."""
         return self.core.injectors
 
-    def info(self) -> dict[str, Any]:
+    def info(self) -> TapInfo:
         """What a user needs to reach this tap (printed by `tap run`, announced by name)."""
         return {
             "name": self.name,
@@ -275,10 +317,10 @@ class Tap:
         """Inject bytes as if the sender of `direction` ("a>b") had written them."""
         self._call(self._command, Command("send", direction, data=data))
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> TapStatus:
         return self._call(self._status)
 
-    def execute(self, command: str | Mapping[str, object]) -> dict[str, Any]:
+    def execute(self, command: str | Mapping[str, object]) -> TapAnswer:
         """One control command, as words (`ber 1e-3 a>b`) or JSON; its JSON answer."""
         try:
             if isinstance(command, str):
@@ -320,12 +362,12 @@ class Tap:
         """Records carry epoch times (captures, monitors on other machines)."""
         return self.timer.now()
 
-    def _command(self, cmd: Command) -> dict[str, Any]:
+    def _command(self, cmd: Command) -> CommandAnswer:
         answer, out = self.core.execute(cmd, self._now())
         self._apply(out)
         return answer
 
-    def _answer(self, cmd: Command) -> dict[str, Any]:
+    def _answer(self, cmd: Command) -> TapAnswer:
         """A control command's JSON answer (never raises for a bad command)."""
         try:
             if cmd.verb == "status":
@@ -357,7 +399,7 @@ class Tap:
             self.timer.poke()
 
     # -- the control port ------------------------------------------------------------------------
-    async def _handle(self, obj: JsonObject, peer: jsonlines.Peer) -> dict[str, Any] | None:
+    async def _handle(self, obj: JsonObject, peer: jsonlines.Peer) -> TapAnswer | None:
         try:
             cmd = Command.from_json(obj)
         except KtcsError as exc:
@@ -371,8 +413,10 @@ class Tap:
         """Answer `subscribe`, then send every event until the subscriber or the tap goes."""
         sub = self.core.subscribe(history)
         wake = self._wakes[sub] = asyncio.Event()
-        peer.send({"ok": True, "profile": self.profile.name, "protocol": self.profile.protocol,
-                   "names": list(self.names), "tap": self.name, "kind": self.kind})  # fmt: skip
+        header: TapSubscribeAnswer = {"ok": True, "profile": self.profile.name,
+                                   "protocol": self.profile.protocol, "names": list(self.names),
+                                   "tap": self.name, "kind": self.kind}  # fmt: skip
+        peer.send(header)
         gone = asyncio.ensure_future(self._until_eof(peer.reader))
         try:
             while not self._closing:

@@ -11,20 +11,21 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from dataclasses import dataclass
-from typing import Any, TypedDict
+from typing import Any
 
-from ktcs_bench.tap.runner import Tap
+from ktcs_bench.tap.registry import TapEnds
+from ktcs_bench.tap.runner import Tap, TapStatus
 from ktcs_bench.transport import net
 from ktcs_bench.transport.tcp import open_tcp
 
 CONNECT_TIMEOUT = 5.0
 
 
-class TcpEnds(TypedDict):
-    """A TCP tap's ends: the address it listens at and the one it connects to ([host, port])."""
+class TcpStatus(TapStatus):
+    """A TCP tap's status: a connection carries the link, and how many have."""
 
-    listen: list[str | int]
-    target: list[str | int]
+    connected: bool
+    connections: int
 
 
 @dataclass
@@ -57,7 +58,7 @@ class TcpTap(Tap):
         self._conn: _Conn | None = None
         self.connections = 0
 
-    def _ends_info(self) -> TcpEnds:
+    def _ends_info(self) -> TapEnds:
         addr = self.listen_address or self.listen
         return {"listen": list(addr), "target": list(self.target)}
 
@@ -73,13 +74,13 @@ class TcpTap(Tap):
         peer = writer.get_extra_info("peername") or ("?", 0)
         if self.core.cut_all:
             writer.close()
-            self._apply(self.core.note(self._now(), "refused", peer=list(peer[:2])))
+            self._apply(self.core.note(self._now(), {"event": "refused", "peer": list(peer[:2])}))
             return
         try:
             b_reader, b_writer = await asyncio.wait_for(open_tcp(*self.target), CONNECT_TIMEOUT)
         except (OSError, TimeoutError) as exc:
             writer.close()
-            self._apply(self.core.note(self._now(), "target-failed", error=str(exc)))
+            self._apply(self.core.note(self._now(), {"event": "target-failed", "error": str(exc)}))
             return
         if self._conn is not None:
             self._drop("replaced by a new connection")
@@ -129,7 +130,7 @@ class TcpTap(Tap):
     def _link_cut(self) -> None:
         self._drop("cut")
 
-    def _status(self) -> dict[str, Any]:
+    def _status(self) -> TcpStatus:
         return {**super()._status(), "connected": self.connected,
                 "connections": self.connections}  # fmt: skip
 

@@ -11,17 +11,12 @@ from __future__ import annotations
 
 import asyncio
 from functools import partial
-from typing import Any, TypedDict
+from typing import Any
 
 from ktcs_bench.errors import UsageError
+from ktcs_bench.tap.registry import TapEnds
 from ktcs_bench.tap.runner import Tap
 from ktcs_bench.transport.memory import VIRTUAL_SCHEME, SerialEnd, network_of
-
-
-class WireEnds(TypedDict):
-    """A virtual wire tap's ends: the endpoint each device opens."""
-
-    paths: dict[str, str]
 
 
 class WireTap(Tap):
@@ -40,7 +35,7 @@ class WireTap(Tap):
         """The endpoint each device opens."""
         return {end: f"{VIRTUAL_SCHEME}{self.name}/{end}" for end in self.names}
 
-    def _ends_info(self) -> WireEnds:
+    def _ends_info(self) -> TapEnds:
         return {"paths": self.paths}
 
     async def _open_ends(self) -> None:

@@ -9,13 +9,15 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict, cast
 
 from ktcs_bench import kinds
 from ktcs_bench import messages as msg
+from ktcs_bench.ctc.model import StationSummary
 from ktcs_bench.errors import UsageError
 from ktcs_bench.lab.state import lab_dir, running_labs
 from ktcs_bench.lab.topology import load_lab
+from ktcs_bench.lab.view import LinkEntry
 from ktcs_bench.station.model import Line
 from ktcs_bench.station_codes.chart import CodeChart
 from ktcs_bench.station_codes.names import Function
@@ -23,6 +25,26 @@ from ktcs_bench.station_codes.stations import StationCodes, station_chart
 from ktcs_bench.transport import jsonlines
 
 ASK_TIMEOUT = 5.0
+
+
+class IxlInputs(TypedDict, total=False):
+    """What a threat reads of an IXL's status (`emulator.ixl.IxlDevice.status`, which says
+    more): its links up by peer role, the track circuits it takes as occupied, each point's
+    detection, its indication table to the CTC (code number as text -> value)."""
+
+    links: dict[str, bool]
+    occupied: list[str]
+    points: dict[str, str]
+    ctc_state: dict[str, int]
+
+
+class CtcView(TypedDict, total=False):
+    """The CTC's answer to `show` (`messages.ShowAnswer`): the station's summary and its
+    indication table by code name (each read where it is used)."""
+
+    ok: bool
+    summary: StationSummary
+    state: dict[str, int]
 
 
 def host_port(text: str) -> tuple[str, int]:
@@ -79,29 +101,28 @@ class Application:
     def _ask(address: tuple[str, int], obj: msg.Message) -> dict[str, Any]:
         return asyncio.run(jsonlines.request(*address, obj, timeout=ASK_TIMEOUT))
 
-    def ixl_status(self) -> dict[str, Any] | None:
+    def ixl_status(self) -> IxlInputs | None:
         if self.ixl is None:
             return None
-        status: dict[str, Any] = self._ask(self.ixl, msg.Status())["status"]
-        return status
+        return cast(IxlInputs, self._ask(self.ixl, msg.Status())["status"])
 
-    def ctc_view(self) -> dict[str, Any] | None:
+    def ctc_view(self) -> CtcView | None:
         if self.ctc is None or self.station is None:
             return None
-        return self._ask(self.ctc, msg.Show(station=self.station))
+        return cast(CtcView, self._ask(self.ctc, msg.Show(station=self.station)))
 
     def link_up(self) -> bool | None:
         s = self.ixl_status()
         return None if s is None else bool(s["links"].get(self.role))
 
-    def failsafe(self, status: dict[str, Any]) -> bool:
+    def failsafe(self, status: IxlInputs) -> bool:
         """While the Type I link is lost: every guarded track circuit occupied (ATC), every point
         without detection (trackside I/O)."""
         if self.role == kinds.ATC:
             return bool(self.guarded) and set(self.guarded) <= set(status["occupied"])
         return all(d == "none" for d in status["points"].values())
 
-    def settled(self, status: dict[str, Any]) -> bool:
+    def settled(self, status: IxlInputs) -> bool:
         """The link is up and the IXL's inputs are the true (clear) state again."""
         up = bool(status["links"].get(self.role))
         if self.role == kinds.ATC:
@@ -148,7 +169,7 @@ def find_in_labs(tap_name: str, lab_name: str | None = None) -> Application:
     return Application()
 
 
-def _from_state(state: dict[str, Any], link: dict[str, Any]) -> Application:
+def _from_state(state: dict[str, Any], link: LinkEntry) -> Application:
     lab = load_lab(Path(state["file"]))
     devices = state.get("devices", {})
     ixl_name = link["a"] if lab.devices[link["a"]].kind == kinds.IXL else link["b"]

@@ -12,12 +12,13 @@ import bisect
 import threading
 import time
 from collections.abc import Callable, Iterator
-from typing import Any
 
 from ktcs_bench.codec import Frame, StreamDecoder, get_profile
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.errors import PeerError, UsageError
 from ktcs_bench.tap.client import TapClient
+from ktcs_bench.tap.core import TapEvent
+from ktcs_bench.tap.runner import TapStatus
 
 STREAM_LIMIT = 200_000  # events kept; a campaign reads a few thousand
 
@@ -39,7 +40,7 @@ class WireTap:
         self._control = TapClient(tap)
         self.address = self._control.address
         try:
-            self.info: dict[str, Any] = self._control.status()
+            self.info: TapStatus = self._control.status()
             self._feed = TapClient(self.address)
         except BaseException:
             self._control.close()
@@ -64,7 +65,7 @@ class WireTap:
         except BaseException:
             self.close()
             raise
-        self._events: list[dict[str, Any]] = []
+        self._events: list[TapEvent] = []
         self._frames: list[tuple[int, str, Frame]] = []  # (stream position, direction, frame)
         self._decoders: dict[str, StreamDecoder] = {}
         self._lock = threading.Lock()
@@ -77,7 +78,7 @@ class WireTap:
     def protocol(self) -> str:
         return self.profile.protocol
 
-    def _read(self, stream: Iterator[dict[str, Any]]) -> None:
+    def _read(self, stream: Iterator[TapEvent]) -> None:
         try:
             for event in stream:
                 with self._lock:
@@ -141,11 +142,11 @@ class WireTap:
             raise PeerError(f"tap {self.name}: no event for {command!r} on its stream")
         return found[0]
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> TapStatus:
         return self._control.status()
 
     # -- what the stream shows -------------------------------------------------------------------
-    def events(self, since: int = 0, kind: str | None = None) -> list[dict[str, Any]]:
+    def events(self, since: int = 0, kind: str | None = None) -> list[TapEvent]:
         """The tap's own events (not records) from position `since`, optionally of one kind."""
         with self._lock:
             tail = self._events[since:]
