@@ -88,11 +88,14 @@ class IxlDevice(Device):
                 raise UsageError(f"--link {role}=...: station {station} has no {role} "
                                  "neighbour (no interval on that side shared with a station)")  # fmt: skip
             charts = (kinds.chart_name(role, True), kinds.chart_name(role, False))
+            # an interlocking that takes no neighbour's codes: the link runs and carries 0s
+            state: Callable[[], Mapping[str, int]] = dict
+            on_codes: Callable[[dict[str, int]], None] = _ignore
+            on_link: Callable[[bool], None] = partial(self._neighbour_link, role)
             if role in served:
-                state: Callable[[], Mapping[str, int]] = partial(self.ixl.full_state, role)
-                on_codes, on_link = partial(self._codes_from, role), partial(self._link_of, role)
-            else:  # an interlocking that takes no neighbour's codes: the link runs, carries 0s
-                state, on_codes, on_link = dict, _ignore, partial(self._neighbour_link, role)
+                state = partial(self.ixl.full_state, role)
+                on_codes = partial(self._codes_from, role)
+                on_link = partial(self._link_of, role)
             self.ports[role] = self.bind_code_link(
                 role, links[role], charts, view, state, on_codes, on_link,
                 type1_profile, type1, faults,

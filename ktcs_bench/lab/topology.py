@@ -394,7 +394,7 @@ def _check_neighbour_link(
 ) -> None:
     """A link between two IXLs (SPEC §6.6), before the line is read: Type I, both IXLs ours,
     through a tap."""
-    name = excerpt(lk.name)
+    name = str(lk.name)
     if a.kind != kinds.IXL:
         raise fail(f"{place}.a", "end a of every link is an IXL")
     if lk.type != kinds.TYPE1:
