@@ -31,7 +31,9 @@ from ktcs_bench.messages import (
     Refused,
 )
 from ktcs_bench.station.model import Line, StationView
-from ktcs_bench.station_codes.stations import link_charts
+from ktcs_bench.station_codes.chart import CodeChart
+from ktcs_bench.station_codes.names import Function as F
+from ktcs_bench.station_codes.stations import link_charts, station_chart
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.transport.ixl_client import IxlClient
 from ktcs_bench.type1 import LinkConfig
@@ -48,6 +50,12 @@ def neighbour_roles(view: StationView) -> tuple[str, ...]:
 
 def _ignore(codes: dict[str, int]) -> None:
     """Codes nobody reads."""
+
+
+def _fail_safe(chart: CodeChart) -> dict[str, int]:
+    """A neighbour's chart as an IXL that does not work the interval sends it: holding no
+    permission, asking none, no departure route locked, its half of the interval occupied."""
+    return {c.name: int(c.type == F.TTC) for c in chart.codes}
 
 
 class IxlDevice(Device):
@@ -77,6 +85,7 @@ class IxlDevice(Device):
         self.ixl = Interlocking(view, mode=mode, tc_sources=(kinds.ATC,), startup_locking=restarted)
         self.drive(self.ixl, lambda now, out: self.apply(out))
         self.ports: dict[str, CodePort] = {}
+        self._neighbours_up: dict[str, bool] = {}  # the links `_neighbour_link` logs
         neighbours = neighbour_roles(view)
         served = (*LINKS, *getattr(self.ixl, "neighbours", {}))  # the roles the core reads
         # the Type I peers and the neighbouring IXLs (SPEC §6.6): each link bound the one way,
@@ -88,8 +97,11 @@ class IxlDevice(Device):
                 raise UsageError(f"--link {role}=...: station {station} has no {role} "
                                  "neighbour (no interval on that side shared with a station)")  # fmt: skip
             charts = (kinds.chart_name(role, True), kinds.chart_name(role, False))
-            # an interlocking that takes no neighbour's codes: the link runs and carries 0s
-            state: Callable[[], Mapping[str, int]] = dict
+            # an interlocking that takes no neighbour's codes: the link runs, carrying the
+            # fail-safe reading of its chart
+            state: Callable[[], Mapping[str, int]] = partial(
+                _fail_safe, station_chart(view, charts[0])
+            )
             on_codes: Callable[[dict[str, int]], None] = _ignore
             on_link: Callable[[bool], None] = partial(self._neighbour_link, role)
             if role in served:
@@ -129,9 +141,11 @@ class IxlDevice(Device):
         self.apply(self.ixl.link_state(role, up, self.now()))
 
     def _neighbour_link(self, role: str, up: bool) -> None:
-        """A neighbour's link the interlocking does not read, logged in the interlocking's
-        words for its links ("east link up")."""
-        self.note("link", f"{role} link {'up' if up else 'in communication error'}")
+        """A neighbour's link the interlocking does not read, each transition logged once in
+        the interlocking's words for its links ("east link up")."""
+        if self._neighbours_up.get(role, False) != up:
+            self._neighbours_up[role] = up
+            self.note("link", f"{role} link {'up' if up else 'in communication error'}")
 
     def apply(self, out: IxlOutput) -> None:
         for role, changes in out.changes.items():

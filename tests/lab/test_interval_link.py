@@ -6,6 +6,8 @@ process, the link a paced pty pair through its tap) and in one process (virtual 
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -15,9 +17,12 @@ import pytest
 
 from ktcs_bench import kinds
 from ktcs_bench.capture import read_capture
+from ktcs_bench.chart_files.files import render
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.lab.inprocess import InProcessLab
 from ktcs_bench.lab.topology import load_lab
+from ktcs_bench.station.loader import load_line
+from ktcs_bench.station_codes.stations import chart_spec
 
 from .conftest import lab_file, request, start_lab, wait_until
 from .test_inprocess import status, until
@@ -142,10 +147,35 @@ def test_in_one_process_the_interval_links_come_up_through_their_taps(tmp_path: 
         records = read_capture(out / "captures" / f"{name}.pcapng").records
         a, b = name[2:4], name[4:6]
         assert {r.direction for r in records} == {f"ixl{a}>ixl{b}", f"ixl{b}>ixl{a}"}, name
-    events = (out / "events.jsonl").read_text()
+    events = [json.loads(e) for e in (out / "events.jsonl").read_text().splitlines()]
     for device, role in (("ixl18", "east"), ("ixl20", "west")):
-        assert f'"device":"{device}","kind":"link","t"' in events
-        assert f"{role} link in communication error" in events
+        said = [e["text"] for e in events if e["device"] == device and e["kind"] == "link"]
+        assert said.count(f"{role} link up") == 2, said  # at the start, and after the cut
+        assert f"{role} link in communication error" in said, said
+    # its capture decodes with a chart each way: what ixl18 sends is its ixl_to_east, what
+    # ixl20 sends its ixl_to_west (each with the sender's own half of the interval)
+    shown = _monitor(tmp_path, str(out / "captures" / "iv1820.pcapng"))
+    assert shown.returncode == 0, shown.stderr
+    frames = shown.stdout.split("\n\n")
+    infos = {f.split()[2]: f for f in frames if "ALL_INFO" in f}
+    assert "PHI1820=" in infos["ixl18>ixl20"] and "TTC1861A1867=" in infos["ixl18>ixl20"]
+    assert "PHI1820=" in infos["ixl20>ixl18"] and "TTC20432047=" in infos["ixl20>ixl18"]
+
+
+def _monitor(
+    tmp_path: Path, source: str, *args: str, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """`ktcs-bench monitor SOURCE` naming the codes of iv1820's two charts, one per sender."""
+    line = load_line()
+    charts = []
+    for device, st, chart in (("ixl18", 18, "ixl_to_east"), ("ixl20", 20, "ixl_to_west")):
+        path = tmp_path / f"st{st}_{chart}.yaml"
+        path.write_text(render(chart_spec(line.view(st), chart), "the test"), encoding="utf-8")
+        charts += ["--chart", f"{device}={path}"]
+    return subprocess.run(
+        [sys.executable, "-m", "ktcs_bench.cli.main", "--no-colour", "monitor", source, *charts,
+         *args], capture_output=True, text=True, timeout=60, env=env,
+    )  # fmt: skip
 
 
 def test_a_live_lab_links_its_ixl_processes_through_the_interval_taps(tmp_path: Path) -> None:
@@ -166,6 +196,13 @@ def test_a_live_lab_links_its_ixl_processes_through_the_interval_taps(tmp_path: 
         assert shown.returncode == 0, shown.stderr
         assert "monitoring tap iv1820" in shown.stdout and "CRC OK" in shown.stdout, shown.stdout
         assert "ixl18>ixl20" in shown.stdout or "ixl20>ixl18" in shown.stdout
+        # what it recorded from the start, codes named by the chart of each end
+        env = {**os.environ, "KTCS_BENCH_RUN_DIR": str(lab.run_dir)}
+        history = _monitor(
+            tmp_path, "iv1820", "--history", "--count", "30", "--timeout", "20", env=env
+        )
+        assert history.returncode == 0, history.stderr
+        assert "TTC1861A1867=" in history.stdout and "TTC20432047=" in history.stdout
         # the link between the processes runs through the tap: cut there, down at both ends
         assert request(tap, {"cmd": "cut"})["ok"]
         wait_until(
