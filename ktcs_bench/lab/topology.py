@@ -10,7 +10,17 @@ Type I devices (atc, trackside) give `serial`, a device path or any pyserial URL
 a CTC gives `address`, where the taps connect to it; an IXL gives `address`, where the tap serves
 it (the real IXL is set to connect there; its own Type I peers are its business, not the lab's).
 An external ATC or trackside is off the lab's rails unless `rails: true` says it joins them itself
-(then the track-circuit emulator needs a fixed port, so the device can be told where they are)."""
+(then the track-circuit emulator needs a fixed port, so the device can be told where they are).
+
+Adjacent stations' IXLs are linked by a vital Type I link (SPEC §6.6), one per interval between
+them that is not a lab edge:
+    - {name: iv1820, type: type1, a: ixl18, b: ixl20, tap: true}
+Both ends are IXLs of the lab (not external) at the two ends of one interval of the line, and the
+link goes through its tap. The IXL at the interval's west end (`Interval.west`) is given its
+neighbour as `--link east=...`, the other `--link west=...` (`LinkSpec.roles`); each sends its
+`ixl_to_ROLE` chart and reads `ROLE_to_ixl`. Type I is symmetric: each end asks for the other's
+full state when the link comes up, neither is primary, so `a` and `b` only name the tap's ends
+(its directions `a>b`, `b>a`); the shipped and generated labs put the west end first."""
 
 from __future__ import annotations
 
