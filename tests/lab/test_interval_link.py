@@ -18,6 +18,7 @@ import pytest
 from ktcs_bench import kinds
 from ktcs_bench.capture import read_capture
 from ktcs_bench.chart_files.files import render
+from ktcs_bench.datafiles import data_dir
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.lab.inprocess import InProcessLab
 from ktcs_bench.lab.topology import load_lab
@@ -214,3 +215,26 @@ def test_a_live_lab_links_its_ixl_processes_through_the_interval_taps(tmp_path: 
         )
         assert request(tap, {"cmd": "restore"})["ok"]
         wait_until("iv1820 up again", lambda: lab.status("ixl18")["links"]["east"])
+
+
+@pytest.mark.parametrize(
+    ("given", "words"),
+    [
+        (["{a}", "{b}"], "--chart: one chart for every frame; SENDER=CHART for each end"),
+        (["ixl18={a}", "ixl18={b}"], "--chart: two charts for the frames ixl18 sends"),
+    ],
+)
+def test_the_monitor_takes_one_chart_per_sender_and_refuses_two(
+    tmp_path: Path, given: list[str], words: str
+) -> None:
+    line = load_line()
+    a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    a.write_text(render(chart_spec(line.view(18), "ixl_to_east"), "the test"), encoding="utf-8")
+    b.write_text(render(chart_spec(line.view(20), "ixl_to_west"), "the test"), encoding="utf-8")
+    charts = [arg for g in given for arg in ("--chart", g.format(a=a, b=b))]
+    fig7 = str(data_dir("protocols") / "captures" / "fig7.hex")
+    done = subprocess.run(
+        [sys.executable, "-m", "ktcs_bench.cli.main", "monitor", fig7, *charts],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 2 and words in done.stderr, done.stderr
