@@ -2,7 +2,8 @@
 and the neighbouring IXLs east and west: SPEC §6.6) and its Type II link to the CTC (as a client
 that reconnects with back-off). Each link's codes go through its binding (`binding.LinkBinding`;
 `ControlLink` for the CTC's controls): the interlocking takes and gives code names only. Each link
-going up or down is one event in the device's log: the interlocking's own for the Type I links, the device's for the CTC link."""
+going up or down is one event in the device's log: the interlocking's own for the Type I links,
+the device's for the CTC link."""
 
 from __future__ import annotations
 
