@@ -46,6 +46,18 @@ interval between them is its `east` peer's `west`. A vital Type I link per pair 
 charts `ixl_to_east`/`east_to_ixl` (and `..._west`), carrying each shared interval's traffic
 permission; not a kind of its own (the peer is an IXL)."""
 
+
+def neighbour_role(west_end: bool) -> str:
+    """The role an IXL gives its neighbour across an interval (SPEC §6.6): `east` when the IXL
+    is at the interval's west end (`Interval.west`), else `west`."""
+    return EAST if west_end else WEST
+
+
+def opposite_role(role: str) -> str:
+    """What the neighbour calls this IXL: `west` for `east` and the other way round."""
+    return WEST if role == EAST else EAST
+
+
 RAILS = "rails"
 """The bench's own link from a device to the track-circuit emulator (not a kTCS protocol)."""
 

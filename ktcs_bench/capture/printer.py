@@ -43,9 +43,13 @@ class FramePrinter:
         colour: bool = False,
         as_json: bool = False,
         stream: TextIO = sys.stdout,
+        charts: Mapping[str, CodeChart] | None = None,
     ) -> None:
         self.profile = profile
         self.chart = chart
+        self.charts = dict(charts or {})
+        """The chart of the frames each end sends, by its name (a tap's `ixl18` of
+        `ixl18>ixl20`): a link carries a chart each way; `chart` names the others."""
         self.colour = colour
         self.as_json = as_json
         self.stream = stream
@@ -73,7 +77,8 @@ class FramePrinter:
                 print_json_line(line, self.stream)
                 continue
             label = f"{format_time(record.time)} {record.direction}{note}  "
-            lines = [to_text(rec, self.profile, self.chart, self.colour, label)]
+            chart = self.charts.get(record.direction.split(">")[0], self.chart)
+            lines = [to_text(rec, self.profile, chart, self.colour, label)]
             for ev in events:
                 text = f"  ARQ: {ev}"
                 lines.append(f"{YELLOW}{text}{RESET}" if self.colour else text)

@@ -16,6 +16,7 @@ from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.cli._common import duration, positive
 from ktcs_bench.codec.profile import FrameProfile, get_profile
 from ktcs_bench.errors import PeerError, UsageError
+from ktcs_bench.station_codes.chart import CodeChart
 from ktcs_bench.tap.client import TapClient
 from ktcs_bench.tap.core import TapEvent
 from ktcs_bench.tap.recorder import Recorder
@@ -41,6 +42,8 @@ examples:
   ktcs-bench monitor tcp://127.0.0.1:5020 --profile ktcs-type2
   ktcs-bench monitor /dev/ttyUSB0 --baud 9600
   ktcs-bench monitor captures/st18.hex --chart code_charts/st18_atc_to_ixl.yaml
+  ktcs-bench monitor iv1820 --chart ixl18=code_charts/st18_ixl_to_east.yaml \
+      --chart ixl20=code_charts/st20_ixl_to_west.yaml
 
 exit status: 0 done (Ctrl-C, the source ended, or --count frames seen); 1 --timeout passed before
 --count frames; 2 bad arguments; 3 the tap or endpoint cannot be reached.
@@ -57,7 +60,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--profile",
         help="frame profile (default: the tap's; ktcs-type2 for tcp://, ktcs-type1 otherwise)",
     )
-    p.add_argument("--chart", help="code chart YAML: show code names")
+    p.add_argument(
+        "--chart", action="append", default=[], metavar="[SENDER=]CHART",
+        help="code chart YAML: show code names; SENDER=CHART for the frames one end sends "
+        "(a link carries a chart each way: --chart ixl18=st18_ixl_to_east.yaml "
+        "--chart ixl20=st20_ixl_to_west.yaml; repeatable)",
+    )  # fmt: skip
     p.add_argument(
         "--json", action="store_true", help="JSON lines: SPEC §7 keys + time, direction, arq"
     )
@@ -141,8 +149,26 @@ def _stream_records(
             port.close()
 
 
+def _charts(given: list[str]) -> tuple[CodeChart | None, dict[str, CodeChart]]:
+    """`--chart` values: the chart of every frame (CHART), and the chart of the frames each
+    named end sends (SENDER=CHART; a path holding "=" is a CHART when it is a file)."""
+    every: CodeChart | None = None
+    by_sender: dict[str, CodeChart] = {}
+    for value in given:
+        sender, _, path = value.partition("=")
+        if not path or os.path.isfile(value):
+            if every is not None:
+                raise UsageError("--chart: one chart for every frame; SENDER=CHART for each end")
+            every = load_chart(value)
+        elif sender in by_sender:
+            raise UsageError(f"--chart: two charts for the frames {sender} sends")
+        else:
+            by_sender[sender] = load_chart(path)
+    return every, by_sender
+
+
 def run(args: argparse.Namespace) -> int:
-    chart = load_chart(args.chart) if args.chart else None
+    chart, charts = _charts(args.chart)
     colour: bool = args.colour
     deadline = None if args.timeout is None else time.monotonic() + args.timeout
     source: str = args.source
@@ -173,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
                   f"profile {profile.name}, ends {' & '.join(header.get('names', []))})", flush=True)  # fmt: skip
     if profile is None:
         raise UsageError(f"{source}: no frames to monitor")
-    printer = FramePrinter(profile, chart=chart, colour=colour, as_json=args.json)
+    printer = FramePrinter(profile, chart=chart, charts=charts, colour=colour, as_json=args.json)
     writers = [open_writer(p, link=profile.protocol, profile=profile.name) for p in args.write]
     try:
         for item in items:

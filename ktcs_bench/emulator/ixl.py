@@ -1,12 +1,14 @@
-"""The IXL process: one station's `Interlocking` bound to its Type I links (ATC, trackside I/O)
-and its Type II link to the CTC (as a client that reconnects with back-off). Each link's codes go
-through its binding (`binding.LinkBinding`; `ControlLink` for the CTC's controls): the
-interlocking takes and gives code names only. Each link going up or down is one event in the
-device's log: the interlocking's own for the Type I links, the device's for the CTC link."""
+"""The IXL process: one station's `Interlocking` bound to its Type I links (ATC, trackside I/O,
+and the neighbouring IXLs east and west: SPEC §6.6) and its Type II link to the CTC (as a client
+that reconnects with back-off). Each link's codes go through its binding (`binding.LinkBinding`;
+`ControlLink` for the CTC's controls): the interlocking takes and gives code names only. Each link
+going up or down is one event in the device's log: the interlocking's own for the Type I links,
+the device's for the CTC link."""
 
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable, Mapping
 from functools import partial
 from typing import Any
 
@@ -15,6 +17,7 @@ from ktcs_bench.binding import ControlLink
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.code_link import CodePort
 from ktcs_bench.emulator.device import Device
+from ktcs_bench.errors import UsageError
 from ktcs_bench.ixl.interlocking import LINKS, Interlocking, IxlOutput
 from ktcs_bench.ixl.modes import Mode
 from ktcs_bench.ixl.reasons import Reason
@@ -28,12 +31,32 @@ from ktcs_bench.messages import (
     ReasonAnswer,
     Refused,
 )
-from ktcs_bench.station.model import Line
-from ktcs_bench.station_codes.stations import link_charts
+from ktcs_bench.station.model import Line, StationView
+from ktcs_bench.station_codes.chart import CodeChart
+from ktcs_bench.station_codes.names import Function as F
+from ktcs_bench.station_codes.stations import link_charts, station_chart
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.transport.ixl_client import IxlClient
 from ktcs_bench.type1 import LinkConfig
 from ktcs_bench.type2 import events as ev
+
+
+def neighbour_roles(view: StationView) -> tuple[str, ...]:
+    """The roles of the station's neighbouring IXLs: one per interval it shares with another
+    station (not a lab edge), `east` where it is the interval's west end."""
+    return tuple(
+        kinds.neighbour_role(iv.west == view.number) for iv in view.intervals if not iv.boundary
+    )
+
+
+def _ignore(codes: dict[str, int]) -> None:
+    """Codes nobody reads."""
+
+
+def _fail_safe(chart: CodeChart) -> dict[str, int]:
+    """A neighbour's chart as an IXL that does not work the interval sends it: holding no
+    permission, asking none, no departure route locked, its half of the interval occupied."""
+    return {c.name: int(c.type == F.TTC) for c in chart.codes}
 
 
 class IxlDevice(Device):
@@ -63,14 +86,33 @@ class IxlDevice(Device):
         self.ixl = Interlocking(view, mode=mode, tc_sources=(kinds.ATC,), startup_locking=restarted)
         self.drive(self.ixl, lambda now, out: self.apply(out))
         self.ports: dict[str, CodePort] = {}
-        for role in LINKS:  # the Type I peers: each link bound the one way
-            if role in links:
-                charts = (kinds.chart_name(role, True), kinds.chart_name(role, False))
-                self.ports[role] = self.bind_code_link(
-                    role, links[role], charts, view, partial(self.ixl.full_state, role),
-                    partial(self._codes_from, role), partial(self._link_of, role),
-                    type1_profile, type1, faults,
-                )  # fmt: skip
+        self._neighbours_up: dict[str, bool] = {}  # the links `_neighbour_link` logs
+        neighbours = neighbour_roles(view)
+        served = (*LINKS, *getattr(self.ixl, "neighbours", {}))  # the roles the core reads
+        # the Type I peers and the neighbouring IXLs (SPEC §6.6): each link bound the one way,
+        # the IXL sending ixl_to_ROLE and reading ROLE_to_ixl
+        for role in (*LINKS, *kinds.NEIGHBOUR_ROLES):
+            if role not in links:
+                continue
+            if role in kinds.NEIGHBOUR_ROLES and role not in neighbours:
+                raise UsageError(f"--link {role}=...: station {station} has no {role} "
+                                 "neighbour (no interval on that side shared with a station)")  # fmt: skip
+            charts = (kinds.chart_name(role, True), kinds.chart_name(role, False))
+            # an interlocking that takes no neighbour's codes: the link runs, carrying the
+            # fail-safe reading of its chart
+            state: Callable[[], Mapping[str, int]] = partial(
+                _fail_safe, station_chart(view, charts[0])
+            )
+            on_codes: Callable[[dict[str, int]], None] = _ignore
+            on_link: Callable[[bool], None] = partial(self._neighbour_link, role)
+            if role in served:
+                state = partial(self.ixl.full_state, role)
+                on_codes = partial(self._codes_from, role)
+                on_link = partial(self._link_of, role)
+            self.ports[role] = self.bind_code_link(
+                role, links[role], charts, view, state, on_codes, on_link,
+                type1_profile, type1, faults,
+            )  # fmt: skip
         # the application the Type II client serves: full states, controls by number
         self.ctc_link = ControlLink(
             *link_charts(view, kinds.chart_name(kinds.CTC, True)),
@@ -98,6 +140,13 @@ class IxlDevice(Device):
 
     def _link_of(self, role: str, up: bool) -> None:
         self.apply(self.ixl.link_state(role, up, self.now()))
+
+    def _neighbour_link(self, role: str, up: bool) -> None:
+        """A neighbour's link the interlocking does not read, each transition logged once in
+        the interlocking's words for its links ("east link up")."""
+        if self._neighbours_up.get(role, False) != up:
+            self._neighbours_up[role] = up
+            self.note("link", f"{role} link {'up' if up else 'in communication error'}")
 
     def apply(self, out: IxlOutput) -> None:
         for role, changes in out.changes.items():

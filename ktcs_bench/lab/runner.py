@@ -463,7 +463,8 @@ class LabRunner:
         or the CTC's to that station; between two external devices, the tap's connection."""
         a, b = self.lab.devices[link.a], self.lab.devices[link.b]
         if a.external is None:
-            return bool(((devices.get(a.name) or {}).get("links") or {}).get(kinds.role_of(b.kind)))
+            role = self.lab.peer_role(link, a.name)
+            return bool(((devices.get(a.name) or {}).get("links") or {}).get(role))
         stations = (devices.get(b.name) or {}).get("stations") or {}
         if b.external is None:
             summary = stations.get(a.station) or stations.get(str(a.station)) or {}

@@ -10,7 +10,17 @@ Type I devices (atc, trackside) give `serial`, a device path or any pyserial URL
 a CTC gives `address`, where the taps connect to it; an IXL gives `address`, where the tap serves
 it (the real IXL is set to connect there; its own Type I peers are its business, not the lab's).
 An external ATC or trackside is off the lab's rails unless `rails: true` says it joins them itself
-(then the track-circuit emulator needs a fixed port, so the device can be told where they are)."""
+(then the track-circuit emulator needs a fixed port, so the device can be told where they are).
+
+Adjacent stations' IXLs are linked by a vital Type I link (SPEC §6.6), one per interval between
+them that is not a lab edge:
+    - {name: iv1820, type: type1, a: ixl18, b: ixl20, tap: true}
+Both ends are IXLs of the lab (not external) at the two ends of one interval of the line, and the
+link goes through its tap. The IXL at the interval's west end (`Interval.west`) is given its
+neighbour as `--link east=...`, the other `--link west=...` (`LinkSpec.roles`); each sends its
+`ixl_to_ROLE` chart and reads `ROLE_to_ixl`. Type I is symmetric: each end asks for the other's
+full state when the link comes up, neither is primary, so `a` and `b` only name the tap's ends
+(its directions `a>b`, `b>a`); the shipped and generated labs put the west end first."""
 
 from __future__ import annotations
 
@@ -71,6 +81,11 @@ class LinkSpec:
     a: str  # the IXL
     b: str  # its peer
     tap: bool = True
+    interval: str | None = None
+    """A link between neighbouring IXLs (SPEC §6.6): the interval they share."""
+    roles: tuple[str, str] | None = None
+    """Such a link's roles: what a calls b and what b calls a (`kinds.EAST`/`WEST`: the IXL at
+    the interval's west end calls the other `east`)."""
 
 
 @dataclass(frozen=True)
@@ -117,7 +132,10 @@ class Lab:
         return [lk for lk in self.links if device in (lk.a, lk.b)]
 
     def peer_role(self, link: LinkSpec, device: str) -> str:
-        """The role the other end plays for `device` (ctc, atc, io, ixl)."""
+        """The role the other end plays for `device` (ctc, atc, io, ixl; east or west across an
+        interval)."""
+        if link.roles is not None:
+            return link.roles[0] if device == link.a else link.roles[1]
         other = link.b if link.a == device else link.a
         return kinds.role_of(self.devices[other].kind)
 
@@ -241,6 +259,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         timetable_file=timetable_file,
     )
     _check_lab(lab, fail)
+    lab = replace(lab, links=_neighbour_links(lab, fail))
     if top.ars is not None:
         lab = replace(lab, ars=_ars(top.ars, lab, file, fail))
     return lab
@@ -343,6 +362,10 @@ def _links(
             if str(device) not in devices:
                 raise fail(f"{place}.{end}", f"unknown device {excerpt(device)}")
         a, b = str(lk.a), str(lk.b)
+        if devices[b].kind == kinds.IXL:  # neighbouring IXLs: checked against the line later
+            _check_neighbour_link(lk, place, devices[a], devices[b], fail)
+            links.append(LinkSpec(str(lk.name), str(lk.type), a, b, lk.tap))
+            continue
         _check_link(lk, place, devices[a], devices[b], fail)
         role_key = (a, kinds.role_of(devices[b].kind))
         if role_key in seen:
@@ -374,6 +397,59 @@ def _check_link(lk: _LinkShape, place: str, ixl: DeviceSpec, peer: DeviceSpec, f
         )
     if kinds.KINDS[peer.kind].station and peer.station != ixl.station:
         raise fail(f"{place}.b", f"{b} belongs to station {peer.station}, {a} to {ixl.station}")
+
+
+def _check_neighbour_link(
+    lk: _LinkShape, place: str, a: DeviceSpec, b: DeviceSpec, fail: _Fail
+) -> None:
+    """A link between two IXLs (SPEC §6.6), before the line is read: Type I, both IXLs ours,
+    through a tap."""
+    name = str(lk.name)
+    if a.kind != kinds.IXL:
+        raise fail(f"{place}.a", "end a of every link is an IXL")
+    if lk.type != kinds.TYPE1:
+        raise fail(f"{place}.type", f"link {name} between IXLs {a.name} and {b.name} is a vital "
+                   f"Type I link (type: type1), not {excerpt(lk.type)}")  # fmt: skip
+    for end, d in (("a", a), ("b", b)):
+        if d.external is not None:
+            raise fail(f"{place}.{end}", f"link {name}: {d.name} is external: its Type I peers "
+                       "are its own, not the lab's")  # fmt: skip
+    if not lk.tap:
+        raise fail(f"{place}.tap", f"link {name} between IXLs {a.name} and {b.name} goes "
+                   "through its tap (tap: true): each IXL opens its end, neither makes a pty "
+                   "for the other")  # fmt: skip
+
+
+def _neighbour_links(lab: Lab, fail: _Fail) -> tuple[LinkSpec, ...]:
+    """The lab's links with each link between two IXLs given its interval and its ends' roles:
+    the two IXLs' stations are the ends of one interval of the line that is not a lab edge, and
+    each IXL has at most one link to each side."""
+    line = lab.load_line()
+    out: list[LinkSpec] = []
+    seen: dict[tuple[str, str], str] = {}
+    for i, lk in enumerate(lab.links):
+        a, b = lab.devices[lk.a], lab.devices[lk.b]
+        if b.kind != kinds.IXL:
+            out.append(lk)
+            continue
+        ends = {a.station, b.station}
+        shared = [iv for iv in line.intervals if {iv.west, iv.east} == ends and not iv.boundary]
+        if not shared:
+            raise fail(f"links[{i}]", f"link {lk.name}: stations {a.station} ({a.name}) and "
+                       f"{b.station} ({b.name}) share no interval of the line {line.name} "
+                       "(a link between IXLs joins adjacent stations)")  # fmt: skip
+        iv = shared[0]
+        roles = (
+            kinds.neighbour_role(a.station == iv.west),
+            kinds.neighbour_role(b.station == iv.west),
+        )
+        for device, role in ((a.name, roles[0]), (b.name, roles[1])):
+            if (device, role) in seen:
+                raise fail(f"links[{i}]", f"link {lk.name}: {device} already has its {role} "
+                           f"neighbour link ({seen[device, role]})")  # fmt: skip
+            seen[device, role] = lk.name
+        out.append(replace(lk, interval=iv.name, roles=roles))
+    return tuple(out)
 
 
 def _check_lab(lab: Lab, fail: _Fail) -> None:

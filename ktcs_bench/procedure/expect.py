@@ -366,8 +366,8 @@ def _link(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str, 
         raise StepError("link NAME")
     lk = names.link(w[0])
     ends = [(lk.a, names.lab.peer_role(lk, lk.a))]
-    if lk.type == "type1":
-        ends.append((lk.b, ""))
+    if lk.type == "type1":  # the peer's own link ("link"), or a neighbouring IXL's to this one
+        ends.append((lk.b, names.lab.peer_role(lk, lk.b) if lk.roles else ""))
 
     async def read(obs: Observer) -> Any:
         for device, role in ends:

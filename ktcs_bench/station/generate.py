@@ -421,6 +421,12 @@ def _lab_text(placed: list[_Placed], n: int) -> str:
                 f"  - {{name: st{s}-{peer.role}, type: {peer.link}, a: {kinds.IXL}{s}, b: {b}, "
                 "tap: true}"
             )
+    for west, east in zip(placed, placed[1:], strict=False):  # the neighbouring IXLs (SPEC §6.6)
+        w, e = west.number, east.number
+        out.append(
+            f"  - {{name: iv{w}{e}, type: {kinds.TYPE1}, a: {kinds.IXL}{w}, b: {kinds.IXL}{e}, "
+            "tap: true}"
+        )
     return "\n".join(out) + "\n"
 
 

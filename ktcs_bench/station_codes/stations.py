@@ -12,9 +12,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 from ktcs_bench import kinds
-from ktcs_bench.station.model import Line, StationView
+from ktcs_bench.station.model import Interval, Line, StationView
 from ktcs_bench.station_codes.chart import Code, CodeChart
 from ktcs_bench.station_codes.names import CodeName
 from ktcs_bench.station_codes.names import Function as F
@@ -22,6 +23,14 @@ from ktcs_bench.station_codes.names import Function as F
 # (link, protocol, direction): the links of a station, each of the IXL's peers each way
 # (`kinds.charts`), and the file stem suffix of each chart
 LINKS: tuple[tuple[str, str, str], ...] = kinds.charts()
+
+# the charts of an IXL's links with its neighbouring IXLs (SPEC §6.6), each way, per role
+NEIGHBOUR_LINKS: tuple[tuple[str, str, str], ...] = tuple(
+    (kinds.chart_name(role, outward), kinds.TYPE1, f"IXL->{label}" if outward else f"{label}->IXL")
+    for role in kinds.NEIGHBOUR_ROLES
+    for label in (role.upper(),)
+    for outward in (True, False)
+)
 
 # the chart's status column: what state 1 (and 0) of each function means
 ONE_ZERO: dict[str, str] = {
@@ -194,6 +203,36 @@ def _io_to_ixl(v: StationView) -> list[CodeName]:
     return out
 
 
+def _shared(v: StationView, role: str) -> list[Interval]:
+    """The station's intervals with its `role` neighbour (not a boundary: an IXL at each end)."""
+    return [
+        iv
+        for iv in v.intervals
+        if not iv.boundary and kinds.neighbour_role(iv.west == v.number) == role
+    ]
+
+
+def _to_neighbour(v: StationView, role: str) -> list[CodeName]:
+    """Per shared interval: the sender holds its permission, asks for it, has a departure route
+    into it locked, and its half of the interval's occupancy (its TTC)."""
+    out: list[CodeName] = []
+    for iv in _shared(v, role):
+        out += [CodeName(f, None, iv.name) for f in (F.PHI, F.PRQ, F.DRL)]
+        if half := v.owned_half(iv):
+            out.append(_ttc(v, iv.name, half))
+    return out
+
+
+def _from_neighbour(v: StationView, role: str) -> list[CodeName]:
+    """What the `role` neighbour sends this station: its own chart towards us."""
+    shared = _shared(v, role)
+    if not shared:
+        return []
+    iv = shared[0]
+    peer = v.line.view(iv.east if iv.west == v.number else iv.west)
+    return _to_neighbour(peer, kinds.opposite_role(role))
+
+
 _BUILDERS: dict[str, Callable[[StationView], list[CodeName]]] = {
     "ixl_to_ctc": _ixl_to_ctc,
     "ctc_to_ixl": _ctc_to_ixl,
@@ -201,13 +240,20 @@ _BUILDERS: dict[str, Callable[[StationView], list[CodeName]]] = {
     "atc_to_ixl": _atc_to_ixl,
     "ixl_to_io": _ixl_to_io,
     "io_to_ixl": _io_to_ixl,
+    **{
+        kinds.chart_name(role, outward): partial(
+            _to_neighbour if outward else _from_neighbour, role=role
+        )
+        for role in kinds.NEIGHBOUR_ROLES
+        for outward in (True, False)
+    },
 }
 
 
 def chart_spec(view: StationView, link: str) -> ChartSpec:
     """One station link's chart as the data gives it (`link` is e.g. "ixl_to_ctc")."""
     try:
-        protocol, direction = next((p, d) for k, p, d in LINKS if k == link)
+        protocol, direction = next((p, d) for k, p, d in LINKS + NEIGHBOUR_LINKS if k == link)
     except StopIteration:
         raise ValueError(f"unknown link {link!r} ({', '.join(k for k, _, _ in LINKS)})") from None
     names = tuple(_BUILDERS[link](view))

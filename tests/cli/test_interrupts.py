@@ -62,7 +62,9 @@ def test_lab_simulate_stopped_by_a_signal_ends_at_once_with_its_files_written_up
     events = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
     assert max(e["t"] for e in events) == reached, events[-3:]
     captures = sorted((out / "captures").glob("*.pcapng"))
-    assert len(captures) == 9
+    # a capture per link: each station's three, and the two between neighbouring IXLs
+    assert [p.stem for p in captures if p.stem.startswith("iv")] == ["iv1820", "iv2022"]
+    assert len(captures) == 11
     silent = LINK_DOWN_PERIODS * LINK_TEST_PERIOD  # no link that is up is ever quiet longer
     for path in captures:
         last = read_capture(path).records[-1].time

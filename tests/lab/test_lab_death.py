@@ -75,7 +75,8 @@ def test_sigkill_of_lab_up_ends_every_device_and_the_lab_can_start_again(tmp_pat
         devices = lab.state()["devices"]
         pids = [int(d["pid"]) for d in devices.values()]
         assert len(pids) == 11
-        assert len(cli(run_dir, "tap", "list").stdout.splitlines()) == 9
+        # a tap in every link: each station's three and the two interval links between IXLs
+        assert len(cli(run_dir, "tap", "list").stdout.splitlines()) == 11
         os.kill(lab.proc.pid, signal.SIGKILL)
         lab.proc.wait(10)
         assert wait_gone(pids, 30) == [], "devices outlived their lab"

@@ -98,8 +98,9 @@ def test_lab_status_json_carries_enum_values_not_their_python_text(tmp_path: Pat
 
 
 def test_simulate_logs_each_link_going_up_once_at_each_end(tmp_path: Path) -> None:
-    """The reference lab's nine links come up once: at the IXL end each (atc, io, ctc), and at
-    the ATC's and trackside's end of the Type I ones -- one event a transition, not two."""
+    """The reference lab's eleven links come up once: at the IXL end each (atc, io, ctc), at
+    the ATC's and trackside's end of the Type I ones, and at both IXLs of each interval link (as
+    `east` at its west end, `west` at the other) -- one event a transition, not two."""
     run_ = _cli("lab", "simulate", "reference", "--for", "10", "--out", str(tmp_path))
     assert run_.returncode == 0, run_.stderr
     events = [json.loads(e) for e in (tmp_path / "events.jsonl").read_text().splitlines()]
@@ -110,4 +111,6 @@ def test_simulate_logs_each_link_going_up_once_at_each_end(tmp_path: Path) -> No
     for st in (18, 20, 22):
         want.update({(f"ixl{st}", f"{role} link up"): 1 for role in ("atc", "io", "ctc")})
         want.update({(f"{dev}{st}", "IXL link up"): 1 for dev in ("atc", "io")})
+    for west, east in ((18, 20), (20, 22)):  # the neighbouring IXLs (SPEC §6.6)
+        want.update({(f"ixl{west}", "east link up"): 1, (f"ixl{east}", "west link up"): 1})
     assert links == want

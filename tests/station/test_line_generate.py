@@ -45,10 +45,17 @@ def test_generated_line_loads_and_its_lab_names_every_station(n: int, tmp_path: 
     for s in numbers:
         kinds = {d.kind for d in lab.devices.values() if d.station == s}
         assert kinds == {"ixl", "atc", "trackside"}
-        assert {(lk.type, lab.devices[lk.b].kind) for lk in lab.links if lk.a == f"ixl{s}"} == {
+        station_links = [lk for lk in lab.links if lk.a == f"ixl{s}" and lk.interval is None]
+        assert {(lk.type, lab.devices[lk.b].kind) for lk in station_links} == {
             ("type2", "ctc"), ("type1", "atc"), ("type1", "trackside"),
         }  # fmt: skip
         assert all(lk.tap for lk in lab.links)
+    # adjacent stations' IXLs: one Type I link per interval, west end first (SPEC §6.6)
+    between = [(lk.name, lk.type, lk.a, lk.b, lk.roles) for lk in lab.links if lk.interval]
+    assert between == [
+        (f"iv{w}{e}", "type1", f"ixl{w}", f"ixl{e}", ("east", "west"))
+        for w, e in zip(numbers, numbers[1:], strict=False)
+    ]
     assert [d.kind for d in lab.devices.values()].count("ctc") == 1
     assert [d.kind for d in lab.devices.values()].count("trackcircuit") == 1
     # the timetable's trains run in it: the lab names the timetable, a train device runs each
