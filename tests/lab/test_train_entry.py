@@ -8,6 +8,9 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
+from hypothesis import given
+from hypothesis import strategies as st
+
 from ktcs_bench.emulator.train import train_line
 from ktcs_bench.lab.inprocess import InProcessLab
 from ktcs_bench.station import load_line
@@ -121,3 +124,45 @@ def test_the_gate_holds_the_first_cycle_until_the_rails_report_the_entry_clear()
     assert gate.next_deadline() == 9.3 + gate.endpoint.cycle
     gate.rails_lost()  # once on the line, the gate holds nothing back
     assert gate.handle_timer(9.3 + gate.endpoint.cycle) is not None
+
+
+REPORTS = st.lists(
+    st.one_of(
+        st.tuples(st.just("rails"), st.dictionaries(st.sampled_from(["TC1851", "TC1853A"]),
+                                                    st.booleans()), st.booleans()),
+        st.tuples(st.just("lost"), st.just({}), st.just(False)),
+        st.tuples(st.just("time"), st.just({}), st.just(False)),
+    ),
+    max_size=30,
+)  # fmt: skip
+
+
+@given(REPORTS, st.floats(0.1, 5.0))
+def test_the_gate_never_lets_a_train_on_while_its_entry_is_not_reported_clear(
+    reports: list[tuple[str, dict[str, bool], bool]], at_s: float
+) -> None:
+    """Whatever the rails report, in whatever order (a connection lost, changes before a full
+    report): the train comes on only when it is due and every track circuit of its entry is
+    known clear, as soon as it is asked then; it says it waits at most once, before it enters."""
+    start = ENTRY.to_m - 50.0
+    cfg = TrainConfig(train_id="9", params=TrainParams(length=200.0), start=start, mode="ktcs")
+    gate = EntryGate(TrainEndpoint(cfg, train_line(LINE), first=at_s), at_s, ("TC1851",))
+    known: dict[str, bool] | None = None  # the model: what the rails said, since the last full
+    now = 0.0
+    for what, occupancy, full in reports:
+        if what == "rails":
+            gate.rails(occupancy, full)
+            known = dict(occupancy) if full else (None if known is None else known | occupancy)
+        elif what == "lost":
+            gate.rails_lost()
+            known = None
+        else:
+            now += 1.0
+            was = gate.entered
+            clear = known is not None and known.get("TC1851") is False
+            gate.handle_timer(now)
+            if not was:
+                assert gate.entered == (now >= at_s and clear), (now, known)
+    texts = [e.text for e in gate.take_events()]
+    assert texts in ([], ["entered"], ["waiting for TC1851 clear to enter"],
+                     ["waiting for TC1851 clear to enter", "entered"]), texts  # fmt: skip
