@@ -120,3 +120,22 @@ def test_a_lasting_violation_is_reported_once_when_it_appears() -> None:
     assert len(shared) == 1 and shared[0].where == "TC1855", heard
     assert all(abs(at - v.time) < 1e-6 for at, v in heard), heard  # heard when it was found
     assert lab.watch is not None and lab.watch.reported == [v for _, v in heard]
+
+
+def test_a_trailed_point_in_the_rails_log_is_a_violation_as_soon_as_it_is_logged() -> None:
+    """The hook for the rails that move trains by the blades (SPEC §6.7): whatever logs it, the
+    track-circuit emulator's `trailed point ST P` is a violation of invariant 3 at that moment,
+    read from its log."""
+    heard: list[Violation] = []
+    lab = InProcessLab("reference", invariants=True, on_violation=heard.append)
+
+    async def main(lab: InProcessLab) -> float:
+        await lab.sleep(5.0)
+        lab.objects["tc"].note("point", "trailed point 20 32")
+        at = lab.now()
+        await lab.sleep(5.0)
+        return at
+
+    at = lab.run(main)
+    assert [(v.invariant, v.kind, v.where) for v in heard] == [(3, "trailed_point", "20/32")], heard
+    assert heard[0].time == at and "trailed point 20 32" in heard[0].text
