@@ -31,10 +31,13 @@ from ktcs_bench.lab.inprocess import InProcessLab
 GOAL = 200.0
 
 
-def simulate(lab: str, seconds: float, out: Path, seed: int = 1) -> dict[str, Any]:
-    """Run `lab` for `seconds` of virtual time; wall and CPU time of the run (start-up included:
-    the devices' construction and their links' first synchronisation)."""
-    sim = InProcessLab(lab, seed=seed, out=out)
+def simulate(
+    lab: str, seconds: float, out: Path, seed: int = 1, invariants: bool = True
+) -> dict[str, Any]:
+    """Run `lab` for `seconds` of virtual time, the lab invariants checked throughout (as `lab
+    simulate` does; `--no-invariants`: without); wall and CPU time of the run (start-up
+    included: the devices' construction and their links' first synchronisation)."""
+    sim = InProcessLab(lab, seed=seed, out=out, invariants=invariants)
     wall, cpu = time.monotonic(), time.process_time()
     sim.run(lambda lab: lab.sleep(seconds))
     wall, cpu = time.monotonic() - wall, time.process_time() - cpu
@@ -50,16 +53,19 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=1.0, help="virtual hours (default 1)")
     ap.add_argument("--lab", default="reference")
     ap.add_argument("--profile", action="store_true", help="profile a tenth of the run first")
+    ap.add_argument("--no-invariants", dest="invariants", action="store_false",
+                    help="without the lab invariants checked throughout")  # fmt: skip
     args = ap.parse_args()
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start")
     seconds = args.hours * 3600
     with tempfile.TemporaryDirectory() as tmp:
-        r = simulate(args.lab, seconds, Path(tmp) / "run")
+        r = simulate(args.lab, seconds, Path(tmp) / "run", invariants=args.invariants)
         print(f"{args.lab}: {seconds:.0f} s of virtual time in {r['wall_s']:.1f} s wall, "
               f"{r['cpu_s']:.1f} s CPU: {seconds / r['wall_s']:.0f}x real time by the wall, "
               f"{seconds / r['cpu_s']:.0f}x by CPU (goal >= {GOAL:.0f}x)")  # fmt: skip
         print(f"  {r['frames']} frames captured on {len(InProcessLab(args.lab).links)} links, "
-              f"{r['events']} events")  # fmt: skip
+              f"{r['events']} events, {len(r['summary'].get('violations', []))} violations of "
+              f"the lab invariants" + ("" if args.invariants else " (not checked)"))  # fmt: skip
         for name, train in r["summary"]["trains"].items():
             arrivals = train.get("arrivals")
             stops = ", ".join(str(a.get("station", a)) if isinstance(a, dict) else str(a)
@@ -69,7 +75,7 @@ def main() -> None:
         if args.profile:
             profiler = cProfile.Profile()
             profiler.enable()
-            simulate(args.lab, seconds / 10, Path(tmp) / "profiled")
+            simulate(args.lab, seconds / 10, Path(tmp) / "profiled", invariants=args.invariants)
             profiler.disable()
             text = io.StringIO()
             pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(15)

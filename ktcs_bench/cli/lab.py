@@ -8,7 +8,8 @@ import asyncio
 import json
 import signal
 import sys
-from typing import Any
+from functools import partial
+from typing import TYPE_CHECKING, Any
 
 from ktcs_bench import kinds
 from ktcs_bench.cli._common import duration, positive
@@ -17,7 +18,18 @@ from ktcs_bench.lab.topology import load_lab, resolve_lab_path
 from ktcs_bench.timed.vloop import MAX_SPEED
 from ktcs_bench.transport import jsonlines
 
-EPILOG = """\
+if TYPE_CHECKING:
+    from ktcs_bench.lab.invariants import Violation
+
+SIMULATE_EXITS = """\
+`lab simulate` runs the lab invariants throughout (SPEC §11: no two trains in one track circuit,
+no train past a danger point, no point moving under a train or a locked route, no point trailed,
+no derailment): each violation is one line on stderr as it is found and one entry of
+`violations` in summary.json. Exit 0: the run ended and broke no invariant; 1: it ran and found
+violations; 2: usage; 3: a device crashed or the lab stalled; 130/143: interrupted.
+"""
+
+EPILOG = f"""\
 examples:
   ktcs-bench lab up                      # the shipped reference lab (stations 18, 20, 22)
   ktcs-bench lab up my-lab.yaml --for 60 # a lab of your own, stop after 60 s
@@ -30,7 +42,8 @@ examples:
 Ctrl-C (or SIGTERM) stops `lab up` and `lab simulate`: exit 130 (143 on SIGTERM); a simulation
 writes its events, captures and summary up to that moment. `lab down`, or `--for` running out,
 ends `lab up` with exit 0.
-"""
+
+{SIMULATE_EXITS}"""
 
 
 def _speed(text: str) -> float:
@@ -74,7 +87,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "from deadline to deadline: the same device objects, Type I links paced at the line rate "
         "on virtual wires, Type II on memory streams, the taps between. Writes OUT/events.jsonl "
         "(every device's events, virtual timestamps), OUT/captures/LINK.pcapng and "
-        "OUT/summary.json. Same lab, seed and duration: byte-identical events and captures.",
+        "OUT/summary.json. Same lab, seed and duration: byte-identical events and captures. "
+        "The lab invariants are checked throughout: each violation is printed on stderr as it "
+        "is found and listed in the summary (`violations`); exit 1 when there were any.",
+        epilog=SIMULATE_EXITS, formatter_class=argparse.RawDescriptionHelpFormatter,
     )  # fmt: skip
     sim.add_argument("lab", nargs="?", help="lab file or shipped lab name (default: reference)")
     sim.add_argument("--for", dest="duration", type=duration,
@@ -84,7 +100,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                      "--replay)")  # fmt: skip
     sim.add_argument("--replay", metavar="FILE",
                      help="run a safety-search failure again (docs/system_safety.md): the file's "
-                     "lab, seed and steps, with the search's checks; exit 1 on a violation")  # fmt: skip
+                     "lab, seed and steps, with the search's checks and the lab invariants "
+                     "throughout; exit 1 on a violation")  # fmt: skip
     sim.add_argument("--json", action="store_true", help="print the summary as JSON")
     for name, text in (("down", "stop a running lab"), ("status", "show a running lab's status"),
                        ("map", "show a running lab's link map")):  # fmt: skip
@@ -254,7 +271,8 @@ def _simulate(args: argparse.Namespace) -> int:
         raise UsageError("lab simulate: give --for DURATION and --out DIR (or --replay FILE)")
     watched = sys.stderr.isatty()
     with _Stop() as stop:  # Ctrl-C and SIGTERM end the run at once, and what ran is written
-        lab = InProcessLab(args.lab, seed=args.seed, out=Path(args.out))
+        lab = InProcessLab(args.lab, seed=args.seed, out=Path(args.out), invariants=True,
+                           on_violation=partial(_violation, watched))  # fmt: skip
 
         def progress() -> None:
             s = lab.summary()
@@ -286,17 +304,36 @@ def _simulate(args: argparse.Namespace) -> int:
         print(json.dumps(summary))
     else:
         print(f"lab {summary['lab']}: {summary['virtual_s']:g} s of virtual time in "
-              f"{summary['wall_s']:g} s ({summary['speed_up']}x real time); "
+              f"{summary['wall_s']:g} s ({summary['speed_up']}x real time), "
+              f"{len(summary['violations'])} violation(s) of the lab invariants; "
               f"{args.out}/events.jsonl, {args.out}/captures/, {args.out}/summary.json")  # fmt: skip
         for name, train in summary["trains"].items():
             print(f"  {name}: {json.dumps(train)}")
     for name, why in summary["crashed"].items():
         print(f"!! {name} crashed: {why}", file=sys.stderr)
+    violations = summary["violations"]
+    if violations:
+        print(f"!! {len(violations)} violation(s) of the lab invariants (summary.json: "
+              f"violations)", file=sys.stderr)  # fmt: skip
     if stop.signum is not None:
         print(f"interrupted ({lab.interrupted}) after {summary['virtual_s']:g} s of virtual time; "
               f"events, captures and summary are written up to there", file=sys.stderr)  # fmt: skip
         return 128 + stop.signum
-    return 3 if summary["crashed"] else 0
+    if summary["crashed"]:
+        return 3
+    return VIOLATIONS if violations else 0
+
+
+VIOLATIONS = 1
+"""`lab simulate`'s exit status when the run broke a lab invariant: "a check failed" (README)."""
+
+
+def _violation(watched: bool, v: Violation) -> None:
+    """One violation, one line on stderr as it is found (past the progress line, on a terminal)."""
+    print(f"{CLEAR_LINE if watched else ''}!! violation: {v}", file=sys.stderr, flush=True)
+
+
+CLEAR_LINE = "\r\x1b[K"
 
 
 class _Stop:
@@ -348,7 +385,8 @@ def _replay(args: argparse.Namespace) -> int:
 
     replay = load_replay(Path(args.replay))
     lab = InProcessLab(args.lab or replay.lab, seed=replay.seed,
-                       out=Path(args.out) if args.out else None)  # fmt: skip
+                       out=Path(args.out) if args.out else None, invariants=True,
+                       on_violation=partial(_violation, False))  # fmt: skip
     line = lab.topology.load_line()
     runs = lab.run(lambda access: replay_steps(access, replay, line))
     found = 0
@@ -358,7 +396,7 @@ def _replay(args: argparse.Namespace) -> int:
             print(f"step {index} {json.dumps(dict(run.step))}: {v}")
     print(f"replay {args.replay}: lab {lab.topology.name}, seed {replay.seed}, {len(runs)} steps, "
           f"{found} violation(s)")  # fmt: skip
-    return 1 if found else 0
+    return VIOLATIONS if found or lab.violations() else 0
 
 
 def _up_in_process(args: argparse.Namespace) -> int:

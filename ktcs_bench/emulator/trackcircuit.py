@@ -25,9 +25,10 @@ from ktcs_bench.messages import (
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport import jsonlines, net
 
-OCCUPANCY_ROLES = (*(k.name for k in kinds.KINDS.values() if k.rails and k.station), "observer")
+OCCUPANCY_ROLES = (*(k.name for k in kinds.KINDS.values() if k.rails and k.station), "observer",
+                   kinds.TRAIN)  # fmt: skip
 """Who on the rails is told the occupancy: the station devices on them (the ATC, the trackside),
-and observers."""
+observers, and trains (a timetable train comes onto the line only once its entry is clear)."""
 
 
 class TrackCircuitDevice(Device):

@@ -20,7 +20,9 @@ A train of the lab's timetable (`train: ID` with a lab-level `timetable:`) runs 
 (`timetable_run`): its train data, its platform stops for the ATO (with precision-stop markers
 before each mark), the station track it uses at each, and when it comes onto the line -- at
 `enters.at_s` of its own time (0 at its start), 50 m short of the far end of its entry track
-circuit, or standing at its first stop. Until then it is not on the rails. Its status carries
+circuit, or standing at its first stop -- and only once the track circuits its body takes there
+are clear as the rails report them (`train.entry.EntryGate`: it logs `waiting for TC1851 clear to
+enter` once, then `entered`). Until then it is not on the rails. Its status carries
 what it is doing (`state`), its arrivals (stop error on the true position) and departures.
 """
 
@@ -63,6 +65,7 @@ from ktcs_bench.train.endpoint import (
     TrainConfig,
     TrainEndpoint,
 )
+from ktcs_bench.train.entry import EntryGate, body_track_circuits
 from ktcs_bench.train.frame import Frame
 from ktcs_bench.train.speed_distance import endpoint_speed_distance
 from ktcs_bench.train.units import kmh
@@ -108,6 +111,15 @@ class TimetableRun:
     """(from_m, to_m, track): the station track it uses where its stations' tracks lie."""
     frame: Frame
     """The line as it runs it (its direction): `config`, `line` and the stops are in it."""
+    entry_tcs: tuple[str, ...] = ()
+    """The track circuits its body takes where it comes onto the line: clear before it does."""
+
+
+def track_at(tracks: tuple[tuple[float, float, str], ...], head: float, tail: float) -> str | None:
+    """The station track a train is on: where its head is, else where its tail is (None: on
+    the plain line, every track)."""
+    track = next((t for lo, hi, t in tracks if lo <= head < hi), None)
+    return track or next((t for lo, hi, t in tracks if lo < tail < hi), None)
 
 
 def timetable_run(train: TimetableTrain, line: Line, brake_build_up: float) -> TimetableRun:
@@ -147,7 +159,13 @@ def timetable_run(train: TimetableTrain, line: Line, brake_build_up: float) -> T
         driver_speed=params.max_speed,
         leaves_line=train.leaves_lab,
     )
-    return TimetableRun(cfg, onboard, train.enters_at_s, tuple(tracks), frame)
+    head, tail = frame.x(start), frame.x(start - params.length)
+    track = track_at(tuple(tracks), head, tail) or "1"
+    # the body's upper end and its length: the same circuits whichever way it faces
+    entry_tcs = body_track_circuits(
+        line.all_track_circuits(), max(head, tail), params.length, track
+    )
+    return TimetableRun(cfg, onboard, train.enters_at_s, tuple(tracks), frame, entry_tcs)
 
 
 def _code_fields(wire: Any) -> tuple[float, float, float] | None:
@@ -190,11 +208,14 @@ class TrainDevice(Device):
         self.endpoint = TrainEndpoint(
             config, onboard, sense=self._sense, first=first, chainage=self.frame.x
         )
+        # a timetable train's entry waits for its entry track clear (a train the lab file puts
+        # on the line stands there at once)
+        self.gate = None if run is None else EntryGate(self.endpoint, first, run.entry_tcs)
         self.tcs = {t.name: t for t in line.all_track_circuits()}
         self.code: TrackCode | None = None
         self.code_tc: str | None = None
         hello = Hello(role=kinds.TRAIN, name=name, train=config.train_id)  # its kind names its key
-        self.rails = RailsClient(rails, hello, self._from_rails)
+        self.rails = RailsClient(rails, hello, self._from_rails, on_lost=self._rails_lost)
         self.last: Any = None
         self.release = False
         self.origin: float | None = None  # the device clock's reading at the train's start
@@ -238,6 +259,10 @@ class TrainDevice(Device):
         return cls(name, line, cfg, links[kinds.RAILS], control)
 
     def _from_rails(self, obj: JsonObject) -> None:
+        occupancy = obj.get("occupancy")
+        if isinstance(occupancy, dict) and self.gate is not None and not self.gate.entered:
+            self.gate.rails({k: bool(v) for k, v in occupancy.items()}, "full" in obj)
+            self.poke()  # its entry may be clear now
         if "code" not in obj:
             return
         wire, tc = obj["code"], obj.get("tc")
@@ -255,6 +280,10 @@ class TrainDevice(Device):
         )
         self.code_tc = tc
 
+    def _rails_lost(self) -> None:
+        if self.gate is not None:
+            self.gate.rails_lost()
+
     def _code_now(self) -> TrackCode:
         if self.code is None or not self.rails.connected:
             return TrackCode.stop_here(self.endpoint.dynamics.state.position)
@@ -270,8 +299,7 @@ class TrainDevice(Device):
         out: Position = {"head": head, "tail": tail}
         if self.endpoint.left:
             return out
-        track = next((t for lo, hi, t in self.tracks if lo <= head < hi), None)
-        track = track or next((t for lo, hi, t in self.tracks if lo < tail < hi), None)
+        track = track_at(self.tracks, head, tail)
         if track is not None:
             out["track"] = track
         return out
@@ -287,6 +315,8 @@ class TrainDevice(Device):
         return CycleInputs(code=self._code_now(), release_eb=release)
 
     def _cycled(self, now: float, out: CycleOutputs | None) -> None:
+        for e in self.gate.take_events() if self.gate is not None else []:
+            self.note(e.kind, e.text)
         if out is None:
             return
         self.last = out
@@ -298,7 +328,8 @@ class TrainDevice(Device):
         if self.run_ is None:  # a train put on the line by the lab file stands there at once
             self.rails.send({"position": self._position()})
         self.origin = self.now()  # the train's own time counts from here (the timetable's 0)
-        self.drive(self.endpoint, self._cycled, origin=self.origin)
+        self.drive(self.endpoint if self.gate is None else self.gate, self._cycled,
+                   origin=self.origin)  # fmt: skip
         self.poke()
         return [asyncio.ensure_future(self.rails.run())]
 
@@ -318,6 +349,10 @@ class TrainDevice(Device):
             "held": ep.held,
             "stop_at": at(ep.commanded_stop),
             "enters_s": None if self.run_ is None else self.run_.enter_s,
+            # the track circuits it waits for clear to come onto the line
+            "waiting_for": self.gate.blocking()
+            if self.gate and self.gate.waiting and not self.gate.entered
+            else [],
             "next_stop": None if ep.next_stop is None else ep.next_stop.name,
             "arrivals": [
                 {

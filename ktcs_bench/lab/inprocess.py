@@ -16,6 +16,10 @@ and a summary. Both files are flushed about every wall second (`FLUSH_EVERY`), s
 outright leaves events and captures that end at about the same time; a run stopped early
 (`interrupted`) says so in its summary. It is a `lab.access.LabAccess`.
 
+With `invariants=True` (`lab simulate`) it runs the lab invariants throughout (`lab.safety.Watch`:
+a look after every change an IXL, a trackside or the rails log) and its summary lists every
+violation (`violations`, empty when none); `on_violation` hears each as it is found.
+
     lab = InProcessLab("reference", seed=1, out=Path("run"))
     lab.run(lambda lab: lab.sleep(3600))       # up, the coroutine, down; on a fresh loop
 """
@@ -39,7 +43,9 @@ from ktcs_bench.capture import CaptureWriter, open_writer
 from ktcs_bench.emulator.build import build_device, device_namespace
 from ktcs_bench.emulator.device import Device, Event
 from ktcs_bench.errors import UsageError
+from ktcs_bench.lab.invariants import Violation, ViolationJson
 from ktcs_bench.lab.runner import device_args, lab_command, start_in_order
+from ktcs_bench.lab.safety import Watch
 from ktcs_bench.lab.state import read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec, load_lab, resolve_lab_path
 from ktcs_bench.lab.view import LinkEntry
@@ -57,6 +63,8 @@ T = TypeVar("T")
 CLOCKS = ("virtual", "scaled")
 FLUSH_EVERY = 1.0
 """Wall seconds between flushes of events.jsonl and the captures during a run."""
+WATCHED = frozenset({kinds.IXL, kinds.TRACKSIDE, kinds.TRACKCIRCUIT})
+"""The devices whose every logged event is a change the invariants look at (`Watch.changed`)."""
 
 
 class InProcessLab:
@@ -76,6 +84,8 @@ class InProcessLab:
         speed: float = 1.0,
         console: bool = False,
         token_file: Path | None = None,
+        invariants: bool = False,
+        on_violation: Callable[[Violation], None] | None = None,
     ) -> None:
         if clock not in CLOCKS:
             raise UsageError(f"clock must be one of {', '.join(CLOCKS)}, not {clock!r}")
@@ -127,6 +137,9 @@ class InProcessLab:
         self._wall0 = 0.0
         self._wall = 0.0
         self._virtual = 0.0
+        self.invariants, self.on_violation = invariants, on_violation
+        self.watch: Watch | None = None
+        self._watching: asyncio.Task[None] | None = None
 
     # -- running it ---------------------------------------------------------------------------
     def new_loop(self) -> VirtualTimeLoop | ScaledTimeLoop:
@@ -233,8 +246,12 @@ class InProcessLab:
                 self._events = (self.out / "events.jsonl").open("w", encoding="utf-8")
             except OSError as exc:
                 raise UsageError(f"cannot write the run's output to {self.out}: {exc}") from None
+        if self.invariants:
+            self.watch = Watch(self, self.topology.load_line(), self.on_violation)
         await start_in_order(self.topology, self, self.endpoints)
         await self._trains_to_ctc()
+        if self.watch is not None:
+            self._watching = loop.create_task(self.watch.run())
         if isinstance(loop, ScaledTimeLoop):  # from here the clock should keep up (it is started)
             loop.watch_behind(self._behind)
 
@@ -399,11 +416,18 @@ class InProcessLab:
             "speed_up": round(virtual / wall, 1) if wall > 0 else None,
             "trains": trains,
             "crashed": dict(sorted(self.crashed.items())),
+            **({} if self.watch is None else {"violations": self.violations()}),
             # stopped early: by what, and at what time of the lab's clock (= virtual_s)
             "interrupted": None
             if self.interrupted is None
             else {"by": self.interrupted, "virtual_s": round(virtual, 6)},
         }
+
+    def violations(self) -> list[ViolationJson]:
+        """Every violation of the lab invariants found so far (none: not watched)."""
+        if self.watch is None:
+            return []
+        return [{**v.to_json(), "time": round(v.time, 6)} for v in self.watch.reported]
 
     # -- stop --------------------------------------------------------------------------------------
     async def down(self) -> None:
@@ -411,6 +435,12 @@ class InProcessLab:
         their start, so the rails and the CTC go last -- then the taps; write the summary."""
         if self._loop is None:
             return
+        if self._watching is not None:  # a last look at the lab as it ends
+            self._watching.cancel()
+            await asyncio.gather(self._watching, return_exceptions=True)
+        if self.watch is not None:
+            await self.watch.look()
+            self.watch.closed = True  # the devices' stopping is no change of the line's state
         self._virtual, self._wall = self.now(), time.monotonic() - self._wall0
         summary = self.summary()
         ixls = [n for n in self.objects if self.topology.devices[n].kind == kinds.IXL]
@@ -487,9 +517,13 @@ class InProcessLab:
     def _on_note(self, device: Device, event: Event) -> None:
         self._log({"t": round(event["time"], 6), "device": device.name, "kind": event["kind"],
                    "text": event["text"]})  # fmt: skip
+        if self.watch is not None and device.kind in WATCHED:
+            self.watch.changed()
 
     def _note_lab(self, name: str, kind: str, text: str) -> None:
         self._log({"t": round(self.now(), 6), "device": name, "kind": kind, "text": text})
+        if self.watch is not None:  # a fault on a link, a device restarted or stopped
+            self.watch.changed()
 
     def _task_done(self, name: str, device: Device, task: asyncio.Task[None]) -> None:
         if task.cancelled() or self.objects.get(name) is not device:

@@ -19,6 +19,10 @@ a clock or does I/O.
 4. After every fault has cleared and the line has settled: each CTC view equals its IXL's
    indications, and each IXL's occupancy equals the track circuits'.
 
+The rails say themselves when a train trails a point or derails (SPEC §6.7: events
+`trailed point ST P`, `derailed ST P` in the track-circuit emulator's log): each counts under 3
+(`rails_violation`), read from the log a snapshot carries (`LabSnapshot.rails_events`).
+
 2 and 3 need history (what the head ran onto since the last look, what held a section when a
 train entered it): `SafetyChecker` is fed snapshot after snapshot; the lab should be looked at
 often enough that a train's head crosses at most a few track-circuit boundaries in between (every
@@ -27,6 +31,7 @@ second of lab time is plenty at line speeds).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, TypedDict
@@ -104,6 +109,10 @@ class StationState:
         ]
 
 
+RailsEvent = tuple[float, str]
+"""An event of the track-circuit emulator's log that an invariant counts: (its time, its text)."""
+
+
 @dataclass(frozen=True)
 class LabSnapshot:
     time: float
@@ -111,6 +120,9 @@ class LabSnapshot:
     occupied: frozenset[str]  # as the rails report it (faults included)
     tc_faults: Mapping[str, str]
     stations: Mapping[int, StationState]
+    # the last of the rails' events that are violations (`rails_violation`), oldest first: the
+    # checker counts those the look before did not carry
+    rails_events: tuple[RailsEvent, ...] = ()
 
 
 class ViolationJson(TypedDict):
@@ -333,6 +345,33 @@ def _ran_onto(
     return []
 
 
+RAILS_VIOLATIONS = (
+    (re.compile(r"trailed point (\d+) (\S+)"), "trailed_point", "train trailed point {p} of station {st}"),
+    (re.compile(r"derailed (\d+) (\S+)"), "derailed", "train derailed at point {p} of station {st}"),
+)  # fmt: skip
+"""The rails' events that break invariant 3 (SPEC §6.7): what the text starts with (station,
+point), the kind, the sentence."""
+
+
+def rails_violation(time: float, text: str) -> Violation | None:
+    """Invariant 3, as the rails report it: a train trailed a point lying against it, or derailed
+    on a point whose blades moved or lay between positions under it (None: any other event)."""
+    for pattern, kind, sentence in RAILS_VIOLATIONS:
+        m = pattern.match(text)
+        if m is not None:
+            st, p = m.groups()
+            return Violation(3, kind, f"{st}/{p}", time, f"{sentence.format(st=st, p=p)}: {text}")
+    return None
+
+
+def rails_events(snap: LabSnapshot, prev: LabSnapshot | None) -> list[Violation]:
+    """Invariant 3 from the rails' log: each event in this look's that the last look's did not
+    carry."""
+    seen = set(prev.rails_events) if prev is not None else set()
+    found = [rails_violation(t, text) for t, text in snap.rails_events if (t, text) not in seen]
+    return [v for v in found if v is not None]
+
+
 # ---------------------------------------------------------------------------------------- 4
 
 
@@ -388,6 +427,7 @@ class SafetyChecker:
         found = train_separation(snap, self.geo)
         found += danger_points(self.last, snap, self.geo)
         found += point_safety(self.last, snap, self.geo)
+        found += rails_events(snap, self.last)
         self.last = snap
         self.looks += 1
         self.violations += found
@@ -402,15 +442,22 @@ class SafetyChecker:
 # ---------------------------------------------------------------------------------------- snapshot
 
 
+RAILS_LOG = 50
+"""How many of the track-circuit emulator's last events a snapshot reads for `rails_violation`
+(looks come far more often than that many events)."""
+
+
 async def snapshot(access: LabAccess, views: bool = True) -> LabSnapshot:
-    """What the lab's devices say now, through `LabAccess` (one status request each, and the
-    CTC's `show` per station unless `views` is False: invariants 1-3 do not need the CTC's view).
-    A device that does not answer leaves its part unknown."""
+    """What the lab's devices say now, through `LabAccess` (one status request each, the
+    track-circuit emulator's last events, and the CTC's `show` per station unless `views` is
+    False: invariants 1-3 do not need the CTC's view). A device that does not answer leaves its
+    part unknown."""
     device_kinds = access.devices
     time = access.now()
     trains: dict[str, TrainState] = {}
     occupied: set[str] = set()
     tc_faults: dict[str, str] = {}
+    logged: list[RailsEvent] = []
     ixls: dict[int, dict[str, Any]] = {}
     sides: dict[int, dict[str, Any]] = {}
     ctcs: list[str] = []
@@ -428,6 +475,7 @@ async def snapshot(access: LabAccess, views: bool = True) -> LabSnapshot:
                 trains[t] = TrainState(t, float(head), float(tail), str(track))
             occupied |= set(status.get("occupied", []))
             tc_faults.update(status.get("faults", {}))
+            logged += await _rails_log(access, name)
         elif kind == kinds.IXL:
             ixls[int(status["station"])] = status
         else:
@@ -465,7 +513,19 @@ async def snapshot(access: LabAccess, views: bool = True) -> LabSnapshot:
             ctc_view=None if view is None else dict(view.get("state", {})),
             ctc_known=bool(summary.get("known")) and bool(summary.get("synced")),
         )
-    return LabSnapshot(time, trains, frozenset(occupied), tc_faults, stations)
+    return LabSnapshot(time, trains, frozenset(occupied), tc_faults, stations, tuple(logged))
+
+
+async def _rails_log(access: LabAccess, name: str) -> list[RailsEvent]:
+    """The track-circuit emulator's last events that are violations (`rails_violation`)."""
+    answer = await _ask(access, name, msg.Events(last=RAILS_LOG))
+    out: list[RailsEvent] = []
+    for e in (answer or {}).get("events", []):
+        if isinstance(e, dict) and isinstance(e.get("text"), str):
+            time, text = float(e.get("time", 0.0)), e["text"]
+            if rails_violation(time, text) is not None:
+                out.append((time, text))
+    return out
 
 
 def _status_value(text: str) -> str:

@@ -25,8 +25,10 @@ A failure is saved as a replay file -- the lab file, the seed and the steps -- t
 
 from __future__ import annotations
 
+import asyncio
 import json
-from collections.abc import Mapping, Sequence
+import logging
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypedDict
@@ -35,8 +37,16 @@ from ktcs_bench import kinds
 from ktcs_bench import messages as msg
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.lab.access import LabAccess
-from ktcs_bench.lab.invariants import SafetyChecker, Violation, snapshot, views_agree
+from ktcs_bench.lab.invariants import (
+    SafetyChecker,
+    TrainState,
+    Violation,
+    snapshot,
+    views_agree,
+)
 from ktcs_bench.station.model import Line
+
+log = logging.getLogger("ktcs_bench.lab")
 
 LOOK_S = 1.0  # how often the lab is looked at while a step runs (lab seconds)
 SETTLE_LIMIT_S = 90.0  # how long a settled line may take to agree after its settle time
@@ -159,6 +169,110 @@ async def replay_steps(access: LabAccess, replay: Replay, line: Line) -> list[St
     checked as the search checked them."""
     await access.sleep(replay.warm_up_s)
     return await run_steps(access, SafetyChecker(line), replay.steps)
+
+
+# ------------------------------------------------------------------------------- a run, watched
+
+
+LASTING = frozenset({"shared_track_circuit", "collision", "train_rear", "point_moved_under_train",
+                     "point_moved_locked"})  # fmt: skip
+"""Violations that are states (they hold look after look until something changes), as opposed
+to moments (a head running past a danger point, onto a point, a point trailed)."""
+
+
+class Watch:
+    """Invariants 1-3 throughout a run of a lab (`lab simulate`): a look (`snapshot`, fed to a
+    `SafetyChecker`) after every change of state of an IXL, a trackside or the rails -- whoever
+    runs the lab calls `changed()` when one of them logs an event (a route locked, set, entered,
+    released; a signal; a point moving or detected; an occupancy change; a fault; a restart) --
+    so the interlocking, the blades and what the rails report stand still between two looks and
+    none of their states goes unseen. What the rails do not report (a train moving on under a
+    track circuit failed clear, or into one another train occupies) is caught by `run`: every
+    `LOOK_S` it reads the trains' positions alone and looks when a train's head or axles are in
+    other track circuits than at the last look.
+
+    A violation is reported (`on_violation`, and kept in `reported`) when it is found; one of a
+    state that lasts (`LASTING`) again only once it has gone away at a look and come back: two
+    trains standing in one track circuit are one violation, not one a look."""
+
+    def __init__(
+        self,
+        access: LabAccess,
+        line: Line,
+        on_violation: Callable[[Violation], None] | None = None,
+    ) -> None:
+        self.access = access
+        self.checker = SafetyChecker(line)
+        self.on_violation = on_violation
+        self.reported: list[Violation] = []
+        self._standing: set[tuple[int, str, str]] = set()
+        self._pending = False
+        self._where: tuple[tuple[str, tuple[str, ...], str | None], ...] | None = None
+        self._tcs = [n for n, k in access.devices.items() if k == kinds.TRACKCIRCUIT]
+        self.closed = False  # the run is over: no more looks
+
+    def changed(self) -> None:
+        """A device's state changed: one look when the loop comes round (one for every change
+        of the same moment that comes before it)."""
+        if self._pending or self.closed:
+            return
+        self._pending = True
+        asyncio.get_running_loop().call_soon(self._spawn)
+
+    def _spawn(self) -> None:
+        if self.closed:
+            return
+        task = asyncio.ensure_future(self.look())
+        task.add_done_callback(_log_failure)
+
+    async def look(self) -> list[Violation]:
+        """Look now: the new violations."""
+        self._pending = False
+        snap = await snapshot(self.access, views=False)
+        self._where = self._positions(snap.trains)
+        return self._report(self.checker.feed(snap))
+
+    async def run(self) -> None:
+        """Every LOOK_S: a look if a train's head or axles changed track circuits unreported."""
+        while True:
+            await self.access.sleep(LOOK_S)
+            trains = await self._trains()
+            if trains is not None and self._positions(trains) != self._where:
+                await self.look()
+
+    async def _trains(self) -> dict[str, TrainState] | None:
+        trains: dict[str, TrainState] = {}
+        for name in self._tcs:
+            answer = await self.access.device(name, msg.Status())
+            if not answer.get("ok"):
+                return None
+            for t, (head, tail, track) in answer["status"].get("trains", {}).items():
+                trains[t] = TrainState(t, float(head), float(tail), str(track))
+        return trains
+
+    def _positions(
+        self, trains: Mapping[str, TrainState]
+    ) -> tuple[tuple[str, tuple[str, ...], str | None], ...]:
+        geo = self.checker.geo
+        return tuple((n, tuple(geo.shunted(t)), geo.tc_at(t.head_m, t.track, t.up))
+                     for n, t in sorted(trains.items()))  # fmt: skip
+
+    def _report(self, found: list[Violation]) -> list[Violation]:
+        lasting = [v for v in found if v.kind in LASTING]
+        keys = {(v.invariant, v.kind, v.where) for v in lasting}
+        new = [v for v in found
+               if v.kind not in LASTING or (v.invariant, v.kind, v.where) not in self._standing]  # fmt: skip
+        self._standing = keys
+        for v in new:
+            self.reported.append(v)
+            if self.on_violation is not None:
+                self.on_violation(v)
+        return new
+
+
+def _log_failure(task: asyncio.Task[list[Violation]]) -> None:
+    if not task.cancelled() and task.exception() is not None:
+        log.error("a look at the lab's invariants failed: %r", task.exception())
 
 
 # ------------------------------------------------------------------------------------ replay files

@@ -6,8 +6,9 @@ train data by name (`train_data`: length, top speed, traction and brake rates --
 Table 1), and its trains. A train has an id, its data (`train`), a direction, and its stops in
 running order: station, platform track, where its front stops (`stop_m`) and how long it stands
 there (`dwell_s`). It starts standing at its first stop and leaves it at `depart_s` -- or, with
-`enters: {track_circuit, at_s}`, it comes onto the line at that track circuit, not before `at_s`,
-and runs to its first stop. It ends at its last stop unless it `leaves_lab`. Times are seconds
+`enters: {track_circuit, at_s}`, it comes onto the line at that track circuit, not before `at_s`
+and only once the track circuits it takes there are clear (`train.entry`), and runs to its first
+stop. It ends at its last stop unless it `leaves_lab`. Times are seconds
 from the start of the lab (the CTC's start).
 
 `load_timetable(path, line)` checks a file against the line it runs on and resolves, for each
