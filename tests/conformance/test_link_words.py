@@ -24,7 +24,9 @@ def test_a_peer_that_is_neither_a_role_nor_a_kind_with_one_is_refused() -> None:
     for word in ("relay", "trackcircuit"):
         r = cli("emulator", "ixl", "--station", "18", "--link", f"{word}=pty")
         assert r.returncode == 2, r.stderr
-        assert f"--link {word}=...: unknown peer (use ctc, ixl, atc, io, west, east, rails" in r.stderr
+        assert (
+            f"--link {word}=...: unknown peer (use ctc, ixl, atc, io, west, east, rails" in r.stderr
+        )
 
 
 def test_the_suite_takes_its_ixl_peer_by_kind_or_by_role() -> None:
