@@ -32,7 +32,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ktcs_bench.atc.track_codes import AtcCode, braking_speed_kmh, most_restrictive, quantise
+from ktcs_bench.atc.track_codes import (
+    AtcCode,
+    braking_decel,
+    braking_speed_kmh,
+    most_restrictive,
+    quantise,
+)
 from ktcs_bench.station.model import Direction, Interval, Line, Route, TrackCircuit
 from ktcs_bench.station_codes import names as n
 from ktcs_bench.station_codes.names import Function as F
@@ -251,27 +257,47 @@ class WaysideAtc:
         return -self.line.highest_gradient_between(t.from_m, t.to_m)
 
     def _code(self, t: TrackCircuit, path: _Path) -> AtcCode:
-        distance = t.length_m  # from this track circuit's entry to the stop point
-        next_limit: float | None = None
-        stop_at_exit = True
-        for i, name in enumerate(path.ahead):
-            nxt = self.tc[name]
+        """The code of `t`: the speed at its exit from the graded steps to the stop point.
+
+        Backwards from the stop (0 at the exit of the last free track circuit), each free track
+        circuit's entry speed is what braking over it allows down to its exit speed
+        (`braking_speed_kmh` on `braking_decel` of the most adverse gradient from `t` to the
+        stop, after the line's brake build-up time), no more than its own limit and the next
+        one's, quantised to the code table: so the speed at `t`'s exit is one from which every
+        code step ahead can be braked for, and never more than the code each circuit ahead gets
+        itself (its own steps see the same or a milder gradient)."""
+        free: list[TrackCircuit] = []
+        for name in path.ahead:
             if self._occ(name):
                 break
-            if i == 0:  # the speed at this circuit's exit is the next one's limit at most
-                next_limit = self._limit(nxt, self._route_limit(name))
-                stop_at_exit = False
-            distance += nxt.length_m
-        beyond_exit = distance - t.length_m
-        allowed = self._limit(t, path.limit_kmh)
-        if stop_at_exit:
-            allowed = 0.0
-        else:
-            if next_limit is not None:
-                allowed = min(allowed, next_limit)
-            allowed = min(allowed, braking_speed_kmh(beyond_exit, self.line.service_brake_mps2))
-        code, kmh = quantise(self.line, allowed)
-        return AtcCode(code, kmh, self._gradient(t, path.direction), distance)
+            free.append(self.tc[name])
+        distance = t.length_m + sum(x.length_m for x in free)  # from t's entry to the stop
+        gradient = self._gradient(t, path.direction)
+        if not free:  # the stop is at this circuit's exit
+            code, kmh = quantise(self.line, 0.0)
+            return AtcCode(code, kmh, gradient, distance)
+        adverse = min([gradient, *(self._gradient(x, path.direction) for x in free)])
+        decel = braking_decel(self.line, adverse)
+        build_up = self.line.brake_build_up_s
+        limits = [self._limit(t, path.limit_kmh), *(self._limit_over(x.name) for x in free)]
+        exit_kmh = 0.0  # at the exit of the last free circuit: the stop
+        for i in range(len(free) - 1, -1, -1):  # free[i]'s entry = the exit of the one before
+            entry = braking_speed_kmh(free[i].length_m, decel, build_up, exit_kmh)
+            exit_kmh = quantise(self.line, min(limits[i], limits[i + 1], entry))[1]
+        code, kmh = quantise(self.line, exit_kmh)
+        return AtcCode(code, kmh, gradient, distance)
+
+    def _limit_over(self, tc: str) -> float:
+        """The lowest limit over track circuit `tc` as its own code takes it: the line's, a set
+        route's over it, the route that last held it (so a step graded to it is never above the
+        code it gets itself)."""
+        limit = self._limit(self.tc[tc], self._route_limit(tc))
+        last = self.tc_route.get(tc)
+        if last is not None:
+            held = self.view.station.route(last).speed_limit_kmh
+            if held is not None:
+                limit = min(limit, held)
+        return limit
 
     # ------------------------------------------------------------------ outputs
 
