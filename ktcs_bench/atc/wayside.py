@@ -83,6 +83,14 @@ class WaysideAtc:
         self.codes = StationCodes(self.view)
         self._inputs = self.codes.names("ixl_to_atc")
         self._routes = self.view.station.routes
+        # for grading the code steps, fixed with the line: each circuit's gradient in a running
+        # direction, line limit, and the routes with a speed limit of their own over it
+        self._slopes: dict[tuple[str, Direction], float] = {}
+        self._line_limits: dict[str, float] = {}
+        self._limited: dict[str, list[Route]] = {}
+        for r in self._routes:
+            for name in r.track_circuits if r.speed_limit_kmh is not None else ():
+                self._limited.setdefault(name, []).append(r)
         self.log: list[AtcEvent] = []
         self._events: list[AtcEvent] = []
         self._sent = self.full_state()
@@ -242,8 +250,8 @@ class WaysideAtc:
         speed), None when no set route over it has one."""
         limits = [
             r.speed_limit_kmh
-            for r in self._routes
-            if r.speed_limit_kmh is not None and tc in r.track_circuits and self._set(r)
+            for r in self._limited.get(tc, ())
+            if r.speed_limit_kmh is not None and self._set(r)
         ]
         return min(limits, default=None)
 
@@ -272,11 +280,11 @@ class WaysideAtc:
                 break
             free.append(self.tc[name])
         distance = t.length_m + sum(x.length_m for x in free)  # from t's entry to the stop
-        gradient = self._gradient(t, path.direction)
+        gradient = self._slope(t, path.direction)
         if not free:  # the stop is at this circuit's exit
             code, kmh = quantise(self.line, 0.0)
             return AtcCode(code, kmh, gradient, distance)
-        adverse = min([gradient, *(self._gradient(x, path.direction) for x in free)])
+        adverse = min([gradient, *(self._slope(x, path.direction) for x in free)])
         decel = braking_decel(self.line, adverse)
         build_up = self.line.brake_build_up_s
         limits = [self._limit(t, path.limit_kmh), *(self._limit_over(x.name) for x in free)]
@@ -287,11 +295,25 @@ class WaysideAtc:
         code, kmh = quantise(self.line, exit_kmh)
         return AtcCode(code, kmh, gradient, distance)
 
+    def _slope(self, t: TrackCircuit, direction: Direction) -> float:
+        """`_gradient`, kept: the line does not change."""
+        key = (t.name, direction)
+        g = self._slopes.get(key)
+        if g is None:
+            g = self._slopes[key] = self._gradient(t, direction)
+        return g
+
     def _limit_over(self, tc: str) -> float:
         """The lowest limit over track circuit `tc` as its own code takes it: the line's, a set
         route's over it, the route that last held it (so a step graded to it is never above the
         code it gets itself)."""
-        limit = self._limit(self.tc[tc], self._route_limit(tc))
+        limit = self._line_limits.get(tc)
+        if limit is None:
+            t = self.tc[tc]
+            limit = self._line_limits[tc] = self.line.speed_limit_between(t.from_m, t.to_m)
+        route = self._route_limit(tc)
+        if route is not None:
+            limit = min(limit, route)
         last = self.tc_route.get(tc)
         if last is not None:
             held = self.view.station.route(last).speed_limit_kmh
