@@ -6,16 +6,18 @@ codes the real `WaysideAtc` gives lead an ATO train from a stand to a stand shor
 point without its supervision ever reaching intervention: no service-brake intervention, no
 emergency brake.
 
-The train is the lab's (seed 001 Table 1 brakes, its length and top speed drawn, its brake
-build-up up to the line's `brake_build_up_s`), a `TrainEndpoint` on the virtual clock reading
-the code of the circuit under its head; the plant runs on the line's true gradients. A down
-train runs in a frame where its direction rises (chainage mirrored, gradients negated), as the
-endpoint runs on rising chainage.
+The train is any the line's codes allow for: a service brake from the weakest whose ATO still
+plans the line's `service_brake_mps2` on the level (`PLAN_SHARE` of it) to the lab's seed 001
+Table 1 train's 3 km/h/s, an emergency brake no weaker, its length and top speed drawn, its
+brake build-up up to the line's `brake_build_up_s`. It is a `TrainEndpoint` on the virtual clock
+reading the code of the circuit under its head; the plant runs on the line's true gradients. A
+down train runs in a frame where its direction rises (chainage mirrored, gradients negated), as
+the endpoint runs on rising chainage.
 
-On the wayside's old rule (every code sized for its distance at the line's 0.5 m/s² on the
-level, whatever the gradient, with no build-up and only the next circuit's limit) this fails:
-e.g. a down train on TC2047 → TC2043 with steep limits two circuits ahead met a code step it could
-not brake for.
+On the wayside's old rule (every code sized for its own distance at 0.5 m/s² on the level,
+whatever the gradient, with no build-up and only the next circuit's limit) the train met code
+steps it could not brake for: `OLD_RULE_FAILURES`, found by this strategy run longer (and run
+here every time).
 """
 
 from __future__ import annotations
@@ -235,16 +237,17 @@ def drive(case: Case) -> tuple[TrainEndpoint, list[str], float, float]:
 
 
 OLD_RULE_FAILURES = (
-    # −20 ‰, down: 110 → 90 → 65 km/h at the exits of 541 m and 111 m circuits (65 ← 90 in 111 m
-    # asks 1.35 m/s²): past the SBI at 101 km/h
+    # −20 ‰, down: 110 → 90 km/h over the 111 m of TC2243 (1.39 m/s²): past the SBI at 101 km/h
     Case("2022", ((0.0, 13300.0, -20.0),), ((7000.0, 12000.0, 110.0),),
          (7000.0, 8077, 8464, 9005, 9116, 10843, 12000.0), "down", 5, 0, 100.0, 110.0, 0.51,
          2.5, 3.5),
-    # level, the weakest brakes: 80 → 65 → 45 → 0 over 177, 104 and 322 m: past the SBI at 50 km/h
+    # level, the weakest brakes: 80 → 65 → 45 → 0 over 177, 104 and 322 m (65 → 45 in 104 m asks
+    # 0.82 m/s²): past the SBI at 50 km/h
     Case("2022", ((0.0, 13300.0, 0.0),), ((7000.0, 12000.0, 110.0),),
          (7000.0, 7422, 7599, 7703, 8025, 8793, 12000.0), "up", 4, 0, 100.0, 110.0, 0.36,
          2.25, 2.25),
-    # level: 110 → 80 over 262 m, the 80 km/h limit two circuits ahead: past the SBI at 107 km/h
+    # level: 110 → 80 over the 262 m of TC1863 (0.84 m/s²), for the 80 km/h limit two circuits
+    # ahead of TC1861A: past the SBI at 107 km/h
     Case("1820", ((0.0, 13300.0, 0.0),),
          ((1200.0, 3674, 110.0), (3674, 4376, 110.0), (4376, 5022, 80.0), (5022, 6000.0, 110.0)),
          (1200.0, 3509, 3771, 4893, 5705, 5845, 6000.0), "up", 4, 0, 200.0, 110.0, 0.87,
