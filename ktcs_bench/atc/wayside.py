@@ -272,8 +272,9 @@ class WaysideAtc:
         (`braking_speed_kmh` on `braking_decel` of the most adverse gradient from `t` to the
         stop, after the line's brake build-up time), no more than its own limit and the next
         one's, quantised to the code table: so the speed at `t`'s exit is one from which every
-        code step ahead can be braked for, and never more than the code each circuit ahead gets
-        itself (its own steps see the same or a milder gradient)."""
+        code step ahead can be braked for. The steps it counts on are never above the codes the
+        circuits ahead get themselves: their own grading sees the same limits and the same or a
+        milder gradient."""
         free: list[TrackCircuit] = []
         for name in path.ahead:
             if self._occ(name):

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import shutil
+from pathlib import Path
 
 import pytest
 from hypothesis import example, given, settings
@@ -32,7 +34,9 @@ from hypothesis import strategies as st
 from ktcs_bench.atc import WaysideAtc
 from ktcs_bench.atc.track_codes import AtcCode, braking_speed_kmh
 from ktcs_bench.emulator.train import train_line
+from ktcs_bench.errors import ConfigError
 from ktcs_bench.station import load_line
+from ktcs_bench.station.loader import default_line_path
 from ktcs_bench.station.model import Direction, Gradient, Line, SpeedLimit
 from ktcs_bench.station_codes import names as n
 from ktcs_bench.timed.virtual import VirtualClock
@@ -295,3 +299,25 @@ def test_the_gradient_in_the_running_direction_grades_the_code() -> None:
     assert braking_speed_kmh(800.0, 0.5, 1.0) < braking_speed_kmh(800.0, 0.5)
     assert braking_speed_kmh(10.0, 0.5, 1.0, exit_kmh=45.0) == 45.0  # no braking needed
     assert braking_speed_kmh(800.0, -0.1, 1.0, exit_kmh=30.0) == 30.0  # no braking to be had
+
+
+def test_the_lines_braking_fields_default_and_a_negative_build_up_is_refused(
+    tmp_path: Path,
+) -> None:
+    """`atc.brake_build_up_s` is read from the line file (1 s when absent); a negative one is a
+    `ConfigError` naming it."""
+    src = default_line_path().parent.parent
+    shutil.copytree(src / "lines", tmp_path / "lines")
+    shutil.copytree(src / "stations", tmp_path / "stations")
+    path = tmp_path / "lines" / "reference.yaml"
+    text = path.read_text(encoding="utf-8")
+    assert "  brake_build_up_s: 1.0\n" in text and LINE.brake_build_up_s == 1.0
+    path.write_text(text.replace("  brake_build_up_s: 1.0\n", "  brake_build_up_s: 2.5\n"))
+    assert load_line(path).brake_build_up_s == 2.5
+    path.write_text(text.replace("  brake_build_up_s: 1.0\n", ""))
+    assert load_line(path).brake_build_up_s == 1.0
+    path.write_text(text.replace("  brake_build_up_s: 1.0\n", "  brake_build_up_s: -1\n"))
+    with pytest.raises(ConfigError) as err:
+        load_line(path)
+    assert err.value.place == "atc.brake_build_up_s"
+    assert err.value.problem.startswith("must not be negative")
