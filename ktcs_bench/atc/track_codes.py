@@ -3,6 +3,12 @@
 A code is a speed code from the line's table with its target speed, the gradient under the
 track circuit (‰, in the direction of travel, the lowest — most adverse for braking — over it),
 and the target distance: metres from the track circuit's entry end to the next stop point.
+
+The code steps are graded (`braking_decel`, `braking_speed_kmh`): a code's speed is one from which
+a train brakes down to the next circuit's code over that circuit, on the line's service rate
+corrected for the most adverse gradient to the stop point in its running direction, after running
+on for the line's brake build-up time -- so that the step a train meets at each circuit's entry is
+one its ATP's curves on that gradient let it brake for.
 """
 
 from __future__ import annotations
@@ -11,6 +17,7 @@ import math
 from dataclasses import dataclass
 
 from ktcs_bench.station.model import Line
+from ktcs_bench.train.deceleration import RotatingMass, gradient_acceleration
 
 
 @dataclass(frozen=True, slots=True)
@@ -36,6 +43,25 @@ def quantise(line: Line, kmh: float) -> tuple[int, float]:
     return best.code, best.kmh
 
 
-def braking_speed_kmh(distance_m: float, decel_mps2: float) -> float:
-    """The speed from which a train stops within `distance_m` at `decel_mps2`."""
-    return math.sqrt(2.0 * decel_mps2 * max(distance_m, 0.0)) * 3.6
+def braking_decel(line: Line, gradient_permille: float) -> float:
+    """The deceleration the codes are graded with over a stretch whose most adverse gradient is
+    `gradient_permille` (running direction, rising positive), m/s²: the line's service rate plus
+    what the gradient adds, g·grad/(1000 + 10·M_R) with the rotating-mass allowance the onboard
+    ATP takes (`RotatingMass`: the least on a descent, the most on a rise). 0 or less: no
+    braking to grade with."""
+    return line.service_brake_mps2 + gradient_acceleration(gradient_permille, RotatingMass())
+
+
+def braking_speed_kmh(
+    distance_m: float, decel_mps2: float, build_up_s: float = 0.0, exit_kmh: float = 0.0
+) -> float:
+    """The highest speed (km/h) from which a train running on for `build_up_s` before braking
+    at `decel_mps2` is down to `exit_kmh` within `distance_m`: v·T + (v² − w²)/(2a) = d. A train
+    already at `exit_kmh` need not brake, and one that cannot brake (a ≤ 0) may not be faster."""
+    w = exit_kmh / 3.6
+    if decel_mps2 <= 0.0:
+        return exit_kmh
+    a, d = decel_mps2, max(distance_m, 0.0)
+    at = a * build_up_s
+    v = -at + math.sqrt(at * at + w * w + 2.0 * a * d)
+    return max(v, w) * 3.6

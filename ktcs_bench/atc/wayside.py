@@ -32,7 +32,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ktcs_bench.atc.track_codes import AtcCode, braking_speed_kmh, most_restrictive, quantise
+from ktcs_bench.atc.track_codes import (
+    AtcCode,
+    braking_decel,
+    braking_speed_kmh,
+    most_restrictive,
+    quantise,
+)
 from ktcs_bench.station.model import Direction, Interval, Line, Route, TrackCircuit
 from ktcs_bench.station_codes import names as n
 from ktcs_bench.station_codes.names import Function as F
@@ -77,6 +83,14 @@ class WaysideAtc:
         self.codes = StationCodes(self.view)
         self._inputs = self.codes.names("ixl_to_atc")
         self._routes = self.view.station.routes
+        # for grading the code steps, fixed with the line: each circuit's gradient in a running
+        # direction, line limit, and the routes with a speed limit of their own over it
+        self._slopes: dict[tuple[str, Direction], float] = {}
+        self._line_limits: dict[str, float] = {}
+        self._limited: dict[str, list[Route]] = {}
+        for r in self._routes:
+            for name in r.track_circuits if r.speed_limit_kmh is not None else ():
+                self._limited.setdefault(name, []).append(r)
         self.log: list[AtcEvent] = []
         self._events: list[AtcEvent] = []
         self._sent = self.full_state()
@@ -236,8 +250,8 @@ class WaysideAtc:
         speed), None when no set route over it has one."""
         limits = [
             r.speed_limit_kmh
-            for r in self._routes
-            if r.speed_limit_kmh is not None and tc in r.track_circuits and self._set(r)
+            for r in self._limited.get(tc, ())
+            if r.speed_limit_kmh is not None and self._set(r)
         ]
         return min(limits, default=None)
 
@@ -251,27 +265,62 @@ class WaysideAtc:
         return -self.line.highest_gradient_between(t.from_m, t.to_m)
 
     def _code(self, t: TrackCircuit, path: _Path) -> AtcCode:
-        distance = t.length_m  # from this track circuit's entry to the stop point
-        next_limit: float | None = None
-        stop_at_exit = True
-        for i, name in enumerate(path.ahead):
-            nxt = self.tc[name]
+        """The code of `t`: the speed at its exit from the graded steps to the stop point.
+
+        Backwards from the stop (0 at the exit of the last free track circuit), each free track
+        circuit's entry speed is what braking over it allows down to its exit speed
+        (`braking_speed_kmh` on `braking_decel` of the most adverse gradient from `t` to the
+        stop, after the line's brake build-up time), no more than its own limit and the next
+        one's, quantised to the code table: so the speed at `t`'s exit is one from which every
+        code step ahead can be braked for. The steps it counts on are never above the codes the
+        circuits ahead get themselves: their own grading sees the same limits and the same or a
+        milder gradient."""
+        free: list[TrackCircuit] = []
+        for name in path.ahead:
             if self._occ(name):
                 break
-            if i == 0:  # the speed at this circuit's exit is the next one's limit at most
-                next_limit = self._limit(nxt, self._route_limit(name))
-                stop_at_exit = False
-            distance += nxt.length_m
-        beyond_exit = distance - t.length_m
-        allowed = self._limit(t, path.limit_kmh)
-        if stop_at_exit:
-            allowed = 0.0
-        else:
-            if next_limit is not None:
-                allowed = min(allowed, next_limit)
-            allowed = min(allowed, braking_speed_kmh(beyond_exit, self.line.service_brake_mps2))
-        code, kmh = quantise(self.line, allowed)
-        return AtcCode(code, kmh, self._gradient(t, path.direction), distance)
+            free.append(self.tc[name])
+        distance = t.length_m + sum(x.length_m for x in free)  # from t's entry to the stop
+        gradient = self._slope(t, path.direction)
+        if not free:  # the stop is at this circuit's exit
+            code, kmh = quantise(self.line, 0.0)
+            return AtcCode(code, kmh, gradient, distance)
+        adverse = min([gradient, *(self._slope(x, path.direction) for x in free)])
+        decel = braking_decel(self.line, adverse)
+        build_up = self.line.brake_build_up_s
+        limits = [self._limit(t, path.limit_kmh), *(self._limit_over(x.name) for x in free)]
+        exit_kmh = 0.0  # at the exit of the last free circuit: the stop
+        for i in range(len(free) - 1, -1, -1):  # free[i]'s entry = the exit of the one before
+            entry = braking_speed_kmh(free[i].length_m, decel, build_up, exit_kmh)
+            exit_kmh = quantise(self.line, min(limits[i], limits[i + 1], entry))[1]
+        code, kmh = quantise(self.line, exit_kmh)
+        return AtcCode(code, kmh, gradient, distance)
+
+    def _slope(self, t: TrackCircuit, direction: Direction) -> float:
+        """`_gradient`, kept: the line does not change."""
+        key = (t.name, direction)
+        g = self._slopes.get(key)
+        if g is None:
+            g = self._slopes[key] = self._gradient(t, direction)
+        return g
+
+    def _limit_over(self, tc: str) -> float:
+        """The lowest limit over track circuit `tc` as its own code takes it: the line's, a set
+        route's over it, the route that last held it (so a step graded to it is never above the
+        code it gets itself)."""
+        limit = self._line_limits.get(tc)
+        if limit is None:
+            t = self.tc[tc]
+            limit = self._line_limits[tc] = self.line.speed_limit_between(t.from_m, t.to_m)
+        route = self._route_limit(tc)
+        if route is not None:
+            limit = min(limit, route)
+        last = self.tc_route.get(tc)
+        if last is not None:
+            held = self.view.station.route(last).speed_limit_kmh
+            if held is not None:
+                limit = min(limit, held)
+        return limit
 
     # ------------------------------------------------------------------ outputs
 

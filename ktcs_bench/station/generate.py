@@ -354,6 +354,7 @@ def _line_text(placed: list[_Placed], reference: Line, n: int) -> str:
         "# Wayside ATC: speed code -> target speed, as on the reference line.",
         "atc:",
         f"  service_brake_mps2: {_num(reference.service_brake_mps2)}",
+        f"  brake_build_up_s: {_num(reference.brake_build_up_s)}",
         "  codes:",
     ]
     codes = sorted(reference.speed_codes, key=lambda c: c.code)

@@ -428,6 +428,7 @@ def _read_line(path: Path, read: list[tuple[Path, bytes | None]]) -> Line:
         speed_limits=tuple(limits),
         speed_codes=tuple(sorted(codes, key=lambda c: (c.kmh, c.code))),
         service_brake_mps2=raw.atc.service_brake_mps2,
+        brake_build_up_s=raw.atc.brake_build_up_s,
         tag_spacing_m=raw.tags.spacing_m,
     )
 
@@ -516,4 +517,6 @@ def _speed_codes(doc: _Doc, atc: AtcShape) -> list[SpeedCode]:
         raise doc.fail("atc.codes", "needs a stop code (kmh: 0), the most restrictive code")
     if atc.service_brake_mps2 <= 0:
         raise doc.fail("atc.service_brake_mps2", "must be positive")
+    if atc.brake_build_up_s < 0:
+        raise doc.fail("atc.brake_build_up_s", "must not be negative")
     return [SpeedCode(c.code, c.kmh) for c in atc.codes]

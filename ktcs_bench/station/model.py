@@ -193,7 +193,8 @@ class Line:
     gradients: tuple[Gradient, ...]
     speed_limits: tuple[SpeedLimit, ...]
     speed_codes: tuple[SpeedCode, ...]  # sorted by speed, lowest (most restrictive) first
-    service_brake_mps2: float = 0.5
+    service_brake_mps2: float = 0.5  # the code steps' braking rate on the level
+    brake_build_up_s: float = 1.0  # the code steps' run-on before that braking (atc.*)
     tag_spacing_m: float = 100.0
 
     def station(self, number: int) -> Station:

@@ -126,6 +126,11 @@ class SpeedCodeShape(Shape):
 class AtcShape(Shape):
     codes: tuple[SpeedCodeShape, ...]
     service_brake_mps2: float = 0.5
+    """The service deceleration on the level the code steps are graded with, m/s² (corrected
+    for the gradient ahead)."""
+    brake_build_up_s: float = 1.0
+    """How long a train runs on at its speed before that braking takes hold, s: the code steps
+    leave the distance it runs meanwhile."""
 
 
 class TagsShape(Shape):

@@ -5,8 +5,10 @@ a deceleration its service brake gives net of the code's gradient, with the brak
 that gradient, and ends its braking the margin short of the target that the SBI's lead needs.
 
 All on the virtual clock: the train endpoint stepped cycle by cycle, codes located on the line as
-the wayside ATC gives them (a speed at each circuit's exit, graded at the line's service brake
-rate, a stop at the exit of the last free circuit).
+the wayside ATC gave them before its code steps were graded with the gradient and the brake
+build-up (a speed at each circuit's exit, sized at the line's service brake rate on the level, a
+stop at the exit of the last free circuit): the ATO must cope with those too. The real wayside's
+graded codes are driven in `tests/atc/test_code_grading_property.py`.
 """
 
 from __future__ import annotations

@@ -4,9 +4,10 @@ codes allow, and says what it is doing (running, stopping, dwelling, held, finis
 
 The wayside here is a stand-in for the ATC: each track circuit's code from where the trains'
 stop points are -- the starting signal of a platform (at the exit of its track circuit) while
-it is at stop, and the end of the line -- graded as the reference ATC grades them (speed at the
-exit = what the code table allows for braking at `service_brake_mps2` to the stop point, the
-target distance counted from the circuit's entry). The real ATC and interlocking are in the lab
+it is at stop, and the end of the line -- sized as the reference ATC sized them before it graded
+its code steps with the gradient and the brake build-up (speed at the exit = what the code table
+allows for braking at `service_brake_mps2` to the stop point, the target distance counted from
+the circuit's entry). The real ATC and interlocking are in the lab
 tests; here the point is the train's logic.
 """
 
