@@ -18,6 +18,10 @@ before each mark), the station track it uses at each, and when it comes onto the
 `enters.at_s` of its own time (0 at its start), 50 m short of the far end of its entry track
 circuit, or standing at its first stop. Until then it is not on the rails. Its status carries
 what it is doing (`state`), its arrivals (stop error on the true position) and departures.
+
+The rails move it by the point blades (SPEC §6.7) and say so: derailed, it reads no code any more
+(stop here: it comes to a stand and stays); misrouted (off its booked track), it runs on the codes
+of the track it is actually on until it stands, and is held there.
 """
 
 from __future__ import annotations
@@ -184,6 +188,8 @@ class TrainDevice(Device):
         self.last: Any = None
         self.release = False
         self.origin: float | None = None  # the device clock's reading at the train's start
+        self.derailed: str | None = None  # the point ("18 31") the rails derailed it at
+        self.actual_track: str | None = None  # the track it is on, once misrouted
 
     @classmethod
     def from_args(
@@ -224,6 +230,14 @@ class TrainDevice(Device):
         return cls(name, line, cfg, links[kinds.RAILS], control)
 
     def _from_rails(self, obj: JsonObject) -> None:
+        if "derailed" in obj and self.derailed is None:
+            self.derailed = str(obj["derailed"])
+            self.note("rails", f"derailed at point {self.derailed}: stops and stays")
+        misrouted = obj.get("misrouted")
+        if isinstance(misrouted, dict) and self.actual_track is None:
+            self.actual_track = str(misrouted.get("track"))
+            self.note("rails", f"misrouted onto track {self.actual_track}: stops at its next "
+                      "stop code and stays")  # fmt: skip
         if "code" not in obj:
             return
         wire, tc = obj["code"], obj.get("tc")
@@ -240,7 +254,7 @@ class TrainDevice(Device):
         self.code_tc = tc
 
     def _code_now(self) -> TrackCode:
-        if self.code is None or not self.rails.connected:
+        if self.code is None or not self.rails.connected or self.derailed is not None:
             return TrackCode.stop_here(self.endpoint.dynamics.state.position)
         return self.code
 
@@ -264,6 +278,10 @@ class TrainDevice(Device):
     def _sense(self, now: float) -> CycleInputs:
         """The cycle's inputs: the code under the antenna, the driver's EB release (once)."""
         release, self.release = self.release, False
+        ep = self.endpoint
+        standing = ep.dynamics.state.speed <= 0.0
+        if self.actual_track is not None and standing and not ep.held and self.config.ato:
+            self.note("rails", f"misrouted: held where it stands ({ep.hold(now)})")
         return CycleInputs(code=self._code_now(), release_eb=release)
 
     def _cycled(self, now: float, out: CycleOutputs | None) -> None:
@@ -321,6 +339,8 @@ class TrainDevice(Device):
             ],  # fmt: skip
             "status": None if verdict is None else verdict.status.value,
             "emergency_brakes": ep.eb_count,
+            "derailed": self.derailed,
+            "misrouted_onto": self.actual_track,
             "target_point": None if self.last is None else self.last.target_point,
         }
 
