@@ -229,7 +229,10 @@ class TrainStep(Step):
             await ctx.access.device(tc, msg.Remove(train=self.train))
             await ctx.action_done()
             return Outcome("pass", "removed")
-        # run to `at` at `kmh`, one move per sample period of the lab's clock
+        # run to `at` at `kmh`, one move per sample period of the lab's clock; a point it
+        # trails is a fault of its trackside, cleared with the run's faults
+        lab = ctx.names.lab
+        ctx.faults.trackside.update(d.name for d in lab.devices.values() if d.kind == "trackside")
         await ctx.action_done()
         sense = 1.0 if self.at >= ghost.head else -1.0
         ghost.speed_kmh = self.kmh

@@ -1,0 +1,72 @@
+"""Trains run where the point blades lie, through the real rails (SPEC §6.7): procedures on the
+procedures' quiet lab in one process on the virtual clock -- the IXL throws point 31, the
+trackside publishes its blades on the rails, and the track-circuit emulator moves the train by
+them; a trailed point's detection is lost at the trackside until the run's faults are cleared."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from ktcs_bench.cli.main import main
+from ktcs_bench.datafiles import data_dir
+
+LAB = data_dir("emulators") / "procedures" / "labs" / "quiet.yaml"
+
+FACING = f"""
+id: facing-point-into-the-loop
+title: A train over facing point 31 lying reverse runs into the loop, not onto the main track
+setup:
+  lab: {LAB}
+  trains:
+    - {{id: T1, head: 420, length_m: 40}}
+steps:
+  - ctc: route set 18 01 12
+  - expect: ixl 18 point 31 is reverse
+    within: 20s
+  - expect: ctc 18 signal 01 is Y,YG,G
+    within: 15s
+  - train: T1 run to 800 at 36
+  - expect: ctc 18 tc TC1856 is occupied
+    within: 5s
+  - expect: ctc 18 tc TC1855 is clear
+  - expect: train T1 tc is TC1856
+  - expect: no event tc "trailed"
+"""
+
+TRAILED = f"""
+id: trailed-point-reported
+title: A down train leaving the loop over point 31 lying normal trails it
+setup:
+  lab: {LAB}
+steps:
+  - train: T2 place 800 track 2 down
+  - expect: ctc 18 tc TC1856 is occupied
+    within: 5s
+  - train: T2 run to 400 at 30
+  - expect: event tc "trailed point 18 31"
+  - expect: ixl 18 point 31 is none
+    within: 5s
+    note: the trailed point has lost its detection
+  - expect: ctc 18 tc TC1851 is occupied
+  - fault: clear
+  - expect: ixl 18 point 31 is reverse
+    within: 5s
+    note: repaired, detected where the wheels forced the blades
+"""
+
+
+@pytest.mark.parametrize("text", [FACING, TRAILED], ids=["facing", "trailed"])
+def test_a_procedure_train_runs_by_the_blades_through_the_rails(
+    tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    proc = tmp_path / "points.yaml"
+    proc.write_text(text, encoding="utf-8")
+    report = tmp_path / "report"
+    code = main(["test", "run", str(proc), "--report", str(report), "--no-colour"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    results = json.loads((report / "results.json").read_text(encoding="utf-8"))
+    assert [p["verdict"] for p in results["procedures"]] == ["pass"], out
