@@ -57,8 +57,41 @@ steps:
     note: repaired, detected where the wheels forced the blades
 """
 
+TRAINS = data_dir("emulators") / "procedures" / "labs" / "trains.yaml"
 
-@pytest.mark.parametrize("text", [FACING, TRAILED], ids=["facing", "trailed"])
+DERAILED = f"""
+id: point-moved-under-a-train
+title: A wrong-side track-circuit failure lets point 31 move under a train, which derails
+setup:
+  lab: {TRAINS}
+  restart: [train1]
+steps:
+  - ctc: route set 18 01 11
+  - train: T1 run to 620
+    note: the train (100 m) stands astride point 31
+  - expect: train T1 head > 619
+    within: 120s
+  - expect: train T1 speed is 0
+    within: 30s
+  - expect: train T1 tail < 550
+  - fault: tc TC1853A failed_clear
+    note: the point's track circuit shows clear under the train, so the route releases the point
+  - expect: ctc 18 point 31 is normal
+    within: 10s
+  - ctc: point reverse 18 31
+  - expect: event tc "derailed 18 31"
+    within: 10s
+  - expect: event train1 "derailed at point 18 31"
+  - train: T1 run to 1050
+    note: a derailed train reads no code, so it never moves again
+  - expect: train T1 speed is 0
+    holds: 20s
+"""
+
+
+@pytest.mark.parametrize(
+    "text", [FACING, TRAILED, DERAILED], ids=["facing", "trailed", "derailed"]
+)
 def test_a_procedure_train_runs_by_the_blades_through_the_rails(
     tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
