@@ -309,6 +309,7 @@ class TrainDevice(Device):
             **super().status(),
             kinds.TRAIN: self.config.train_id,
             **self._position(),
+            **({} if self.actual_track is None else {"track": self.actual_track}),  # where it is
             "time_s": round(now, 1),
             "state": ep.service_state(now) if self.on_line else "waiting",
             "held": ep.held,

@@ -88,9 +88,36 @@ steps:
     holds: 20s
 """
 
+REFERENCE = data_dir("emulators") / "labs" / "reference.yaml"
+
+MISROUTED = f"""
+id: timetable-train-misrouted
+title: A timetable train booked on the main track sent into the loop says misrouted and stays
+setup:
+  lab: {REFERENCE}
+  ars: false
+steps:
+  - ctc: route set 18 01 12
+    note: 1001 is booked on track 1 at station 18
+  - expect: event tc "misrouted"
+    within: 180s
+  - expect: event train1001 "misrouted onto track 2"
+  - expect: train 1001 speed is 0
+    within: 120s
+  - expect: train 1001 tc is TC1856
+  - ctc: route set 18 12 91
+  - expect: code TC1856 speed > 0
+    within: 15s
+  - expect: train 1001 speed is 0
+    holds: 30s
+    note: held where it stood, though its code lets it go
+"""
+
 
 @pytest.mark.parametrize(
-    "text", [FACING, TRAILED, DERAILED], ids=["facing", "trailed", "derailed"]
+    "text",
+    [FACING, TRAILED, DERAILED, MISROUTED],
+    ids=["facing", "trailed", "derailed", "misrouted"],
 )
 def test_a_procedure_train_runs_by_the_blades_through_the_rails(
     tmp_path: Path, text: str, capsys: pytest.CaptureFixture[str]
