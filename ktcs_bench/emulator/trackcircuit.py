@@ -194,9 +194,10 @@ class TrackCircuitDevice(Device):
             **super().status(),
             "occupied": sorted(k for k, v in self.model.occupancy().items() if v),
             "faults": dict(self.model.faults),
-            # head, tail and the track the head is actually on (None: the plain line)
+            # head, tail and the station track the head is actually on (on the plain line, whose
+            # track circuits carry every track: the track it was put on or booked, else "1")
             "trains": {
-                k: [t.head_m, t.tail_m, self.model.track_of(k)]
+                k: [t.head_m, t.tail_m, self.model.track_of(k) or t.track or "1"]
                 for k, t in self.model.trains.items()
             },
             "blades": {f"{st} {p}": b for (st, p), b in sorted(self.model.blades.items())},
