@@ -12,6 +12,9 @@ import pytest
 
 from ktcs_bench.cli.main import main
 from ktcs_bench.datafiles import data_dir
+from ktcs_bench.errors import ConfigError
+from ktcs_bench.procedure.model import load_procedure
+from ktcs_bench.procedure.steps import Ghost, TrainStep
 
 LAB = data_dir("emulators") / "procedures" / "labs" / "quiet.yaml"
 
@@ -130,3 +133,18 @@ def test_a_procedure_train_runs_by_the_blades_through_the_rails(
     assert code == 0, out
     results = json.loads((report / "results.json").read_text(encoding="utf-8"))
     assert [p["verdict"] for p in results["procedures"]] == ["pass"], out
+
+
+def test_a_placed_train_faces_the_way_the_step_says(tmp_path: Path) -> None:
+    head = "id: p\ntitle: t\nsetup: {lab: reference}\nsteps:\n"
+    path = tmp_path / "p.yaml"
+    path.write_text(head + "  - train: T2 place 6420 track 1 down\n  - train: T3 place 300\n")
+    down, default = load_procedure(path).steps
+    assert isinstance(down, TrainStep) and isinstance(default, TrainStep)
+    assert (down.at, down.track, down.direction) == (6420.0, "1", "down")
+    assert default.direction is None  # a new train faces up; placed again, as it faced
+    assert Ghost("T2", 6420.0, 40.0, "1", direction="down").tail == 6460.0
+    path.write_text(head + "  - train: T2 place 6420 sideways\n")
+    with pytest.raises(ConfigError) as err:
+        load_procedure(path)
+    assert err.value.place == "step 1 (train)" and "up|down" in err.value.problem
