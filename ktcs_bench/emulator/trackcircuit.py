@@ -201,4 +201,10 @@ class TrackCircuitDevice(Device):
                 for k, t in self.model.trains.items()
             },
             "blades": {f"{st} {p}": b for (st, p), b in sorted(self.model.blades.items())},
+            # the points each derailed train came off at ("18 31")
+            "derailed": {
+                k: sorted(f"{st} {p}" for st, p in path.derailed)
+                for k, path in self.model.paths.items()
+                if path.derailed
+            },
         }
