@@ -6,6 +6,7 @@ them; a trailed point's detection is lost at the trackside until the run's fault
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -15,6 +16,7 @@ from ktcs_bench.datafiles import data_dir
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.procedure.model import load_procedure
 from ktcs_bench.procedure.steps import Ghost, TrainStep
+from tests.lab.conftest import RunningLab, start_lab
 
 LAB = data_dir("emulators") / "procedures" / "labs" / "quiet.yaml"
 
@@ -45,6 +47,9 @@ title: A down train leaving the loop over point 31 lying normal trails it
 setup:
   lab: {LAB}
 steps:
+  - ctc: point normal 18 31
+  - expect: ixl 18 point 31 is normal
+    within: 10s
   - train: T2 place 800 track 2 down
   - expect: ctc 18 tc TC1856 is occupied
     within: 5s
@@ -148,3 +153,32 @@ def test_a_placed_train_faces_the_way_the_step_says(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as err:
         load_procedure(path)
     assert err.value.place == "step 1 (train)" and "up|down" in err.value.problem
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RunningLab]:
+    """The procedures' quiet lab in real processes (as `tests/procedure/test_live.py` has it):
+    the trackside processes publish their blades over TCP to the track-circuit process."""
+    tmp = tmp_path_factory.mktemp("pointslab")
+    text = LAB.read_text(encoding="utf-8")
+    line = (data_dir("emulators") / "lines" / "reference.yaml").resolve()
+    text = text.replace("lab: quiet", "lab: pointslab").replace(
+        "../../lines/reference.yaml", str(line)
+    )
+    (tmp / "pointslab.yaml").write_text(text, encoding="utf-8")
+    with start_lab(tmp, "pointslab", path=tmp / "pointslab.yaml") as running:
+        yield running
+
+
+def test_the_blades_reach_the_rails_in_a_live_lab(live: RunningLab, tmp_path: Path) -> None:
+    """Facing point 31 lying reverse sends the train into the loop, and a down train trails it
+    out of the loop, between real processes; the run's fault clear repairs the point."""
+    paths = []
+    for name, text in (("facing", FACING), ("trailed", TRAILED)):
+        paths.append(tmp_path / f"{name}.yaml")
+        paths[-1].write_text(text, encoding="utf-8")
+    done = live.cli("test", "run", "--live", "pointslab", "--no-colour", "--json",
+                    *map(str, paths), timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    verdicts = [p["verdict"] for p in json.loads(done.stdout)["procedures"]]
+    assert verdicts == ["pass", "pass"], done.stdout
