@@ -227,12 +227,14 @@ class Clear(Message, tag="clear"):
 
 
 class Place(Message, tag="place"):
-    """A train with no process of its own on the rails: head and tail in m on the line."""
+    """A train with no process of its own on the rails: head and tail in m on the line; the track
+    it is put on; the way it faces (its head is its front that way). Placed again: it moves."""
 
     train: str
     head: float
     tail: float
     track: str = "1"
+    direction: Literal["up", "down"] = "up"
 
 
 class Remove(Message, tag="remove"):

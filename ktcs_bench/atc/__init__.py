@@ -1,7 +1,8 @@
 """Wayside ATC and the track-circuit emulator (SPEC §6.4), sans-I/O.
 
-`TrackCircuitModel(line)`: train positions -> occupancy (with injectable faults) and the code under
-each train's antenna. `WaysideAtc(line, station)`: occupancy + IXL route state -> TC/TTC/IZC codes
+`TrackCircuitModel(line)`: train positions and point blades -> each train's path over the points
+(trailed points, derailments, misrouted trains), occupancy (with injectable faults) and the code
+under each train's antenna (SPEC §6.7). `WaysideAtc(line, station)`: occupancy + IXL route state -> TC/TTC/IZC codes
 for the IXL and an `AtcCode` (speed code, target speed, gradient, target distance) per track
 circuit; the most restrictive code everywhere while its IXL link is in communication error.
 

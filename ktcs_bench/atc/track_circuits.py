@@ -1,21 +1,39 @@
-"""The track-circuit emulator: owns the line, turns train positions into occupancy, and hands each
-train the code of the track circuit under its antenna (SPEC §6.4).
+"""The track-circuit emulator: owns the line, moves each train by the point blades as the
+trackside holds them, turns train positions into occupancy, and hands each train the code of the
+track circuit under its antenna (SPEC §6.4, §6.7).
 
-A train is given as head and tail chainage (the antenna is at the head; the direction of travel is
-tail -> head) and the station track it uses where tracks run side by side. Faults per track
-circuit: "failed_occupied", "failed_clear" (wrong side: a train is not seen) and "no_code" (the
-code does not reach the antenna). Sans-I/O: `update` is called with positions, no clock.
+A train is given as head and tail chainage (the antenna is at the head; a train whose head is above
+its tail faces up) and, when it first appears, the station track it is put on (`TrainPosition`).
+From then on the model keeps its actual path -- which track it is on between the points under it
+(`TrainPath`) -- and moves it with each new position: the end that advances goes over the points
+ahead (`station.geometry`), the other end follows the path. At a point met facing the train takes
+the leg the blades lie in; met trailing against the blades it trails the point (forces the blades
+over: the trackside loses its detection until a fault clear); blades moving or not in an end
+position under a train derail it, and so does a point moved under it. A train booked on a track
+(a timetable train) that finds itself on another where its booked track runs is misrouted. Each
+such event is kept for the adapter (`take_events`) to log and tell the train and the trackside.
+
+Blades are fed per station (`set_blades`); a point not reported yet lies normal (where a point
+machine starts). Faults per track circuit: "failed_occupied", "failed_clear" (wrong side: a
+train is not seen) and "no_code" (the code does not reach the antenna). Sans-I/O: positions and
+blades in, no clock.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Literal
 
 from ktcs_bench.atc.track_codes import AtcCode
-from ktcs_bench.station.model import Line, TrackCircuit
+from ktcs_bench.station.geometry import LineGeometry, Track, beyond, meets
+from ktcs_bench.station.model import Line, PointPosition, TrackCircuit
 
 FAULTS = ("failed_occupied", "failed_clear", "no_code")
+Blades = Literal["normal", "reverse", "moving", "none"]
+BLADES: tuple[Blades, ...] = ("normal", "reverse", "moving", "none")
+"""Where a point's blades are: in an end position, moving, or stopped between (not in one)."""
+_BLADES: dict[str, Blades] = {b: b for b in BLADES}
 
 
 @dataclass(frozen=True, slots=True)
@@ -23,23 +41,109 @@ class TrainPosition:
     train: str
     head_m: float
     tail_m: float
-    track: str = "1"  # station track in use (plain-line track circuits carry every track)
+    track: str | None = "1"  # the station track it is put on, or booked on (see `booked`)
+    booked: bool = False  # `track` is its booked track here: running off it is misrouting
+
+
+@dataclass(frozen=True, slots=True)
+class Crossing:
+    """A point under (or at an end of) a train: where, and the leg the train is on."""
+
+    position_m: float
+    station: int
+    point: str
+    leg: PointPosition
+
+
+@dataclass
+class TrainPath:
+    """Where a train actually is: from `lo` to `hi` (m), on `tracks[i]` between the crossings
+    i-1 and i (len(tracks) == len(crossings) + 1, in chainage order)."""
+
+    lo: float
+    hi: float
+    tracks: list[Track]
+    crossings: list[Crossing] = field(default_factory=list)
+    derailed: set[tuple[int, str]] = field(default_factory=set)
+    misrouted: bool = False
+
+    def stretches(self) -> list[tuple[float, float, Track]]:
+        bounds = [self.lo, *(c.position_m for c in self.crossings), self.hi]
+        return [(bounds[i], bounds[i + 1], t) for i, t in enumerate(self.tracks)]
+
+    def track_at_end(self, upper: bool) -> Track:
+        return self.tracks[-1] if upper else self.tracks[0]
+
+
+@dataclass(frozen=True, slots=True)
+class RailEvent:
+    """Something the rails did to a train: `kind` trailed | derailed | misrouted; `leg` the
+    position a trailed point's blades were forced to; `track` the track a misrouted train is on."""
+
+    kind: str
+    train: str
+    text: str
+    station: int | None = None
+    point: str | None = None
+    leg: PointPosition | None = None
+    track: str | None = None
 
 
 class TrackCircuitModel:
     def __init__(self, line: Line) -> None:
         self.line = line
+        self.geometry = LineGeometry(line)
         self.tcs: tuple[TrackCircuit, ...] = line.all_track_circuits()
         self._by_name = {t.name: t for t in self.tcs}
         self.trains: dict[str, TrainPosition] = {}
+        self.paths: dict[str, TrainPath] = {}
+        self.blades: dict[tuple[int, str], Blades] = {
+            (st, p.name): "normal" for _, st, p in self.geometry.points
+        }
         self.faults: dict[str, str] = {}
         self.codes: dict[str, AtcCode] = {}
+        self.events: list[RailEvent] = []
         self._last = self.occupancy()
 
+    # ------------------------------------------------------------------ inputs
+
     def update(self, trains: Iterable[TrainPosition]) -> dict[str, bool]:
-        """New train positions (all trains); returns the occupancy changes."""
-        self.trains = {t.train: t for t in trains}
+        """New train positions (all trains: one missing is taken off); the occupancy changes."""
+        given = list(trains)
+        for gone in set(self.trains) - {t.train for t in given}:
+            self._drop(gone)
+        for t in given:
+            self._move(t)
         return self._changes()
+
+    def move(self, position: TrainPosition) -> dict[str, bool]:
+        """One train's new position (put on the line if new); the occupancy changes.
+        ValueError for a train put where its track does not run (nothing changes)."""
+        self._move(position)
+        return self._changes()
+
+    def remove(self, train: str) -> dict[str, bool]:
+        self._drop(train)
+        return self._changes()
+
+    def set_blades(self, station: int, blades: Mapping[str, str]) -> dict[str, bool]:
+        """Where the blades of the station's points are (any of `BLADES`); a point moved under a
+        train derails it. KeyError for an unknown point, ValueError for an unknown state."""
+        for point, state in blades.items():
+            self.geometry.point(station, point)  # KeyError on an unknown one
+            if state not in BLADES:
+                raise ValueError(f"blades of point {station} {point}: {state!r} is not one of "
+                                 f"{', '.join(BLADES)}")  # fmt: skip
+        for point, state in blades.items():
+            self.blades[(station, point)] = _BLADES[state]
+        for train, path in self.paths.items():
+            self._under(train, path)
+        return self._changes()
+
+    def take_events(self) -> list[RailEvent]:
+        """What happened on the rails since the last call (trailed, derailed, misrouted)."""
+        out, self.events = self.events, []
+        return out
 
     def fail(self, tc: str, kind: str) -> dict[str, bool]:
         if kind not in FAULTS:
@@ -55,19 +159,27 @@ class TrackCircuitModel:
             self.faults.pop(tc, None)
         return self._changes()
 
+    # ------------------------------------------------------------------ queries
+
     def shunted(self, tc: TrackCircuit) -> bool:
         """A train's axles are in the track circuit (before any fault)."""
         return self._shunted(tc, self._spans())
 
-    def _spans(self) -> list[tuple[float, float, str]]:
-        """Each train's axles: (lowest, highest chainage, track)."""
-        return [(min(t.head_m, t.tail_m), max(t.head_m, t.tail_m), t.track)
-                for t in self.trains.values()]  # fmt: skip
+    def track_of(self, train: str) -> Track:
+        """The track the train's head is on (None: the plain line)."""
+        t = self.trains[train]
+        return self.paths[train].track_at_end(t.head_m >= t.tail_m)
 
-    @staticmethod
-    def _shunted(tc: TrackCircuit, spans: list[tuple[float, float, str]]) -> bool:
+    def derailed(self, train: str) -> bool:
+        return bool(self.paths[train].derailed)
+
+    def _spans(self) -> list[tuple[float, float, Track]]:
+        """Each train's axles: (lowest, highest chainage, track) per stretch of its path."""
+        return [s for p in self.paths.values() for s in p.stretches()]
+
+    def _shunted(self, tc: TrackCircuit, spans: list[tuple[float, float, Track]]) -> bool:
         for lo, hi, track in spans:
-            if lo < tc.to_m and hi > tc.from_m and tc.on_track(track):
+            if lo < tc.to_m and hi > tc.from_m and self.geometry.carries(tc, track):
                 return True
         return False
 
@@ -90,10 +202,12 @@ class TrackCircuitModel:
         self.codes.update(codes)
 
     def under_antenna(self, train: str) -> str | None:
+        """The track circuit under the train's head, on the track the head is actually on."""
         t = self.trains[train]
         up = t.head_m >= t.tail_m
+        track = self.paths[train].track_at_end(up)
         for tc in self.tcs:
-            if not tc.on_track(t.track):
+            if not self.geometry.carries(tc, track):
                 continue
             inside = tc.from_m <= t.head_m < tc.to_m if up else tc.from_m < t.head_m <= tc.to_m
             if inside:
@@ -106,6 +220,104 @@ class TrackCircuitModel:
         if tc is None or self.faults.get(tc) == "no_code":
             return None
         return self.codes.get(tc)
+
+    # ------------------------------------------------------------------ the path
+
+    def _drop(self, train: str) -> None:
+        self.trains.pop(train, None)
+        self.paths.pop(train, None)
+
+    def _move(self, t: TrainPosition) -> None:
+        lo, hi = min(t.head_m, t.tail_m), max(t.head_m, t.tail_m)
+        path = self.paths.get(t.train)
+        if path is None:
+            # put on the line: its rear on its track, its front run out over the points between
+            up = t.head_m >= t.tail_m
+            rear = t.tail_m
+            path = TrainPath(rear, rear, [self.geometry.track_at(rear, t.track)])
+            self._extend(t.train, path, t.head_m, upper=up)
+            self.paths[t.train] = path
+        else:
+            if hi > path.hi:
+                self._extend(t.train, path, hi, upper=True)
+            if lo < path.lo:
+                self._extend(t.train, path, lo, upper=False)
+        self._trim(path, lo, hi)
+        self.trains[t.train] = t
+        self._under(t.train, path)
+        if t.booked and t.track is not None and not path.misrouted:
+            actual = path.track_at_end(t.head_m >= t.tail_m)
+            if actual is not None and actual != t.track and self.geometry.runs(t.track, t.head_m):
+                path.misrouted = True
+                self.events.append(RailEvent(
+                    "misrouted", t.train, f"misrouted: train {t.train} on track {actual} at "
+                    f"{t.head_m:.0f} m, booked on track {t.track}", track=actual,
+                ))  # fmt: skip
+
+    def _extend(self, train: str, path: TrainPath, to: float, upper: bool) -> None:
+        """Run the path's upper (or lower) end out to `to` over the points on its way."""
+        start = path.hi if upper else path.lo
+        for station, point in self.geometry.passed(start, to):
+            track = path.track_at_end(upper)
+            meeting = meets(point, track, upward=upper)
+            if meeting is None:
+                continue
+            key = (station, point.name)
+            blades = self.blades[key]
+            leg: PointPosition
+            if meeting == "toe":  # facing: the leg the blades lie in (normal if they lie in none)
+                leg = "reverse" if blades == "reverse" else "normal"
+            else:
+                leg = meeting
+            if blades not in ("normal", "reverse"):
+                self._derail(train, path, station, point.name)
+            elif meeting != "toe" and blades != leg:
+                self.blades[key] = leg  # forced over by the wheels
+                self.events.append(RailEvent(
+                    "trailed", train, f"trailed point {station} {point.name} (train {train}, "
+                    f"blades {blades}, trailed from the {leg} leg)", station, point.name, leg,
+                ))  # fmt: skip
+            crossing = Crossing(point.position_m, station, point.name, leg)
+            onto = beyond(point, meeting, leg)
+            if upper:
+                path.crossings.append(crossing)
+                path.tracks.append(onto)
+                path.hi = point.position_m
+            else:
+                path.crossings.insert(0, crossing)
+                path.tracks.insert(0, onto)
+                path.lo = point.position_m
+        if upper:
+            path.hi = max(path.hi, to)
+        else:
+            path.lo = min(path.lo, to)
+
+    @staticmethod
+    def _trim(path: TrainPath, lo: float, hi: float) -> None:
+        """The path cut to the train's new extent (a crossing at an end stays: the end is over)."""
+        while path.crossings and path.crossings[-1].position_m > hi:
+            path.crossings.pop()
+            path.tracks.pop()
+        while path.crossings and path.crossings[0].position_m < lo:
+            path.crossings.pop(0)
+            path.tracks.pop(0)
+        path.lo, path.hi = lo, hi
+
+    def _under(self, train: str, path: TrainPath) -> None:
+        """A point under the train whose blades are not (any longer) on its leg derails it."""
+        for c in path.crossings:
+            if path.lo < c.position_m < path.hi and self.blades[(c.station, c.point)] != c.leg:
+                self._derail(train, path, c.station, c.point)
+
+    def _derail(self, train: str, path: TrainPath, station: int, point: str) -> None:
+        if (station, point) in path.derailed:
+            return
+        path.derailed.add((station, point))
+        blades = self.blades[(station, point)]
+        self.events.append(RailEvent(
+            "derailed", train, f"derailed {station} {point} (train {train}, blades {blades})",
+            station, point,
+        ))  # fmt: skip
 
     def _changes(self) -> dict[str, bool]:
         now = self.occupancy()

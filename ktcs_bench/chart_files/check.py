@@ -23,6 +23,12 @@ from ktcs_bench.ctc.model import StationModel
 from ktcs_bench.errors import ConfigError
 from ktcs_bench.field.trackside import Trackside
 from ktcs_bench.ixl.interlocking import Interlocking
+from ktcs_bench.station.geometry import (
+    GeometryError,
+    LineGeometry,
+    walk_route,
+    walked_track_circuits,
+)
 from ktcs_bench.station.model import Line
 from ktcs_bench.station_codes.chart import CodeChart
 from ktcs_bench.station_codes.stations import ChartSpec, build_specs, link_charts
@@ -50,6 +56,7 @@ def check_charts(line: Line, chart_dir: Path, emulators: bool = True) -> list[st
         problems += _compare(path, chart, spec)
     if emulators:
         problems += _check_emulators(line, files)
+    problems += check_point_geometry(line)
     return problems
 
 
@@ -204,4 +211,36 @@ def _file_against_wire(path: Path, file: CodeChart, ends: Iterable[_End]) -> lis
         if more:
             text += f" (and {more} more code{'s differ' if more > 1 else ' differs'})"
         out.append(text)
+    return out
+
+
+def check_point_geometry(line: Line) -> list[str]:
+    """The points' geometry against the routes (SPEC §6.7): each point lies in its own track
+    circuits, and each route run over the geometry -- its points in the positions it requires,
+    from its entry signal's track -- reaches its exit signal's track and shunts exactly its own
+    track circuits, and its overlap its overlap's."""
+    out: list[str] = []
+    geometry = LineGeometry(line)
+    for st in line.stations.values():
+        for i, p in enumerate(st.points):
+            if not any(st.track_circuit(t).covers(p.position_m) for t in p.track_circuits):
+                out.append(f"{st.file}: points[{i}].position_m: point {p.name} at "
+                           f"{p.position_m:g} m lies in none of its track circuits")  # fmt: skip
+        for i, r in enumerate(st.routes):
+            place = f"routes[{i}]"
+            try:
+                walk = walk_route(st, r, place)
+            except GeometryError as exc:
+                out.append(f"{st.file}: {exc.place}: route {r.name}: {exc.problem}")
+                continue
+            for key, stretches, listed in (
+                ("track_circuits", walk.route, r.track_circuits),
+                ("overlap.track_circuits", walk.overlap, r.overlap_track_circuits),
+            ):
+                walked = walked_track_circuits(geometry, stretches)
+                if walked != set(listed):
+                    out.append(
+                        f"{st.file}: {place}.{key}: route {r.name} lists {sorted(listed)}, its "
+                        f"points as they are set run over {sorted(walked)}"
+                    )
     return out

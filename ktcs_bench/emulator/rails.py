@@ -7,6 +7,14 @@ then the server sends {"occupancy": {TC: 0|1}} (all on hello, changes after). An
 {"codes": {TC: [code, speed_kmh, gradient_permille, target_distance_m]}}; a train sends
 {"position": {"head": m, "tail": m, "track": "1"}} and receives {"code": [...] | null} for the
 track circuit under its antenna. Faults: {"fault": {"tc": NAME, "kind": KIND}}, {"clear": NAME|null}.
+
+The blades (SPEC §6.7): a trackside sends where its points' blades are, every point of its
+station each time one changes: {"blades": {"station": 18, "points": {"31": "normal"|"reverse"|
+"moving"|"none"}}}, and the server moves trains by them. A train that trails a point makes the
+server tell the tracksides {"trailed": {"station": 18, "point": "31", "leg": "reverse"}} (the
+blades forced to that leg; the station's trackside loses the point's detection until a fault
+clear). A train the rails derail is told {"derailed": "18 31"}, a timetable train off its booked
+track {"misrouted": {"track": "2"}}; the "track" of a train's position is its booked track there.
 """
 
 from __future__ import annotations
@@ -41,11 +49,20 @@ class Position(TypedDict, total=False):
     track: str
 
 
+class Blades(TypedDict):
+    """Where the blades of a station's points are (see the module docstring)."""
+
+    station: int
+    points: dict[str, str]
+
+
 class ToRails(TypedDict, total=False):
-    """What a client sends once it has said hello: an ATC its codes, a train its position."""
+    """What a client sends once it has said hello: an ATC its codes, a train its position, a
+    trackside its blades."""
 
     codes: dict[str, list[float]]
     position: Position
+    blades: Blades
 
 
 class RailsClient:
@@ -75,6 +92,8 @@ class RailsClient:
             self._last.setdefault("codes", {}).update(obj["codes"])
         if "position" in obj:
             self._last["position"] = obj["position"]
+        if "blades" in obj:
+            self._last["blades"] = obj["blades"]
         if self.peer is not None:
             self.peer.send(obj)
 

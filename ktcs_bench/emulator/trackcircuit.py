@@ -1,6 +1,9 @@
 """The track-circuit emulator process: owns the line (`atc.TrackCircuitModel`) and serves the
 rails -- positions in from trains, occupancy out to ATCs and trackside relays, each train the code
-under its antenna -- with injectable track-circuit failures."""
+under its antenna -- with injectable track-circuit failures. It moves the trains by the blades
+each trackside publishes; what the rails do to a train (a trailed point, a derailment, a misrouted
+train) is an event of its log (`rails: trailed point 18 31 ...`), told to the train (it stops)
+and, for a trailed point, to the trackside of its station (its detection is lost)."""
 
 from __future__ import annotations
 
@@ -8,7 +11,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ktcs_bench import kinds
-from ktcs_bench.atc.track_circuits import TrackCircuitModel, TrainPosition
+from ktcs_bench.atc.track_circuits import RailEvent, TrackCircuitModel, TrainPosition
 from ktcs_bench.atc.track_codes import AtcCode
 from ktcs_bench.emulator.device import Device
 from ktcs_bench.messages import (
@@ -61,6 +64,7 @@ class TrackCircuitDevice(Device):
                 if p.info.get("role") in OCCUPANCY_ROLES:
                     p.send(msg)
             self.note("occupancy", ", ".join(f"{k}={int(v)}" for k, v in sorted(changes.items())))
+        self._rail_events()
         self._codes_to_trains()
 
     def _codes_to_trains(self) -> None:
@@ -95,38 +99,77 @@ class TrackCircuitDevice(Device):
             train = str(peer.info.get(kinds.TRAIN, peer.address))
             pos = obj["position"]
             try:
-                self.model.trains[train] = TrainPosition(
-                    train, float(pos["head"]), float(pos["tail"]), str(pos.get("track", "1"))
-                )
+                track = pos.get("track")
+                position = TrainPosition(
+                    train, float(pos["head"]), float(pos["tail"]),
+                    None if track is None else str(track), booked=track is not None,
+                )  # fmt: skip
             except (KeyError, TypeError, ValueError):
                 return {"error": "position needs head and tail in metres"}
-            self._broadcast(self.model.update(list(self.model.trains.values())))
+            try:
+                changes = self.model.move(position)
+            except ValueError as exc:
+                return {"error": str(exc)}
+            self._broadcast(changes)
+            return None
+        if "blades" in obj and isinstance(obj["blades"], dict):
+            blades = obj["blades"]
+            points = blades.get("points")
+            if not isinstance(points, dict):
+                return {"error": "blades need station and points {POINT: position}"}
+            try:
+                station = int(blades["station"])
+                changes = self.model.set_blades(
+                    station, {str(k): str(v) for k, v in points.items()}
+                )
+            except (KeyError, TypeError, ValueError) as exc:
+                return {"error": f"blades: {exc}"}
+            self._broadcast(changes)
             return None
         return await self._handle(obj, peer)
+
+    def _rail_events(self) -> None:
+        """Log what the rails did to trains, and tell the train and (a trailed point) the
+        trackside of the point's station."""
+        for e in self.model.take_events():
+            self.note("rails", e.text)
+            train = self.trains.get(e.train)
+            if e.kind == "trailed":
+                for p in self.peers:
+                    if p.info.get("role") == kinds.TRACKSIDE:
+                        p.send({"trailed": {"station": e.station, "point": e.point, "leg": e.leg}})
+            elif train is not None:
+                train.send(self._to_train(e))
+
+    @staticmethod
+    def _to_train(e: RailEvent) -> JsonObject:
+        if e.kind == "derailed":
+            return {"derailed": f"{e.station} {e.point}"}
+        return {"misrouted": {"track": e.track}}
 
     def _closed(self, peer: jsonlines.Peer) -> None:
         self.peers.pop(peer, None)
         train = peer.info.get(kinds.TRAIN)
         if train is not None and self.trains.get(str(train)) is peer:
             del self.trains[str(train)]
-            self.model.trains.pop(str(train), None)
-            self._broadcast(self.model.update(list(self.model.trains.values())))
+            self._broadcast(self.model.remove(str(train)))
 
     async def handle(self, message: Message) -> Answer:
-        """fail (tc, kind), clear (tc, else every one), place (train, head, tail, track: a train
-        with no process of its own), remove (train)."""
+        """fail (tc, kind), clear (tc, else every one), place (train, head, tail, track,
+        direction: a train with no process of its own; placed again, it moves), remove (train)."""
         try:
             match message:
                 case Fail(tc=tc, kind=kind):
                     self._broadcast(self.model.fail(tc, kind))
                 case Clear(tc=tc):
                     self._broadcast(self.model.clear_fault(tc))
-                case Place(train=train, head=head, tail=tail, track=track):
-                    self.model.trains[train] = TrainPosition(train, head, tail, track)
-                    self._broadcast(self.model.update(list(self.model.trains.values())))
+                case Place(train=train, head=head, tail=tail, track=track, direction=way):
+                    if (head >= tail) != (way == "up"):
+                        raise ValueError(f"train {train} faces {way}: its head must be "
+                                         f"{'above' if way == 'up' else 'below'} its tail")  # fmt: skip
+                    self._broadcast(self.model.move(TrainPosition(train, head, tail, track)))
                 case Remove(train=train):
-                    self.model.trains.pop(train, None)
-                    self._broadcast(self.model.update(list(self.model.trains.values())))
+                    self._broadcast(self.model.remove(train))
                 case _:
                     return await super().handle(message)
         except (KeyError, ValueError) as exc:
@@ -152,5 +195,17 @@ class TrackCircuitDevice(Device):
             **super().status(),
             "occupied": sorted(k for k, v in self.model.occupancy().items() if v),
             "faults": dict(self.model.faults),
-            "trains": {k: [t.head_m, t.tail_m, t.track] for k, t in self.model.trains.items()},
+            # head, tail and the station track the head is actually on (on the plain line, whose
+            # track circuits carry every track: the track it was put on or booked, else "1")
+            "trains": {
+                k: [t.head_m, t.tail_m, self.model.track_of(k) or t.track or "1"]
+                for k, t in self.model.trains.items()
+            },
+            "blades": {f"{st} {p}": b for (st, p), b in sorted(self.model.blades.items())},
+            # the points each derailed train came off at ("18 31")
+            "derailed": {
+                k: sorted(f"{st} {p}" for st, p in path.derailed)
+                for k, path in self.model.paths.items()
+                if path.derailed
+            },
         }

@@ -1,6 +1,8 @@
 """The trackside I/O process: point machines, signal lamps and track relays (`field.Trackside`)
 on a Type I link to their IXL, with track occupancy from the rails and a fault API. Until the
-rails connect, and whenever their connection is lost, every track relay reports occupied."""
+rails connect, and whenever their connection is lost, every track relay reports occupied. It
+publishes where its points' blades are on the rails (trains run by them), and a point the rails
+say a train trailed loses its detection until `clear_faults`."""
 
 from __future__ import annotations
 
@@ -34,6 +36,8 @@ class TracksideDevice(IxlPeerDevice):
         self.io = Trackside(line.view(station))
         super().__init__(name, line, station, links, self.io.full_state, **kwargs)
         self.drive(self.io, lambda now, out: self.apply(out))
+        self._blades: dict[str, str] = {}
+        self._publish_blades()
 
     def from_ixl(self, codes: dict[str, int]) -> None:
         self.apply(self.io.receive(codes, self.now()))
@@ -52,12 +56,29 @@ class TracksideDevice(IxlPeerDevice):
             mine = {k: bool(v) for k, v in occ.items() if k in self.io.relays}
             if mine:
                 self.apply(self.io.set_occupancy(mine, self.now()))
+        trailed = obj.get("trailed")
+        if isinstance(trailed, dict) and trailed.get("station") == self.station:
+            point, leg = str(trailed.get("point")), str(trailed.get("leg"))
+            if point in self.io.points:
+                try:
+                    self.apply(self.io.trail(point, leg, self.now()))
+                except ValueError as exc:
+                    self.note("rails", f"trailed point not understood: {exc}")
+
+    def _publish_blades(self) -> None:
+        """Tell the rails where the blades are when that changed (the client replays the last
+        on reconnect)."""
+        blades = self.io.blades()
+        if blades != self._blades and self.rails is not None:
+            self._blades = blades
+            self.rails.send({"blades": {"station": self.station, "points": blades}})
 
     def apply(self, out: FieldOutput) -> None:
         if out.changes and self.port is not None:
             self.port.update(out.changes)
         for e in out.events:
             self.note(e.kind, e.text)
+        self._publish_blades()
         self.poke()
 
     def status(self) -> dict[str, Any]:

@@ -24,6 +24,10 @@ circuit, or standing at its first stop -- and only once the track circuits its b
 are clear as the rails report them (`train.entry.EntryGate`: it logs `waiting for TC1851 clear to
 enter` once, then `entered`). Until then it is not on the rails. Its status carries
 what it is doing (`state`), its arrivals (stop error on the true position) and departures.
+
+The rails move it by the point blades (SPEC §6.7) and say so: derailed, it reads no code any more
+(stop here: it comes to a stand and stays); misrouted (off its booked track), it runs on the codes
+of the track it is actually on until it stands, and is held there.
 """
 
 from __future__ import annotations
@@ -219,6 +223,8 @@ class TrainDevice(Device):
         self.last: Any = None
         self.release = False
         self.origin: float | None = None  # the device clock's reading at the train's start
+        self.derailed: str | None = None  # the point ("18 31") the rails derailed it at
+        self.actual_track: str | None = None  # the track it is on, once misrouted
 
     @classmethod
     def from_args(
@@ -263,6 +269,14 @@ class TrainDevice(Device):
         if isinstance(occupancy, dict) and self.gate is not None and not self.gate.entered:
             self.gate.rails({k: bool(v) for k, v in occupancy.items()}, "full" in obj)
             self.poke()  # its entry may be clear now
+        if "derailed" in obj and self.derailed is None:
+            self.derailed = str(obj["derailed"])
+            self.note("rails", f"derailed at point {self.derailed}: stops and stays")
+        misrouted = obj.get("misrouted")
+        if isinstance(misrouted, dict) and self.actual_track is None:
+            self.actual_track = str(misrouted.get("track"))
+            self.note("rails", f"misrouted onto track {self.actual_track}: stops at its next "
+                      "stop code and stays")  # fmt: skip
         if "code" not in obj:
             return
         wire, tc = obj["code"], obj.get("tc")
@@ -285,7 +299,7 @@ class TrainDevice(Device):
             self.gate.rails_lost()
 
     def _code_now(self) -> TrackCode:
-        if self.code is None or not self.rails.connected:
+        if self.code is None or not self.rails.connected or self.derailed is not None:
             return TrackCode.stop_here(self.endpoint.dynamics.state.position)
         return self.code
 
@@ -312,6 +326,10 @@ class TrainDevice(Device):
     def _sense(self, now: float) -> CycleInputs:
         """The cycle's inputs: the code under the antenna, the driver's EB release (once)."""
         release, self.release = self.release, False
+        ep = self.endpoint
+        standing = ep.dynamics.state.speed <= 0.0
+        if self.actual_track is not None and standing and not ep.held and self.config.ato:
+            self.note("rails", f"misrouted: held where it stands ({ep.hold(now)})")
         return CycleInputs(code=self._code_now(), release_eb=release)
 
     def _cycled(self, now: float, out: CycleOutputs | None) -> None:
@@ -344,6 +362,7 @@ class TrainDevice(Device):
             kinds.TRAIN: self.config.train_id,
             "direction": self.frame.sense,
             **self._position(),
+            **({} if self.actual_track is None else {"track": self.actual_track}),  # where it is
             "time_s": round(now, 1),
             "state": ep.service_state(now) if self.on_line else "waiting",
             "held": ep.held,
@@ -378,6 +397,8 @@ class TrainDevice(Device):
             ],  # fmt: skip
             "status": None if verdict is None else verdict.status.value,
             "emergency_brakes": ep.eb_count,
+            "derailed": self.derailed,
+            "misrouted_onto": self.actual_track,
             "target_point": None if self.last is None else at(self.last.target_point),
         }
 

@@ -3,6 +3,8 @@
 Faults: "detection" (the detection contacts open: no indication at all, whatever the blades do)
 and "jammed" (the machine runs but the blades never reach the other position: it keeps showing
 the moving indication). A throw reversed half-way takes as long to come back as it had run.
+A train trailing the point against its blades forces them over to its leg (`trail`): the
+detection is lost ("trailed", like "detection") until a fault clear repairs the point.
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ from dataclasses import dataclass
 from ktcs_bench.station.model import Point, PointPosition
 
 FAULTS = ("detection", "jammed")
+TRAILED = "trailed"
+"""The fault a trailing train leaves (not injected: `trail`)."""
 
 
 @dataclass
@@ -51,13 +55,27 @@ class PointMachine:
         self.started_at = None
         return True
 
+    def trail(self, leg: PointPosition) -> None:
+        """A train trailed the point from `leg`: the blades are forced over to it, and the
+        detection is lost until the fault is cleared."""
+        self.position = self.target = leg
+        self.started_at = self.arrive_at = None
+        self.fault = TRAILED
+
+    def blades(self) -> str:
+        """Where the blades are, whatever detection says: normal, reverse, moving, or none
+        (stopped between positions)."""
+        if self.position is not None:
+            return self.position
+        return "moving" if self.moving else "none"
+
     def next_deadline(self) -> float | None:
         return None if self.fault == "jammed" else self.arrive_at
 
     def bits(self) -> dict[str, int]:
         """The four Table 3 indications: SNI, SRN, SRI, SNR."""
         out = {"SNI": 0, "SRN": 0, "SRI": 0, "SNR": 0}
-        if self.fault == "detection":
+        if self.fault in ("detection", TRAILED):
             return out
         if self.position == "normal":
             out["SNI"] = 1

@@ -135,6 +135,20 @@ class Trackside:
         self._event(now, "fault", f"point {point}: {kind} fault injected")
         return self._finish(now)
 
+    def trail(self, point: str, leg: str, now: float) -> FieldOutput:
+        """A train trailed `point` from its `leg` (normal | reverse) against the blades: they
+        are forced over, and its detection is lost until `clear_faults`."""
+        pm = self.points[point]
+        if leg not in ("normal", "reverse"):
+            raise ValueError(f"point {point}: no {leg!r} leg")
+        pm.trail("normal" if leg == "normal" else "reverse")
+        self._event(now, "fault", f"point {point} trailed from its {leg} leg: detection lost")
+        return self._finish(now)
+
+    def blades(self) -> dict[str, str]:
+        """Where each point's blades are (`PointMachine.blades`): what trains run by."""
+        return {name: pm.blades() for name, pm in self.points.items()}
+
     def fail_lamp(self, signal: str, aspect: str, now: float) -> FieldOutput:
         sig = self.signals[signal]
         if aspect not in sig.signal.aspects:

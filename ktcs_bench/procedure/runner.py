@@ -14,7 +14,7 @@ import asyncio
 import json
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypedDict
 
@@ -341,8 +341,8 @@ class ProcedureRun:
 
     async def place(self, ghost: Ghost) -> None:
         tc = self.names.device_of(kinds.TRACKCIRCUIT)
-        place = msg.Place(train=ghost.train, head=ghost.head, tail=ghost.head - ghost.length,
-                          track=ghost.track)  # fmt: skip
+        place = msg.Place(train=ghost.train, head=ghost.head, tail=ghost.tail,
+                          track=ghost.track, direction=ghost.direction)  # fmt: skip
         answer = await self.access.device(tc, place)
         if not answer.get("ok"):
             raise PeerError(f"the track circuits did not take train {ghost.train}: {answer}")
@@ -468,7 +468,7 @@ class ProcedureRun:
         if not ars:  # what an earlier run left set is cancelled (with ARS on, ARS decides)
             await self._cancel_routes(stations)
         for ghost in proc.setup.trains:
-            g = self.ghosts[ghost.train] = Ghost(ghost.train, ghost.head, ghost.length, ghost.track)
+            g = self.ghosts[ghost.train] = replace(ghost)
             await self.place(g)
         await self.mark()
         await self.action_done()

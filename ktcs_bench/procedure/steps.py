@@ -6,10 +6,13 @@ carried out through the run's context, giving a verdict:
     - local: 18 grant                  the station's local panel: grant | refuse | take, or
                                          control CODE [VALUE]
     - train: T1 place TC1851           a train the procedure moves itself (no process): place AT
-    - train: T1 run to 1300 at 30        [length M] [track N], run to AT [at KMH], remove; AT is a
-    - train: 1001 release_eb             chainage in m or a track circuit (its middle); a train
-    - train: 1001 run to 5200              device takes its commands: hold, dispatch [now], run
-                                         to AT (its ATO stops there), release_eb
+    - train: T1 run to 1300 at 30        [length M] [track N] [up|down], run to AT [at KMH],
+    - train: T2 place 6420 track 1 down  remove; AT is a chainage in m or a track circuit (its
+    - train: 1001 release_eb               middle); the direction it faces (default up) puts its
+    - train: 1001 run to 5200              head, its front, that way; the rails move it over the
+                                         points as their blades lie. A train device takes its
+                                         commands: hold, dispatch [now], run to AT (its ATO
+                                         stops there), release_eb
     - fault: link st18-atc cut         a tap's words (cut, restore, ber 1e-3, drop-frame, ...)
     - fault: point 18 31 detection     point detection lost (or jammed); relay TC KIND (a track
     - fault: tc TC1855 failed_occupied   relay), tc TC KIND (the track circuit itself); kill
@@ -38,6 +41,7 @@ from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.messages import Message
 from ktcs_bench.procedure.expect import Expectation, Observer, parse_expectation
 from ktcs_bench.procedure.names import LabNames, StepError
+from ktcs_bench.station.model import Direction
 from ktcs_bench.tap.control import parse_command
 
 DEFAULT_WITHIN_S = 10.0
@@ -91,6 +95,11 @@ class Ghost:
     length: float = 40.0
     track: str = "1"
     speed_kmh: float = 0.0
+    direction: Direction = "up"  # the way it faces: its head is its front that way
+
+    @property
+    def tail(self) -> float:
+        return self.head - self.length if self.direction == "up" else self.head + self.length
 
 
 @dataclass
@@ -189,6 +198,7 @@ class TrainStep(Step):
     kmh: float = DEFAULT_RUN_KMH
     length: float | None = None
     track: str | None = None
+    direction: Direction | None = None
     device: str | None = None  # a train device: `command` is its command
     command: Message = field(default_factory=msg.Status)
 
@@ -200,9 +210,13 @@ class TrainStep(Step):
             return Outcome("pass" if ok else "error", _answer_text(answer))
         ghost = ctx.ghosts.get(self.train)
         if self.verb == "place":
+            if ghost is not None:  # put somewhere else: off the rails first, not run there
+                tc = ctx.names.device_of("trackcircuit")
+                await ctx.access.device(tc, msg.Remove(train=self.train))
             ghost = ctx.ghosts[self.train] = Ghost(
                 self.train, self.at, self.length or (ghost.length if ghost else 40.0),
                 self.track or (ghost.track if ghost else "1"),
+                direction=self.direction or (ghost.direction if ghost else "up"),
             )  # fmt: skip
             await ctx.place(ghost)
             await ctx.action_done()
@@ -215,7 +229,10 @@ class TrainStep(Step):
             await ctx.access.device(tc, msg.Remove(train=self.train))
             await ctx.action_done()
             return Outcome("pass", "removed")
-        # run to `at` at `kmh`, one move per sample period of the lab's clock
+        # run to `at` at `kmh`, one move per sample period of the lab's clock; a point it
+        # trails is a fault of its trackside, cleared with the run's faults
+        lab = ctx.names.lab
+        ctx.faults.trackside.update(d.name for d in lab.devices.values() if d.kind == "trackside")
         await ctx.action_done()
         sense = 1.0 if self.at >= ghost.head else -1.0
         ghost.speed_kmh = self.kmh
@@ -358,14 +375,16 @@ def _train_step(names: LabNames, base: dict[str, Any], text: str) -> TrainStep:
         opts = rest[1:]
         while opts:
             key = opts.pop(0)
-            if key in ("length", "track") and opts:
+            if key in ("up", "down"):
+                step.direction = "up" if key == "up" else "down"
+            elif key in ("length", "track") and opts:
                 value = opts.pop(0)
                 if key == "length":
                     step.length = _positive(value, "length")
                 else:
                     step.track = value
             else:
-                raise StepError(f"train place: unexpected {key!r} (length M, track N)")
+                raise StepError(f"train place: unexpected {key!r} (length M, track N, up|down)")
         return step
     if verb == "run" and len(rest) in (2, 4, 5) and rest[0] == "to":
         step = TrainStep(**base, train=train, verb=verb, at=_place(names, rest[1]))
@@ -375,7 +394,7 @@ def _train_step(names: LabNames, base: dict[str, Any], text: str) -> TrainStep:
             step.kmh = _positive(rest[3], "speed")
         return step
     raise StepError(f"train {train}: cannot read {' '.join(w[1:])!r} "
-                    "(place AT [length M] [track N], run to AT [at KMH], remove)")  # fmt: skip
+                    "(place AT [length M] [track N] [up|down], run to AT [at KMH], remove)")  # fmt: skip
 
 
 def _device_order(names: LabNames, train: str, device: str, verb: str, rest: list[str]) -> Message:

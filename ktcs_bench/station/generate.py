@@ -35,7 +35,15 @@ from dataclasses import dataclass
 from ktcs_bench import kinds
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.loader import load_line
-from ktcs_bench.station.model import Line, PointSetting, Route, Signal, Station, TrackCircuit
+from ktcs_bench.station.model import (
+    Line,
+    Point,
+    PointSetting,
+    Route,
+    Signal,
+    Station,
+    TrackCircuit,
+)
 
 FIRST_STATION = 12
 STATION_STEP = 2
@@ -167,6 +175,12 @@ def _tc_comment(tc: TrackCircuit, pattern: Station) -> str:
     return "tracks " + ", ".join(tc.tracks) if tc.tracks else ""
 
 
+def _geometry(pt: Point) -> str:
+    """The point's geometry fields (SPEC §6.7), as its pattern station has them."""
+    toe = "" if pt.toe is None else f"toe: {_q(pt.toe)}, "
+    return f"facing: {pt.facing}, {toe}normal: {_q(pt.normal)}, reverse: {_q(pt.reverse)}"
+
+
 def _signal_comment(s: Signal, into: dict[str, str]) -> str:
     if s.kind == "marker":
         if s.track is not None:
@@ -203,7 +217,8 @@ def _station_text(p: _Placed, n: int, into: dict[str, str]) -> str:
     for pt in st.points:
         out.append(
             f"  - {{name: {_q(pt.name)}, track_circuits: {_names(p.tc(t) for t in pt.track_circuits)}, "
-            f"position_m: {_num(pt.position_m + shift)}, throw_time_s: {_num(pt.throw_time_s)}}}"
+            f"position_m: {_num(pt.position_m + shift)}, {_geometry(pt)}, "
+            f"throw_time_s: {_num(pt.throw_time_s)}}}"
         )
     out += ["", "signals:"]
     for s in st.signals:

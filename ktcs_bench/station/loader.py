@@ -18,6 +18,7 @@ from pathlib import Path
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, excerpt
 from ktcs_bench.schema import convert, located
+from ktcs_bench.station.geometry import GeometryError, walk_route
 from ktcs_bench.station.model import (
     ASPECT_ORDER,
     DIRECTIONS,
@@ -129,7 +130,23 @@ def _point(s: _StationRefs, o: PointShape, place: str) -> Point:
         s.tc(r, f"{place}.track_circuits[{i}]")
     if o.throw_time_s <= 0:
         raise s.doc.fail(f"{place}.throw_time_s", "must be positive")
-    return Point(str(o.name), refs, o.position_m, o.throw_time_s)
+    up = s.choice(str(o.facing), f"{place}.facing", DIRECTIONS) == "up"
+    facing: Direction = "up" if up else "down"
+    legs: dict[str, str] = {}
+    for key, value in (("normal", o.normal), ("reverse", o.reverse), ("toe", o.toe)):
+        if value is None:
+            continue
+        legs[key] = str(value)
+        if legs[key] not in s.tracks:
+            raise s.doc.fail(
+                f"{place}.{key}", f"unknown track {excerpt(legs[key])} (tracks: {s.tracks})"
+            )
+    if legs["normal"] == legs["reverse"]:
+        raise s.doc.fail(f"{place}.reverse", "the reverse leg leads to the normal leg's track")
+    return Point(
+        str(o.name), refs, o.position_m, facing=facing, normal=legs["normal"],
+        reverse=legs["reverse"], toe=legs.get("toe"), throw_time_s=o.throw_time_s,
+    )  # fmt: skip
 
 
 def _signal(s: _StationRefs, o: SignalShape, place: str) -> Signal:
@@ -291,9 +308,15 @@ def load_station(path: str | Path, external_track_circuits: Iterable[str] = ()) 
     doc.unique([r.name for r in routes], "routes", "route")
     _check_conflicts(doc, routes, s.points)
     name = str(raw.name) if raw.name is not None else f"Station {number}"
-    return Station(
+    station = Station(
         number, name, str(path), s.tracks, tuple(tcs), tuple(points), tuple(signals), tuple(routes)
     )
+    for i, r in enumerate(routes):
+        try:
+            walk_route(station, r, f"routes[{i}]")
+        except GeometryError as exc:
+            raise doc.fail(exc.place, f"route {r.name}: {exc.problem}") from None
+    return station
 
 
 def onward(first: Route, then: Route) -> bool:

@@ -49,10 +49,27 @@ class TrackCircuit:
 
 @dataclass(frozen=True, slots=True)
 class Point:
+    """A point (turnout) and its geometry (SPEC §6.7): a train running `facing` meets its toe and
+    leaves by the leg the blades lie in; from a leg it runs out over the toe (trailing). `toe`,
+    `normal` and `reverse` name the station track on each side; None at the toe is the plain
+    line. The toe is on the low-chainage side of a point facing up, the high side facing down."""
+
     name: str
     track_circuits: tuple[str, ...]
     position_m: float
+    facing: Direction
+    normal: str
+    reverse: str
+    toe: str | None = None
     throw_time_s: float = 4.0
+
+    def leg(self, position: PointPosition) -> str:
+        """The track the leg of `position` leads to."""
+        return self.normal if position == "normal" else self.reverse
+
+    def side(self, upward: bool) -> Literal["toe", "legs"]:
+        """The side a train running up (`upward`) or down comes to the point from."""
+        return "toe" if (self.facing == "up") == upward else "legs"
 
 
 @dataclass(frozen=True, slots=True)

@@ -31,6 +31,10 @@ class PointShape(Shape):
     name: Text
     track_circuits: tuple[Text, ...]
     position_m: float
+    facing: Text  # up | down: the direction of a train that meets the toe
+    normal: Text  # the station track the normal leg leads to
+    reverse: Text  # ... and the reverse leg
+    toe: Text | None = None  # the station track at the toe; none: the plain line
     throw_time_s: float = 4.0
 
 

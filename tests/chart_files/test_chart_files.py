@@ -133,7 +133,8 @@ def test_check_catches_disagreement_with_station_data(
     st18 = emu / "stations" / "st18.yaml"
     text = st18.read_text().replace(
         '  - {name: "32", track_circuits: [TC1857A]',
-        '  - {name: "35", track_circuits: [TC1857A], position_m: 1160}\n'
+        '  - {name: "35", track_circuits: [TC1857A], position_m: 1160, facing: down, toe: "1", '
+        'normal: "1", reverse: "2"}\n'
         '  - {name: "32", track_circuits: [TC1857A]',
     )
     st18.write_text(text)

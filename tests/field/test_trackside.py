@@ -125,3 +125,27 @@ def test_rails_lost_every_track_relay_occupied_until_reported_again(io: Tracksid
     out = io.set_occupancy(dict.fromkeys(tcs, False), 4.0)
     assert dict(out.changes) == {t: 0 for t in tcs if t != "TC1856"}
     assert all(io.full_state()[t] == 0 for t in tcs)
+
+
+def test_blades_where_the_machine_has_them_moving_included(io: Trackside) -> None:
+    assert io.blades() == {"31": "normal", "32": "normal"}
+    io.receive({"PNC1831": 0, "PRC1831": 1}, 0.0)
+    assert io.blades()["31"] == "moving"
+    io.handle_timer(4.0)
+    assert io.blades()["31"] == "reverse"
+    io.fail_point("32", "jammed", 5.0)
+    io.receive({"PNC1832": 0, "PRC1832": 1}, 5.0)
+    io.handle_timer(20.0)
+    assert io.blades()["32"] == "moving"  # jammed: never arrives
+
+
+def test_a_trailed_point_loses_its_detection_until_a_fault_clear(io: Trackside) -> None:
+    out = io.trail("31", "reverse", 1.0)  # a train ran through from the reverse leg
+    assert dict(out.changes) == {"SNI1831": 0}  # no indication at all
+    assert io.blades()["31"] == "reverse"  # the blades forced over
+    assert any("trailed" in e.text for e in out.events)
+    assert io.handle_timer(30.0).changes == []  # stays lost
+    out = io.clear_faults(31.0)
+    assert dict(out.changes) == {"SRI1831": 1}  # repaired: detected where the blades lie
+    with pytest.raises(ValueError):
+        io.trail("31", "sideways", 32.0)

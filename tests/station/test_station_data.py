@@ -153,6 +153,30 @@ STATION_CASES: list[tuple[str, Callable[[Any], None], str, str]] = [
         "unknown track circuit 'TC9999'",
     ),
     (
+        "point leg to a track the station lacks",
+        lambda d: _set(d, ["points", 0, "reverse"], "9"),
+        "points[0].reverse",
+        "unknown track '9'",
+    ),
+    (
+        "point facing no direction",
+        lambda d: _set(d, ["points", 0, "facing"], "left"),
+        "points[0].facing",
+        "must be one of up, down",
+    ),
+    (
+        "point legs the other way round from the routes",
+        lambda d: [_set(d, ["points", 0, "normal"], "2"), _set(d, ["points", 0, "reverse"], "1")],
+        "routes[0].exit",
+        "route 0111: the points as the route sets them lead to track 2, not signal 11's track 1",
+    ),
+    (
+        "point toe on a track the routes do not reach it by",
+        lambda d: _set(d, ["points", 2, "toe"], "2"),
+        "routes[0].points",
+        "route 0111: sets point 33 it never runs over",
+    ),
+    (
         "routes not a list",
         lambda d: _set(d, ["routes"], {"a": 1}),
         "routes",
