@@ -132,9 +132,6 @@ class Ars:
         self.retry_at: dict[tuple[str, int, str], tuple[float, str]] = {}  # -> (when, why)
         self.requests_made = 0
         self._now = 0.0
-        self._read: dict[
-            int, tuple[int, StationReading]
-        ] = {}  # station -> (table version, reading)
         self._station_tcs = {
             st: {t.name for t in self.line.station(st).track_circuits} for st in model.models
         }
@@ -191,16 +188,7 @@ class Ars:
 
     def _readings(self) -> dict[int, StationReading]:
         """Each station whose indications the CTC knows, read (again only if its table moved)."""
-        out: dict[int, StationReading] = {}
-        for st, model in self.model.models.items():
-            table = self.model.table(st)
-            if table is None or not table.known:
-                continue
-            cached = self._read.get(st)
-            if cached is None or cached[0] != table.version:
-                cached = self._read[st] = (table.version, model.read(table.state))
-            out[st] = cached[1]
-        return out
+        return {st: r for st in self.model.models if (r := self.model.reading(st)) is not None}
 
     @staticmethod
     def _occupancy(reading: StationReading) -> dict[str, bool | None]:
