@@ -246,3 +246,28 @@ def test_console_without_taps_or_trains_says_so(browser_context: Any, bench: Ben
         expect(pg.locator("#card-18 .link")).to_have_text("link up")
     finally:
         pg.close()
+
+
+def interval(page: Any, name: str) -> Any:
+    return page.locator(f"#iv-{name}")
+
+
+def test_each_interval_draws_an_arrow_of_its_direction_and_a_neutral_mark_without_one(
+    page: Any, bench: Bench
+) -> None:
+    """Each interval's arrow keeps the head of the direction its stations indicate; a lab-edge
+    interval names the station outside the lab as its holder; an interval no end is known of
+    shows the dashed shaft alone, "no direction"."""
+    expect(interval(page, "1820")).to_have_attribute("data-direction", "up")
+    expect(interval(page, "1820").locator(".iv-head.up")).to_be_visible()
+    expect(interval(page, "1820").locator(".iv-head.down")).to_be_hidden()
+    expect(interval(page, "2224")).to_have_attribute("data-direction", "down")
+    expect(interval(page, "2224").locator(".iv-head.down")).to_be_visible()
+    expect(interval(page, "2224").locator(".iv-dir")).to_have_text("held by 24")
+    bench.call(bench.rigs[22].close())  # the only station 2224 borders: nothing known of it
+    expect(interval(page, "2224")).to_have_class(re.compile(r"\bnone\b"))
+    expect(interval(page, "2224").locator(".iv-head")).to_have_count(2)
+    expect(interval(page, "2224").locator(".iv-head.down")).to_be_hidden()
+    expect(interval(page, "2224").locator(".iv-dir")).to_have_text("no direction")
+    bench.do(lambda: bench.start_rig(22, Mode.LOCAL))
+    expect(interval(page, "2224")).to_have_attribute("data-direction", "down")
