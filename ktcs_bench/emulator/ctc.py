@@ -32,7 +32,7 @@ from ktcs_bench import kinds
 from ktcs_bench import messages as msg
 from ktcs_bench.console.server import ConsoleServer
 from ktcs_bench.console.trains import TrainPosition, position_from_status
-from ktcs_bench.ctc.ars import Ars, ArsLogEntry, RouteRequest
+from ktcs_bench.ctc.ars import Ars, ArsLogEntry, ArsRequest
 from ktcs_bench.ctc.desk import Desk, Outcome
 from ktcs_bench.ctc.model import CtcModel, IntervalWatch, signal_name
 from ktcs_bench.ctc.tables import IndicationTables
@@ -273,14 +273,14 @@ class CtcDevice(Device):
         now = self._ars_now()
         self._ars_send(now, self.ars.update(now))
 
-    def _ars_send(self, now: float, requests: list[RouteRequest]) -> None:
+    def _ars_send(self, now: float, requests: list[ArsRequest]) -> None:
         for request in requests:
             task = asyncio.get_running_loop().create_task(self._ars_request(request))
             self._ars_tasks.add(task)
             task.add_done_callback(self._ars_tasks.discard)
         self.poke()
 
-    async def _ars_request(self, request: RouteRequest) -> None:
+    async def _ars_request(self, request: ArsRequest) -> None:
         assert self.ars is not None
         outcome = await self.carry_out(request.command, "ars")
         self.ars.result(request, outcome.accepted, outcome.why, self._ars_now())
