@@ -360,24 +360,36 @@ class Ars:
         self, t: DescribedTrain, p: _Progress, station: int, iv: Interval
     ) -> str | None:
         """Why another train departs into `iv` before `t` (None: `t` may go first)."""
-        rivals = [c for c in self._contenders.get(iv.name, []) if c.station != station]
-        mine = next((c for c in self._contenders.get(iv.name, []) if c.train == t.id), None)
+        ready = self._contenders.get(iv.name, [])
+        mine = next((c for c in ready if c.train == t.id), None)
         blocker = self._standing_on_my_track(t, p, iv)
         if blocker is not None:
             bp = self.progress[blocker]
-            if self._standing_on_my_track(self.describer.trains[blocker], bp, iv) != t.id:
+            if not self._mutual(blocker, iv):
                 far = iv.east if station == iv.west else iv.west
                 return (f"interval {iv.name}: train {blocker} stands on track {bp.track} "
                         f"at {far} and needs it, it goes first")  # fmt: skip
             # each stands on the other's track: the timetable locks them up; its order decides
-            other_key = next((c.key for c in rivals if c.train == blocker), None)
+            other_key = next((c.key for c in ready if c.train == blocker), None)
             if mine is not None and other_key is not None and other_key < mine.key:
                 return (f"interval {iv.name}: trains {t.id} and {blocker} each stand on the "
                         f"other's track; {blocker} goes first (timetable order)")  # fmt: skip
             return None
+        rivals = [c for c in ready if c.station != station
+                  and (self._blocked(c.train, iv) is None or self._mutual(c.train, iv))]  # fmt: skip
         if mine is None or not rivals or mine.key <= rivals[0].key:
             return None
         return f"interval {iv.name} given to train {rivals[0].train} first (timetable order)"
+
+    def _blocked(self, train: str, iv: Interval) -> str | None:
+        t, p = self.describer.trains.get(train), self.progress.get(train)
+        return None if t is None or p is None else self._standing_on_my_track(t, p, iv)
+
+    def _mutual(self, train: str, iv: Interval) -> bool:
+        """`train` stands on the arrival track of the train standing on its own (a lock-up the
+        timetable makes): each would wait for the other."""
+        other = self._blocked(train, iv)
+        return other is not None and self._blocked(other, iv) == train
 
     def _standing_on_my_track(self, t: DescribedTrain, p: _Progress, iv: Interval) -> str | None:
         """A train standing at `iv`'s far end on the track `t` is booked to arrive at there, and

@@ -1,0 +1,253 @@
+"""ARS and the intervals' traffic permission (SPEC §6.6), sans-I/O: the CTC's tables are fed
+indications as the interlockings would send them, and what ARS asks for is read off its
+requests. A departure into an interval its station does not hold waits for the permission it
+asks for; it is never asked for against a train in the interval or a route into it from the
+other end; of two trains ready to depart into one interval from its two ends one goes first (by
+the timetable, or the one standing on the other's arrival track), and the log says why the other
+waits."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from ktcs_bench.ctc.ars import Ars, ArsRequest, DirectionRequest, RouteRequest
+from ktcs_bench.ctc.model import CtcModel
+from ktcs_bench.station.loader import load_line
+from ktcs_bench.station.timetable import Timetable, load_timetable
+from ktcs_bench.station_codes import names as n
+
+LINE = load_line()
+
+HEAD = f"""\
+timetable: meet
+line: {Path(LINE.file).resolve()}
+train_data:
+  t: {{length_m: 200, max_speed_kmh: 80, traction_kmh_per_s: 3, service_brake_kmh_per_s: 3,
+      emergency_brake_kmh_per_s: 4}}
+trains:
+"""
+
+
+def timetable(tmp_path: Path, up_to_22: str = "1", down_to_20: str = "2",
+              up_depart: float = 40, down_depart: float = 40) -> Timetable:  # fmt: skip
+    """1001 up from 20 track 1 to 22; 2001 down from 22 track 2 to 20 and 18."""
+    stop22 = {"1": 12680, "2": 12580}[up_to_22]
+    stop20 = {"1": 6220, "2": 6120, "3": 6220}[down_to_20]
+    text = (
+        HEAD
+        + f"""\
+  - id: "1001"
+    train: t
+    direction: up
+    depart_s: {up_depart}
+    stops:
+      - {{station: 20, track: "1", stop_m: 6780, dwell_s: 30}}
+      - {{station: 22, track: "{up_to_22}", stop_m: {stop22}, dwell_s: 30}}
+  - id: "2001"
+    train: t
+    direction: down
+    depart_s: {down_depart}
+    stops:
+      - {{station: 22, track: "2", stop_m: 12120, dwell_s: 30}}
+      - {{station: 20, track: "{down_to_20}", stop_m: {stop20}, dwell_s: 30}}
+      - {{station: 18, track: "2", stop_m: 620, dwell_s: 30}}
+"""
+    )
+    path = tmp_path / "meet.yaml"
+    path.write_text(text, encoding="utf-8")
+    return load_timetable(path, LINE)
+
+
+class Line:
+    """The CTC's tables, fed by hand: every station in center mode, points normal, circuits
+    clear, each interval as `permission` says (its holder; the other end shows the holder's
+    direction), unless changed."""
+
+    def __init__(self, tt: Timetable, holders: dict[str, int | None]) -> None:
+        self.model = CtcModel(LINE)
+        self.occupied: set[str] = set()
+        self.routes: set[tuple[int, str]] = set()
+        self.holders = dict(holders)
+        self.asking: set[tuple[int, str]] = set()
+        self.push()
+        self.ars = Ars(self.model, tt, on=(18, 20, 22))
+
+    def state(self, st: int) -> dict[str, int]:
+        view = LINE.view(st)
+        out = {n.ctc(st): 1}
+        for p in view.station.points:
+            out[n.sni(st, p.name)] = 1
+        for tc in view.track_circuits:
+            out[tc.name] = int(tc.name in self.occupied)
+        for r in view.station.routes:
+            out[n.rsi(st, r.name)] = int((st, r.name) in self.routes)
+        for iv in view.intervals:
+            holder = self.holders.get(iv.name, iv.west if iv.default_direction == "up"
+                                      else iv.east)  # fmt: skip
+            d = None if holder is None else "up" if holder == iv.west else "down"
+            out[n.tdu(iv.name)] = int(d == "up")
+            out[n.tdd(iv.name)] = int(d == "down")
+            out[n.phi(iv.name)] = int(holder == st)
+            out[n.prq(iv.name)] = int((st, iv.name) in self.asking)
+        return out
+
+    def push(self) -> None:
+        for st in LINE.stations:
+            model = self.model.station(st)
+            chart = model.indications
+            state = dict.fromkeys((c.number for c in chart.codes), 0)
+            state.update({chart.number_of(k): v for k, v in self.state(st).items()})
+            if not self.model.tables.stations[st].connected:
+                self.model.tables.link_up(st, "test")
+            self.model.tables.full_state(st, list(state.items()))
+
+    def update(self, now: float) -> list[ArsRequest]:
+        self.push()
+        return self.ars.update(now)
+
+    def waits(self, train: str) -> str | None:
+        return self.ars.progress[train].waiting
+
+    def log(self) -> list[str]:
+        return [e["text"] for e in self.ars.log]
+
+
+def routes(requests: list[ArsRequest]) -> list[tuple[str, int, str]]:
+    return [(r.train, r.station, r.route) for r in requests if isinstance(r, RouteRequest)]
+
+
+def asks(requests: list[ArsRequest]) -> list[tuple[str, int, str]]:
+    return [(r.train, r.station, r.interval) for r in requests if isinstance(r, DirectionRequest)]
+
+
+def standing(line: Line) -> None:
+    """Both trains on their first platforms, identified."""
+    line.occupied |= {"TC2055", "TC2256"}
+    assert line.update(0.0) == []
+    assert set(line.ars.describer.trains) == {"1001", "2001"}
+
+
+def test_a_departure_into_an_interval_held_by_the_other_end_asks_for_it_then_goes(
+    tmp_path: Path,
+) -> None:
+    line = Line(timetable(tmp_path, down_depart=400), {"2022": 22})
+    standing(line)
+    sent = line.update(45.0)
+    assert routes(sent) == [] and asks(sent) == [("1001", 20, "2022")]
+    assert line.waits("1001") == "interval 2022 held by 22, asked for it"
+    assert "train 1001: asks for the permission of interval 2022 at station 20 (held by 22)" in (
+        line.log()
+    )
+    # the control goes out as DRC2022 at station 20
+    action = line.model.action(sent[0].command)
+    assert (action.station, action.name, action.value) == (20, "DRC2022", 1)
+    line.ars.result(sent[0], True, None, 45.1)
+    line.asking.add((20, "2022"))  # 20's IXL asks 22 for it
+    assert line.update(45.2) == []  # asked once: not again while the handover runs
+    line.holders["2022"] = None  # 22 gives it up first ...
+    line.asking.clear()
+    assert line.update(45.4) == []
+    line.holders["2022"] = 20  # ... and 20 holds it once it has read that
+    sent = line.update(45.6)
+    assert routes(sent) == [("1001", 20, "1191")] and asks(sent) == []
+
+
+def test_the_permission_is_asked_for_again_only_after_a_refusal_waits_out(tmp_path: Path) -> None:
+    line = Line(timetable(tmp_path, down_depart=400), {"2022": 22})
+    standing(line)
+    (ask,) = line.update(45.0)
+    line.ars.result(ask, False, "unknown code", 45.1)
+    assert line.update(46.0) == []
+    assert line.waits("1001") == (
+        "interval 2022 held by 22, not given (unknown code), asking again at 50.1 s"
+    )
+    assert line.ars.next_deadline() == pytest.approx(50.1)
+    assert asks(line.update(50.1)) == [("1001", 20, "2022")]
+
+
+@pytest.mark.parametrize(
+    ("occupied", "route", "why"),
+    [
+        ({"TC2245"}, None, "interval 2022 held by 22, TC2245 occupied"),
+        (set(), (22, "2292"), "interval 2022 held by 22, route 22-92 into it set at station 22"),
+    ],
+)
+def test_never_asked_against_a_train_in_the_interval_or_a_route_into_it(
+    tmp_path: Path, occupied: set[str], route: tuple[int, str] | None, why: str
+) -> None:
+    line = Line(timetable(tmp_path, down_depart=400), {"2022": 22})
+    standing(line)
+    line.occupied |= occupied
+    if route is not None:
+        line.routes.add(route)
+    assert line.update(45.0) == []
+    assert line.waits("1001") == why
+    assert "1001 waits for route 11-91 at station 20: " + why in " ".join(line.log())
+
+
+def test_a_train_described_in_the_interval_is_named(tmp_path: Path) -> None:
+    line = Line(timetable(tmp_path, down_depart=0), {"2022": 22})
+    standing(line)
+    (req,) = line.update(31.0)
+    assert routes([req]) == [("2001", 22, "2292")]
+    line.ars.result(req, True, None, 31.1)
+    line.routes.add((22, "2292"))
+    # 2001 runs out of 22 into the interval
+    line.occupied |= {"TC2253A", "TC2247"}
+    line.update(40.0)
+    line.occupied -= {"TC2256", "TC2253A"}
+    line.routes.clear()
+    line.update(41.0)
+    assert line.ars.describer.train_at("TC2247").id == "2001"  # type: ignore[union-attr]
+    line.update(45.0)
+    assert line.waits("1001") == "interval 2022 held by 22, train 2001 in it"
+
+
+def test_two_trains_ready_for_one_interval_from_its_two_ends_go_in_timetable_order(
+    tmp_path: Path,
+) -> None:
+    """Each end waits for the other only if ARS lets it: here 22 holds 2022, but 1001 at 20
+    comes first in the timetable (both due at 40 s): 2001 waits at 22 and says for whom, 20 asks
+    for the permission, and 22 does not lock its departure meanwhile."""
+    line = Line(timetable(tmp_path), {"2022": 22})
+    standing(line)
+    sent = line.update(45.0)
+    assert asks(sent) == [("1001", 20, "2022")] and routes(sent) == []
+    assert line.waits("2001") == "interval 2022 given to train 1001 first (timetable order)"
+    assert (
+        "train 2001 waits for route 22-92 at station 22: interval 2022 given to train 1001 "
+        "first (timetable order)" in line.log()
+    )
+    # 1001 later due than 2001: 2001 goes at once from the end that holds
+    line = Line(timetable(tmp_path / "..", up_depart=50), {"2022": 22})
+    standing(line)
+    sent = line.update(55.0)
+    assert routes(sent) == [("2001", 22, "2292")] and asks(sent) == []
+    assert line.waits("1001") == "interval 2022 given to train 2001 first (timetable order)"
+
+
+def test_the_train_standing_on_the_others_arrival_track_goes_first(tmp_path: Path) -> None:
+    """1001 would arrive on 22's track 2, where 2001 stands needing 2022: were 1001 sent first,
+    the two would lock each other up. 2001 goes first whatever the timetable order."""
+    line = Line(timetable(tmp_path, up_to_22="2"), {"2022": 20})
+    standing(line)
+    sent = line.update(45.0)
+    assert routes(sent) == [] and asks(sent) == [("2001", 22, "2022")]
+    assert line.waits("1001") == (
+        "interval 2022: train 2001 stands on track 2 at 22 and needs it, it goes first"
+    )
+
+
+def test_each_on_the_others_track_the_timetable_order_decides_and_says_so(tmp_path: Path) -> None:
+    line = Line(timetable(tmp_path, up_to_22="2", down_to_20="1", up_depart=60),
+                {"2022": 20})  # fmt: skip
+    standing(line)
+    sent = line.update(65.0)
+    # 2001 is first in timetable order (due at 40 s, 1001 at 60 s): 20 keeps its departure back
+    assert routes(sent) == [] and asks(sent) == [("2001", 22, "2022")]
+    assert line.waits("1001") == (
+        "interval 2022: trains 1001 and 2001 each stand on the other's track; 2001 goes first "
+        "(timetable order)"
+    )
