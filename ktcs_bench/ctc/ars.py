@@ -44,7 +44,7 @@ from typing import Any, TypedDict
 from ktcs_bench import kinds, messages
 from ktcs_bench.ctc.describer import DescribedTrain, Describer
 from ktcs_bench.ctc.model import CtcModel, StationReading
-from ktcs_bench.station.model import Interval, Route, Station
+from ktcs_bench.station.model import Direction, Interval, Route, Station
 from ktcs_bench.station.timetable import Stop, Timetable, TimetableTrain, start_route
 
 RETRY_S = 5.0  # a rejected or unanswered request: ask again no sooner
@@ -144,6 +144,7 @@ class _Progress:
     track: str | None = None  # the platform track it stands on
     waiting: str | None = None  # why it waits now (logged when it changes)
     wanted: tuple[int, str] | None = None  # (station, route) it wants next
+    picked: bool = False  # picked up on the line at the CTC's start: its first times are past
 
 
 class Ars:
@@ -172,6 +173,7 @@ class Ars:
         self.direction_retry: dict[tuple[int, str], tuple[float, str]] = {}  # -> (when, why)
         self.directions_asked = 0
         self._contenders: dict[str, list[_Contender]] = {}  # interval -> ready to depart into it
+        self._picked_up = False  # the trains on the line at the start have been picked up
         self._order = {t.id: i for i, t in enumerate(timetable.trains)}
         self._now = 0.0
         self._station_tcs = {
@@ -195,6 +197,10 @@ class Ars:
         occupancy: dict[str, bool | None] = {}
         for reading in readings.values():
             occupancy.update(self._occupancy(reading))
+        if not self._picked_up and self._whole_picture(readings, occupancy):
+            self._picked_up = True  # the trains already on the line, once, at the first picture
+            for e in self.describer.pick_up(occupancy, now, self._hints(readings)):
+                self._log(now, e.text, train=e.train)
         for e in self.describer.update(occupancy, now):
             self._log(now, e.text, train=e.train)
         for train_id in list(self.progress):
@@ -409,6 +415,31 @@ class Ars:
                     return other_id
         return None
 
+    def _whole_picture(
+        self, readings: dict[int, StationReading], occupancy: dict[str, bool | None]
+    ) -> bool:
+        """Every station's indications known, none showing its fail-safe picture."""
+        return set(readings) == set(self.model.models) and all(
+            v is not None for v in occupancy.values()
+        )
+
+    def _hints(self, readings: dict[int, StationReading]) -> dict[str, Direction]:
+        """The direction the indications show over each circuit they show one for: an
+        interval's traffic direction, a set route's direction (for picking trains up)."""
+        out: dict[str, Direction] = {}
+        for st, reading in readings.items():
+            view = self.line.view(st)
+            for iv in view.intervals:
+                d = reading.directions.get(iv.name)
+                if d == "up":
+                    out.update(dict.fromkeys(iv.track_circuits, "up"))
+                elif d == "down":
+                    out.update(dict.fromkeys(iv.track_circuits, "down"))
+            for name in sorted(reading.routes_set):
+                route = self._station(st).route(name)
+                out.update(dict.fromkeys(route.track_circuits, route.direction))
+        return out
+
     def _readings(self) -> dict[int, StationReading]:
         """Each station whose indications the CTC knows, read (again only if its table moved)."""
         return {st: r for st in self.model.models if (r := self.model.reading(st)) is not None}
@@ -522,10 +553,45 @@ class Ars:
     # ------------------------------------------------------------------ the timetable
 
     def _start(self, t: DescribedTrain) -> _Progress:
+        if t.picked_up:
+            return self._picked(t)
         first = t.service.stops[0]
         if first.home_route is None:  # entered standing on its first platform
             return _Progress(0, "dwell", t.identified_at, first.track)
         return _Progress()
+
+    def _picked(self, t: DescribedTrain) -> _Progress:
+        """Where in its timetable a train picked up on the line stands, from where it is: on a
+        platform of a stop (dwelling there from now; terminated at its last), in a stop's station
+        short of its stop point (arriving), or on the way to the next stop ahead of it. Its
+        first stop's times are not waited for again: it was on its way before the CTC started."""
+        stops, now = t.service.stops, t.identified_at
+        head = self.describer.circuits[t.berth]
+        up = t.direction == "up"
+        for k, stop in enumerate(stops):
+            station = self._station(stop.station)
+            if not set(t.footprint) & {c.name for c in station.track_circuits}:
+                continue
+            track = self._platform(t, stop.station)
+            if track is not None:
+                last = k == len(stops) - 1 and not t.service.leaves_lab
+                p = _Progress(k, "terminated" if last else "dwell", now, track, picked=True)
+            elif (head.to_m <= stop.stop_m + 1e-6) if up else (head.from_m >= stop.stop_m - 1e-6):
+                p = _Progress(k, "arriving", picked=True)
+            else:
+                p = _Progress(k + 1, "approach" if k + 1 < len(stops) else "leaving", picked=True)
+            self._log(now, f"train {t.id}: {self._state_text(t, p)}", stop.station, t.id)
+            return p
+        for k, stop in enumerate(stops):
+            tcs = self._station(stop.station).track_circuits
+            lo, hi = min(c.from_m for c in tcs), max(c.to_m for c in tcs)
+            if (lo >= head.to_m - 1e-6) if up else (hi <= head.from_m + 1e-6):
+                p = _Progress(k, "approach", picked=True)
+                break
+        else:
+            p = _Progress(len(stops), "leaving", picked=True)
+        self._log(now, f"train {t.id}: {self._state_text(t, p)}", train=t.id)
+        return p
 
     def _station(self, number: int) -> Station:
         return self.line.station(number)
@@ -580,7 +646,7 @@ class Ars:
         )
 
     def _not_before(self, stop: Stop, p: _Progress, train: TimetableTrain) -> tuple[float, ...]:
-        times = [train.enters_at_s, train.depart_s] if p.stop == 0 else []
+        times = [train.enters_at_s, train.depart_s] if p.stop == 0 and not p.picked else []
         if p.arrived_at is not None:
             times.append(p.arrived_at + stop.dwell_s)
         return tuple(times)
@@ -599,7 +665,7 @@ class Ars:
             assert route is not None
             if t.footprint[-1] not in self._approach_zone(stop.station, route):
                 return _Want(stop.station, route, "")  # not yet approaching
-            due = t.service.enters_at_s if p.stop == 0 else now
+            due = t.service.enters_at_s if p.stop == 0 and not p.picked else now
         else:
             route = self._start_route(t, p)
             if route is None:

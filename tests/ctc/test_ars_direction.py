@@ -251,3 +251,58 @@ def test_each_on_the_others_track_the_timetable_order_decides_and_says_so(tmp_pa
         "interval 2022: trains 1001 and 2001 each stand on the other's track; 2001 goes first "
         "(timetable order)"
     )
+
+
+# -- a CTC restarted with trains on the line ---------------------------------------------------
+
+REFERENCE = load_timetable(LINE.file.replace("lines/reference.yaml",
+                                             "timetables/reference.yaml"), LINE)  # fmt: skip
+
+
+def test_a_restarted_ctc_picks_up_the_trains_on_the_line_and_runs_them_on() -> None:
+    """The reference timetable's two up trains, found at the CTC's start: 1001 standing at 20,
+    1003 in interval 1820 behind it. The leading one is the earlier train; 1001 dwells from now
+    and leaves at its dwell's end, its first stop's times not waited for again."""
+    line = Line(REFERENCE, {})
+    line.occupied |= {"TC2055", "TC1863"}
+    assert line.update(0.0) == []
+    d = line.ars.describer
+    assert (d.train_at("TC2055").id, d.train_at("TC1863").id) == ("1001", "1003")  # type: ignore[union-attr]
+    assert d.expected == []
+    log = line.log()
+    assert "train 1001 picked up at TC2055 (on the line as the CTC started)" in log
+    assert "train 1001: at station 20 track 1" in log
+    assert "train 1003: running to station 20" in log
+    assert line.waits("1001") == "dwell until 30.0 s"
+    assert routes(line.update(30.0)) == [("1001", 20, "1191")]
+
+
+def test_a_restarted_ctc_never_sends_a_train_at_one_it_picked_up_in_the_interval(
+    tmp_path: Path,
+) -> None:
+    """2001 is in interval 2022 coming down (22 holds it, the direction shows down) when the CTC
+    starts: it is picked up as the down train, and 1001 at 20 waits for it instead of asking for
+    the permission."""
+    line = Line(timetable(tmp_path, up_depart=0, down_depart=0), {"2022": 22})
+    line.occupied |= {"TC2055", "TC2245"}
+    line.update(0.0)
+    d = line.ars.describer
+    assert d.train_at("TC2245").id == "2001"  # type: ignore[union-attr]
+    assert d.train_at("TC2055").id == "1001"  # type: ignore[union-attr]
+    assert "train 2001: running to station 20" in line.log()
+    assert line.update(31.0) == []
+    assert line.waits("1001") == "interval 2022 held by 22, train 2001 in it"
+
+
+def test_no_train_is_picked_up_from_a_picture_not_yet_whole() -> None:
+    """A station not yet known (or showing its fail-safe picture) holds the pick-up back: a run
+    of circuits is not named from half the line."""
+    line = Line(REFERENCE, {})
+    line.occupied |= {"TC2055"}
+    line.push()
+    line.model.tables.link_down(22)
+    assert line.ars.update(0.0) == []
+    assert line.ars.describer.trains == {}
+    line.model.tables.link_up(22, "test")
+    assert line.update(1.0) == []
+    assert set(line.ars.describer.trains) == {"1001"}
