@@ -333,6 +333,7 @@ class Ars:
         retry = self.direction_retry.get(key)
         if retry is not None and now < retry[0]:
             return f"{held}, not given ({retry[1]}), asking again at {retry[0]:.1f} s", None
+        self.direction_retry.pop(key, None)
         return f"{held}, asked for it", DirectionRequest(t.id, station, iv.name, reading.holder)
 
     def _against(
@@ -382,7 +383,10 @@ class Ars:
                         f"other's track; {blocker} goes first (timetable order)")  # fmt: skip
             return None
         rivals = [c for c in ready if c.station != station
-                  and (self._blocked(c.train, iv) is None or self._mutual(c.train, iv))]  # fmt: skip
+                  and (self._blocked(c.train, iv) is None or self._mutual(c.train, iv))
+                  and (c.station, iv.name) not in self.direction_retry]  # fmt: skip
+        # (a rival whose ask was refused lets this end go meanwhile: no waiting on a train
+        # that cannot have the permission, the link between the two down, say)
         if mine is None or not rivals or mine.key <= rivals[0].key:
             return None
         return f"interval {iv.name} given to train {rivals[0].train} first (timetable order)"

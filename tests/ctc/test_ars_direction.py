@@ -306,3 +306,19 @@ def test_no_train_is_picked_up_from_a_picture_not_yet_whole() -> None:
     line.model.tables.link_up(22, "test")
     assert line.update(1.0) == []
     assert set(line.ars.describer.trains) == {"1001"}
+
+
+def test_a_rival_that_cannot_have_the_permission_does_not_hold_the_holder_back(
+    tmp_path: Path,
+) -> None:
+    """1001 at 20 is first in timetable order, but its ask is refused (the link between 20 and
+    22 down, say): meanwhile 2001 leaves from 22, which holds the interval."""
+    line = Line(timetable(tmp_path), {"2022": 22})
+    standing(line)
+    (ask,) = line.update(45.0)
+    assert asks([ask]) == [("1001", 20, "2022")]
+    line.ars.result(ask, False, "direction", 45.5)
+    assert routes(line.update(46.0)) == [("2001", 22, "2292")]
+    assert line.waits("1001") == (
+        "interval 2022 held by 22, not given (direction), asking again at 50.5 s"
+    )
