@@ -322,3 +322,25 @@ def test_a_rival_that_cannot_have_the_permission_does_not_hold_the_holder_back(
     assert line.waits("1001") == (
         "interval 2022 held by 22, not given (direction), asking again at 50.5 s"
     )
+
+
+def test_the_describer_picks_up_by_the_direction_shown_and_leaves_what_no_path_covers(
+    tmp_path: Path,
+) -> None:
+    """The same run of circuits in interval 2022 is the down train where the interval shows down
+    and the up train where it shows up; a train in the siding no timetable train runs over is
+    left unexplained."""
+    from ktcs_bench.ctc.describer import Describer
+
+    tt = timetable(tmp_path)
+    occupancy = {tc.name: False for tc in LINE.all_track_circuits()}
+    occupancy.update({"TC2245": True, "TC2254": True})
+    for shown, train in (("down", "2001"), ("up", "1001")):
+        d = Describer(LINE, tt)
+        hints = dict.fromkeys(LINE.intervals[2].track_circuits, shown)
+        events = d.pick_up(occupancy, 5.0, hints)  # type: ignore[arg-type]
+        assert [(e.train, e.kind, e.track_circuit) for e in events] == [
+            (train, "picked up", "TC2245")
+        ]
+        assert d.trains[train].picked_up and d.trains[train].identified_at == 5.0
+        assert [e.kind for e in d.update(occupancy, 5.0)] == ["unexplained"]  # the siding
