@@ -344,3 +344,130 @@ def test_the_describer_picks_up_by_the_direction_shown_and_leaves_what_no_path_c
         ]
         assert d.trains[train].picked_up and d.trains[train].identified_at == 5.0
         assert [e.kind for e in d.update(occupancy, 5.0)] == ["unexplained"]  # the siding
+
+
+# -- a whole meet, the interlockings' permission rules played by the test -----------------------
+
+MEET = """\
+  - id: "1001"
+    train: t
+    direction: up
+    stops:
+      - {station: 18, track: "1", stop_m: 1080, dwell_s: 30}
+      - {station: 20, track: "1", stop_m: 6780, dwell_s: 30}
+      - {station: 22, track: "1", stop_m: 12680, dwell_s: 30}
+  - id: "2001"
+    train: t
+    direction: down
+    stops:
+      - {station: 22, track: "2", stop_m: 12120, dwell_s: 30}
+      - {station: 20, track: "2", stop_m: 6120, dwell_s: 30}
+      - {station: 18, track: "2", stop_m: 620, dwell_s: 30}
+"""
+
+
+def test_an_up_and_a_down_train_cross_at_20_without_meeting_between_stations(
+    tmp_path: Path,
+) -> None:
+    """1001 up 18 -> 20 -> 22 and 2001 down 22 -> 20 -> 18, both leaving at once. The test plays
+    the interlockings as SPEC §6.6 has them (a departure only from the holder; the permission
+    given only with the interval clear and no departure route of the holder's into it) and
+    moves each train one circuit at a time where a route of its direction is set. ARS asks for
+    each permission it needs; the two cross at station 20, never in one interval together, and
+    both reach their last stop."""
+    path = tmp_path / "meet.yaml"
+    path.write_text(HEAD + MEET, encoding="utf-8")
+    tt = load_timetable(path, LINE)
+    line = Line(tt, {})  # 1820 held by 18, 2022 by 20: the line's default (up)
+    paths = {t.id: _path(t.id, tt) for t in tt.trains}
+    at = {t: p[0] for t, p in paths.items()}
+    line.occupied = set(at.values())
+    directions = {t.id: t.direction for t in tt.trains}
+    inner = {iv.name: iv for iv in LINE.intervals if not iv.boundary}
+    departs = {(s, r.name): iv.name for s in LINE.stations for r in LINE.station(s).routes
+               if (iv := LINE.view(s).interval_of_exit(r)) is not None and not iv.boundary}  # fmt: skip
+
+    def answer(r: ArsRequest) -> tuple[bool, str | None]:
+        if isinstance(r, DirectionRequest):
+            iv = inner[r.interval]
+            holder = line.holders.get(r.interval, iv.west)
+            clear = not set(iv.track_circuits) & line.occupied
+            locked = any(departs.get(x) == r.interval and x[0] == holder for x in line.routes)
+            if clear and not locked:
+                line.holders[r.interval] = r.station
+            return True, None
+        route = LINE.station(r.station).route(r.route)
+        into = departs.get((r.station, r.route))
+        if into is not None and line.holders.get(into, inner[into].west) != r.station:
+            return False, "direction"
+        if any((r.station, c) in line.routes for c in route.conflicts):
+            return False, "route conflicts"
+        if set(route.all_track_circuits) & line.occupied:
+            return False, "track occupied"
+        line.routes.add((r.station, r.route))
+        return True, None
+
+    def move(train: str) -> None:
+        p, i = paths[train], paths[train].index(at[train])
+        if i + 1 == len(p) or p[i + 1] in line.occupied:
+            return
+        nxt, in_iv = p[i + 1], any(p[i + 1] in iv.track_circuits for iv in inner.values())
+        was_in_iv = any(at[train] in iv.track_circuits for iv in inner.values())
+        routed = [x for x in line.routes if nxt in LINE.station(x[0]).route(x[1]).track_circuits
+                  and LINE.station(x[0]).route(x[1]).direction == directions[train]]  # fmt: skip
+        platform = at[train] in {c.name for c in LINE.all_track_circuits() if len(c.tracks) == 1}
+        if not routed and not (in_iv and (was_in_iv or not platform)):
+            return  # (out of a station's last points into the interval: its route ran there)
+        line.occupied.discard(at[train])
+        at[train] = nxt
+        line.occupied.add(nxt)
+        for x in list(line.routes):  # a route the train has run into releases behind it
+            tcs = LINE.station(x[0]).route(x[1]).track_circuits
+            if p[i] in tcs and (nxt not in tcs or nxt == tcs[-1]):
+                line.routes.discard(x)
+
+    for second in range(1500):
+        now = float(second)
+        for r in line.update(now):
+            ok, why = answer(r)
+            line.ars.result(r, ok, why, now)
+        if second % 3 == 0:
+            for train in sorted(at):
+                move(train)
+        for iv in inner.values():  # never two trains in one interval
+            assert len([t for t, tc in at.items() if tc in iv.track_circuits]) <= 1, (now, at)
+    assert at == {t: p[-1] for t, p in paths.items()}, "\n".join(line.log())
+    states = {t["train"]: t["state"] for t in line.ars.status()["trains"]}
+    assert states == {"1001": "terminated at station 22 track 1",
+                      "2001": "terminated at station 18 track 2"}  # fmt: skip
+    log = " ".join(line.log())
+    assert "train 2001: asks for the permission of interval 2022 at station 22" in log
+    assert "train 2001: asks for the permission of interval 1820 at station 20" in log
+
+
+def _path(train: str, tt: Timetable) -> list[str]:
+    """The circuits `train` runs over, in order: each platform, the route out, the interval,
+    the route into the next platform."""
+    t = tt.train(train)
+    up = t.direction == "up"
+    out: list[str] = []
+
+    def add(tcs: list[str]) -> None:
+        key = {c.name: c.from_m for c in LINE.all_track_circuits()}
+        for tc in sorted(tcs, key=lambda c: key[c], reverse=not up):
+            if not out or out[-1] != tc:
+                out.append(tc)
+
+    for k, stop in enumerate(t.stops):
+        st_ = LINE.station(stop.station)
+        if stop.home_route is not None:
+            add(list(st_.route(stop.home_route).track_circuits))
+        else:
+            add([c.name for c in st_.track_circuits if c.tracks == (stop.track,)])
+        if stop.start_route is not None and k + 1 < len(t.stops):
+            route = st_.route(stop.start_route)
+            add(list(route.track_circuits))
+            iv = LINE.view(stop.station).interval_of_exit(route)
+            assert iv is not None
+            add(list(iv.track_circuits))
+    return out
