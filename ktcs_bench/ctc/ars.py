@@ -20,6 +20,16 @@ occupied, none of its points has lost detection or is locked the other way, and 
 leads into is not occupied against its direction. Otherwise the train **waits** and the reason
 goes to the log once, when it changes. Of two trains wanting the same signal, the one nearer asks.
 
+A departure into an interval between two stations needs that interval's traffic permission
+(SPEC §6.6): where its station does not hold it, ARS asks for it first (a `DirectionRequest`,
+`ctc direction`) and the route once it is held -- never against a train in the interval or a
+departure route into it from the other end, read from both ends' indications; of two trains ready
+to depart into one interval from its two ends, the one standing on the other's arrival track goes
+first, else the first in timetable order, and the other waits saying for whom (docs/ars.md).
+
+A CTC that starts with trains on the line picks them up from its first whole picture
+(`Describer.pick_up`) and takes each on from where it stands.
+
 A station showing every one of its track circuits occupied shows its interlocking's fail-safe
 picture (its ATC link down, or up and not yet reporting): ARS reads that as occupancy not known,
 not as trains -- it steps, clears and identifies no train, and sets no route over it.
@@ -27,8 +37,8 @@ not as trains -- it steps, clears and identifies no train, and sets no route ove
 Inputs: `update(now)` after the CTC's indication tables changed (it reads them through the
 `CtcModel`), `handle_timer(now)` at `next_deadline()` (a dwell ending, a train becoming due, a
 retry), `switch(station, on, now)` and `result(request, accepted, why, now)` with what came of a
-request. `update` and `handle_timer` return the `RouteRequest`s to send, in the CTC desk's words
-(`request.command`). A rejected or unanswered request is asked again after `RETRY_S`; an accepted
+request. `update` and `handle_timer` return the requests to send (`RouteRequest`,
+`DirectionRequest`), in the CTC desk's words (`request.command`). A rejected or unanswered request is asked again after `RETRY_S`; an accepted
 one not again for that train unless its route drops before the train has entered it (an operator
 cancelled it). Every log entry is also handed to `on_log` (the CTC device puts it in its events).
 No clock, no I/O.
