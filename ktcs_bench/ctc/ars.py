@@ -318,9 +318,9 @@ class Ars:
         if iv is None:
             return None, None
         holds, asks = readings[station].permission.get(iv.name, (None, None))
-        if holds is None:
-            return None, None  # its interlocking indicates no permission: nothing to ask for
         other = iv.east if station == iv.west else iv.west
+        if holds is None or self._not_worked(iv, readings):
+            return None, None  # its interlockings work no permission: nothing to ask for
         first = self._goes_first(t, p, station, iv)
         if first is not None:
             return first, None
@@ -345,6 +345,20 @@ class Ars:
             return f"{held}, not given ({retry[1]}), asking again at {retry[0]:.1f} s", None
         self.direction_retry.pop(key, None)
         return f"{held}, asked for it", DirectionRequest(t.id, station, iv.name, reading.holder)
+
+    @staticmethod
+    def _not_worked(iv: Interval, readings: dict[int, StationReading]) -> bool:
+        """Both ends show the interval's direction alike, yet neither holds nor asks for its
+        permission: interlockings that work no permission (from before SPEC §6.6) -- each
+        shows its direction, and departures are theirs to refuse. (Where the permission is
+        worked, an end showing a direction knows its holder; in a handover or a lost one the
+        ends do not show one alike.)"""
+        ends = [readings.get(iv.west), readings.get(iv.east)]
+        if any(r is None for r in ends):
+            return False
+        shown = {r.directions.get(iv.name) for r in ends if r is not None}
+        perm = [r.permission.get(iv.name, (None, None)) for r in ends if r is not None]
+        return len(shown) == 1 and None not in shown and not any(h or a for h, a in perm)
 
     def _against(
         self,

@@ -71,6 +71,7 @@ class Line:
         self.routes: set[tuple[int, str]] = set()
         self.holders = dict(holders)
         self.asking: set[tuple[int, str]] = set()
+        self.worked = True  # False: interlockings from before SPEC §6.6 (no end ever holds)
         self.push()
         self.ars = Ars(self.model, tt, on=(18, 20, 22))
 
@@ -89,7 +90,7 @@ class Line:
             d = None if holder is None else "up" if holder == iv.west else "down"
             out[n.tdu(iv.name)] = int(d == "up")
             out[n.tdd(iv.name)] = int(d == "down")
-            out[n.phi(iv.name)] = int(holder == st)
+            out[n.phi(iv.name)] = int(holder == st and self.worked)
             out[n.prq(iv.name)] = int((st, iv.name) in self.asking)
         return out
 
@@ -152,6 +153,25 @@ def test_a_departure_into_an_interval_held_by_the_other_end_asks_for_it_then_goe
     line.holders["2022"] = 20  # ... and 20 holds it once it has read that
     sent = line.update(45.6)
     assert routes(sent) == [("1001", 20, "1191")] and asks(sent) == []
+
+
+def test_interlockings_that_work_no_permission_are_left_to_refuse_departures(
+    tmp_path: Path,
+) -> None:
+    """Both ends show 2022's direction alike and neither holds or asks for it (interlockings
+    from before SPEC §6.6, whose charts carry PHI at 0): ARS asks for no permission and sets the
+    departure as before, with its direction; against it, it waits as before."""
+    line = Line(timetable(tmp_path, down_depart=400), {"2022": 20})
+    line.worked = False
+    standing(line)
+    assert line.model.interval("2022").holder is None
+    assert routes(line.update(45.0)) == [("1001", 20, "1191")]
+    line = Line(timetable(tmp_path, down_depart=400), {"2022": 22})
+    line.worked = False
+    standing(line)
+    line.occupied.add("TC2063")  # 20's half of the interval, the direction down
+    assert line.update(45.0) == []
+    assert line.waits("1001") == "interval 2022 occupied against the up direction"
 
 
 def test_the_permission_is_asked_for_again_only_after_a_refusal_waits_out(tmp_path: Path) -> None:
