@@ -9,7 +9,7 @@ misspelt, a value of the wrong type -- which the port answers as `{"ok": false, 
 The handlers then dispatch on the message's class (`match`), never on strings; `encode` gives a
 message's JSON object back (a message round-trips: `decode(encode(m), union) == m`).
 
-The CTC's operator commands (`OperatorCommand`: route, point, signal, mode, control) are one
+The CTC's operator commands (`OperatorCommand`: route, point, signal, mode, direction, control) are one
 message whoever gives them: the `ctc` console's words (`ctc.log.parse_words`), automatic route
 setting, procedures, the web console's clicks (read into it by the desk:
 `ctc.model.operator_command`) -- and the command log says them in the operator's words from the
@@ -123,6 +123,14 @@ class Mode(Message, tag="mode"):
     station: StationRef = None
 
 
+class AskDirection(Message, tag="direction"):
+    """Ask the neighbour for `interval`'s traffic permission (SPEC §6.6), ahead of a departure
+    route into it from `station`: its IXL answers accepted (asked) or refused."""
+
+    interval: str
+    station: StationRef = None
+
+
 class Control(Message, tag="control"):
     """A control code of the station's CTC->IXL chart by name, and its value."""
 
@@ -131,7 +139,7 @@ class Control(Message, tag="control"):
     value: int = 1
 
 
-OperatorCommand = Route | Point | Signal | Mode | Control
+OperatorCommand = Route | Point | Signal | Mode | AskDirection | Control
 """What the operator's desk carries out (`ctc.desk.Desk.operate`)."""
 
 
@@ -273,8 +281,8 @@ TrainOrder = Hold | Dispatch | RunTo
 # -- what each kind of device takes ---------------------------------------------------------------
 
 DEVICE = Status | Events | Stop
-CTC = (Status | Events | Stop | Show | Log | Route | Point | Signal | Mode | Control | Ars
-       | TimedRoute | AddTrain)  # fmt: skip
+CTC = (Status | Events | Stop | Show | Log | Route | Point | Signal | Mode | AskDirection
+       | Control | Ars | TimedRoute | AddTrain)  # fmt: skip
 IXL = Status | Events | Stop | LocalControl | Local
 TRACKSIDE = Status | Events | Stop | FailPoint | FailLamp | FailTrackCircuit | ClearFaults
 TRACK_CIRCUITS = Status | Events | Stop | Fail | Clear | Place | Remove

@@ -24,8 +24,11 @@ commands:
   point normal|reverse ST POINT  e.g. point reverse 20 31
   signal stop|release ST SIGNAL
   mode center|local ST           center: request center mode (CMR handshake)
+  direction ST INTERVAL          ask the neighbour for the interval's traffic permission
+                                 ahead of a departure route, e.g. direction 20 1820
   control ST CODE [VALUE]        any CTC->IXL chart code by name
-  show ST                        mode, routes, points, signals, occupancy, link
+  show ST                        mode, routes, points, signals, occupancy, link, and each
+                                 interval's direction and holder
   ars [on|off] [ST]              automatic route setting: switch it at ST (no ST: every
                                  station); without on/off, where it is on and what each train
                                  waits for
@@ -37,6 +40,7 @@ EPILOG = """\
 examples:
   ktcs-bench ctc                                  # interactive, against the running reference lab
   ktcs-bench ctc route set 18 01 11               # one command
+  ktcs-bench ctc direction 20 1820                # station 20 asks 18 for interval 1820
   ktcs-bench ctc ars off 20                       # routes at station 20 by hand from now on
   ktcs-bench ctc --script morning.txt --json      # scripted controls, JSON results
 """
@@ -85,6 +89,8 @@ def show_text(answer: dict[str, Any]) -> str:
     lines.append("  points   " + " ".join(f"{k}:{v}" for k, v in s["points"].items()))
     lines.append("  signals  " + " ".join(f"{k}:{v}" for k, v in s["signals"].items()))
     lines.append("  occupied " + (" ".join(s["occupied"]) or none))
+    for iv in s.get("intervals", {}).values():
+        lines.append("  interval " + iv["text"])
     return "\n".join(lines)
 
 

@@ -239,14 +239,9 @@ def build(line: Line) -> Layout:
         f'viewBox="0 0 {_f(scale.width)} {_f(height)}" width="{_f(scale.width)}" '
         f'height="{_f(height)}" data-line="{escape(line.name)}">'
     ]
-    # intervals: name and traffic direction arrow
+    # intervals: name, traffic direction arrow and who holds (or asks for) the permission
     for iv in line.intervals:
-        xa, xb = scale.x(iv.from_m), scale.x(iv.to_m)
-        parts.append(
-            f'<g class="interval" id="iv-{escape(iv.name)}" data-interval="{escape(iv.name)}">'
-            f'<text class="iv-name" x="{_f((xa + xb) / 2)}" y="{_f(y0 - 40)}">{escape(iv.name)}'
-            f'</text><text class="iv-dir" x="{_f((xa + xb) / 2)}" y="{_f(y0 - 24)}"></text></g>'
-        )
+        parts.append(_interval_svg(iv.name, scale.x(iv.from_m), scale.x(iv.to_m), y0))
     # station headers: name, mode, link
     for st in line.stations.values():
         xs = [scale.x(t.from_m) for t in st.track_circuits] + [
@@ -307,6 +302,26 @@ def build(line: Line) -> Layout:
     parts.append("</svg>")
     layout.svg = "".join(parts)
     return layout
+
+
+def _interval_svg(name: str, xa: float, xb: float, y0: float) -> str:
+    """An interval's name over an arrow along it. Both heads are drawn; the page keeps the one of
+    the permission's direction (class `up` or `down` on the group) and shows a neutral mark --
+    the shaft alone, dashed -- while no direction is indicated (class `none`, the default)."""
+    cx, ay = (xa + xb) / 2, y0 - 30
+    half = min(70.0, max(12.0, (xb - xa) / 2 - 10))
+    x1, x2 = cx - half, cx + half
+    e = escape(name)
+    return (
+        f'<g class="interval none" id="iv-{e}" data-interval="{e}" data-direction="">'
+        f'<text class="iv-name" x="{_f(cx)}" y="{_f(y0 - 44)}">{e}</text>'
+        f'<line class="iv-shaft" x1="{_f(x1)}" y1="{_f(ay)}" x2="{_f(x2)}" y2="{_f(ay)}"/>'
+        f'<polygon class="iv-head up" points="{_f(x2 + 7)},{_f(ay)} {_f(x2)},{_f(ay - 4)} '
+        f'{_f(x2)},{_f(ay + 4)}"/>'
+        f'<polygon class="iv-head down" points="{_f(x1 - 7)},{_f(ay)} {_f(x1)},{_f(ay - 4)} '
+        f'{_f(x1)},{_f(ay + 4)}"/>'
+        f'<text class="iv-dir" x="{_f(cx)}" y="{_f(y0 - 16)}"></text></g>'
+    )
 
 
 def _signal_svg(st: Station, sg: Signal, scale: Scale, ty: float) -> str:

@@ -20,6 +20,16 @@ occupied, none of its points has lost detection or is locked the other way, and 
 leads into is not occupied against its direction. Otherwise the train **waits** and the reason
 goes to the log once, when it changes. Of two trains wanting the same signal, the one nearer asks.
 
+A departure into an interval between two stations needs that interval's traffic permission
+(SPEC §6.6): where its station does not hold it, ARS asks for it first (a `DirectionRequest`,
+`ctc direction`) and the route once it is held -- never against a train in the interval or a
+departure route into it from the other end, read from both ends' indications; of two trains ready
+to depart into one interval from its two ends, the one standing on the other's arrival track goes
+first, else the first in timetable order, and the other waits saying for whom (docs/ars.md).
+
+A CTC that starts with trains on the line picks them up from its first whole picture
+(`Describer.pick_up`) and takes each on from where it stands.
+
 A station showing every one of its track circuits occupied shows its interlocking's fail-safe
 picture (its ATC link down, or up and not yet reporting): ARS reads that as occupancy not known,
 not as trains -- it steps, clears and identifies no train, and sets no route over it.
@@ -27,8 +37,8 @@ not as trains -- it steps, clears and identifies no train, and sets no route ove
 Inputs: `update(now)` after the CTC's indication tables changed (it reads them through the
 `CtcModel`), `handle_timer(now)` at `next_deadline()` (a dwell ending, a train becoming due, a
 retry), `switch(station, on, now)` and `result(request, accepted, why, now)` with what came of a
-request. `update` and `handle_timer` return the `RouteRequest`s to send, in the CTC desk's words
-(`request.command`). A rejected or unanswered request is asked again after `RETRY_S`; an accepted
+request. `update` and `handle_timer` return the requests to send (`RouteRequest`,
+`DirectionRequest`), in the CTC desk's words (`request.command`). A rejected or unanswered request is asked again after `RETRY_S`; an accepted
 one not again for that train unless its route drops before the train has entered it (an operator
 cancelled it). Every log entry is also handed to `on_log` (the CTC device puts it in its events).
 No clock, no I/O.
@@ -44,12 +54,13 @@ from typing import Any, TypedDict
 from ktcs_bench import kinds, messages
 from ktcs_bench.ctc.describer import DescribedTrain, Describer
 from ktcs_bench.ctc.model import CtcModel, StationReading
-from ktcs_bench.station.model import Route, Station
+from ktcs_bench.station.model import Direction, Interval, Route, Station
 from ktcs_bench.station.timetable import Stop, Timetable, TimetableTrain, start_route
 
 RETRY_S = 5.0  # a rejected or unanswered request: ask again no sooner
 GRANT_GRACE_S = 10.0  # an accepted request whose route is not indicated set by then: ask again
 LOG_KEEP = 2_000  # log entries kept
+ASKED_S = 5.0  # the permission asked for and the ask accepted: not asked again for so long
 FAIL_SAFE_MIN = 3  # a station with this many circuits or more, all occupied: its fail-safe picture
 
 
@@ -82,6 +93,40 @@ class RouteRequest:
         return f"route {self.entry}-{self.exit} at station {self.station}"
 
 
+@dataclass(frozen=True, slots=True)
+class DirectionRequest:
+    """An interval's traffic permission ARS asks for at `station`, ahead of `train`'s departure
+    into it (SPEC §6.6): the station's IXL asks its neighbour."""
+
+    train: str
+    station: int
+    interval: str
+    holder: int | None  # who held it when asked
+
+    @property
+    def command(self) -> messages.AskDirection:
+        """The request as the CTC desk takes it (`CtcModel.action`)."""
+        return messages.AskDirection(station=self.station, interval=self.interval)
+
+    @property
+    def text(self) -> str:
+        return f"the permission of interval {self.interval} at station {self.station}"
+
+
+ArsRequest = RouteRequest | DirectionRequest
+"""What ARS sends through the desk: a route, or an interval's permission ahead of one."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Contender:
+    """A train ready to depart into an interval but for its permission: who goes first is by
+    the timetable (`key`: when its departure came due, then its place in the timetable)."""
+
+    train: str
+    station: int
+    key: tuple[float, int]
+
+
 @dataclass
 class _Grant:
     at: float
@@ -109,6 +154,7 @@ class _Progress:
     track: str | None = None  # the platform track it stands on
     waiting: str | None = None  # why it waits now (logged when it changes)
     wanted: tuple[int, str] | None = None  # (station, route) it wants next
+    picked: bool = False  # picked up on the line at the CTC's start: its first times are past
 
 
 class Ars:
@@ -131,10 +177,15 @@ class Ars:
         self.granted: dict[tuple[str, int, str], _Grant] = {}  # (train, station, route)
         self.retry_at: dict[tuple[str, int, str], tuple[float, str]] = {}  # -> (when, why)
         self.requests_made = 0
+        # interval permissions: (station, interval) -> request sent, no result yet
+        self.pending_direction: dict[tuple[int, str], DirectionRequest] = {}
+        self.asked: dict[tuple[int, str], float] = {}  # -> asked (accepted) until then
+        self.direction_retry: dict[tuple[int, str], tuple[float, str]] = {}  # -> (when, why)
+        self.directions_asked = 0
+        self._contenders: dict[str, list[_Contender]] = {}  # interval -> ready to depart into it
+        self._picked_up = False  # the trains on the line at the start have been picked up
+        self._order = {t.id: i for i, t in enumerate(timetable.trains)}
         self._now = 0.0
-        self._read: dict[
-            int, tuple[int, StationReading]
-        ] = {}  # station -> (table version, reading)
         self._station_tcs = {
             st: {t.name for t in self.line.station(st).track_circuits} for st in model.models
         }
@@ -148,25 +199,33 @@ class Ars:
             self.enabled[st] = on
             self._log(now, f"ARS {'on' if on else 'off'} at station {st}", station=st)
 
-    def update(self, now: float) -> list[RouteRequest]:
-        """The indication tables changed (or time passed): follow the trains, ask for routes."""
+    def update(self, now: float) -> list[ArsRequest]:
+        """The indication tables changed (or time passed): follow the trains, ask for routes (and
+        for the permission of the interval a departure leads into)."""
         self._now = max(self._now, now)
         readings = self._readings()
         occupancy: dict[str, bool | None] = {}
         for reading in readings.values():
             occupancy.update(self._occupancy(reading))
+        if not self._picked_up and self._whole_picture(readings, occupancy):
+            self._picked_up = True  # the trains already on the line, once, at the first picture
+            for e in self.describer.pick_up(occupancy, now, self._hints(readings)):
+                self._log(now, e.text, train=e.train)
         for e in self.describer.update(occupancy, now):
             self._log(now, e.text, train=e.train)
         for train_id in list(self.progress):
             if train_id not in self.describer.trains:
                 del self.progress[train_id]
         self._drop_stale_grants(readings, now)
-        requests: list[RouteRequest] = []
-        claimed: dict[tuple[int, str], str] = {}  # (station, entry signal) -> the leading train
+        wants: list[tuple[DescribedTrain, _Progress, _Want]] = []
         for t in self.describer._order():
             p = self.progress.setdefault(t.id, self._start(t))
             self._advance(t, p, now)
-            want = self._wanted(t, p, now)
+            wants.append((t, p, self._wanted(t, p, now)))
+        self._contenders = self._ready_to_depart(wants, readings, occupancy, now)
+        requests: list[ArsRequest] = []
+        claimed: dict[tuple[int, str], str] = {}  # (station, entry signal) -> the leading train
+        for t, p, want in wants:
             station, route = want.station, want.route
             p.wanted = (station, route.name) if station is not None and route else None
             if station is None or route is None or want.why is not None:
@@ -178,6 +237,17 @@ class Ars:
                 continue
             claimed[key] = t.id
             why = self._check(t, station, route, readings, occupancy, now)
+            if why is None:
+                why, ask = self._direction(t, p, station, route, readings, occupancy, now)
+                if ask is not None:
+                    self.pending_direction[(ask.station, ask.interval)] = ask
+                    self.directions_asked += 1
+                    self._wait(t, p, why, now)
+                    self._log(now, f"train {t.id}: asks for {ask.text}" + (
+                        f" (held by {ask.holder})" if ask.holder is not None else ""),
+                        station=station, train=t.id)  # fmt: skip
+                    requests.append(ask)
+                    continue
             if why is not None:
                 self._wait(t, p, why or None, now)
                 continue
@@ -189,18 +259,218 @@ class Ars:
             requests.append(req)
         return requests
 
+    # ------------------------------------------------------------------ interval permissions
+
+    def _departure_interval(self, station: int, route: Route) -> Interval | None:
+        """The interval between two stations of the lab that `route` departs into (None: it
+        departs into none, or into one at the lab's edge, whose direction is fixed)."""
+        iv = self.line.view(station).interval_of_exit(route)
+        return None if iv is None or iv.boundary else iv
+
+    def _ready_to_depart(
+        self,
+        wants: list[tuple[DescribedTrain, _Progress, _Want]],
+        readings: dict[int, StationReading],
+        occupancy: dict[str, bool | None],
+        now: float,
+    ) -> dict[str, list[_Contender]]:
+        """Per interval, the trains whose departure into it could be asked for now but for its
+        permission, first in timetable order: when each departure came due, then the train's
+        place in the timetable."""
+        out: dict[str, list[_Contender]] = {}
+        for t, p, want in wants:
+            if want.why is not None or want.route is None or want.station is None:
+                continue
+            if p.phase != "dwell":
+                continue
+            iv = self._departure_interval(want.station, want.route)
+            if iv is None:
+                continue
+            if self._check(t, want.station, want.route, readings, occupancy, now) not in (None, ""):
+                continue  # held up by something else at its own station
+            stop = t.service.stops[p.stop]
+            due = max(self._not_before(stop, p, t.service), default=p.arrived_at or 0.0)
+            key = (due, self._order.get(t.id, len(self._order)))
+            out.setdefault(iv.name, []).append(_Contender(t.id, want.station, key))
+        for group in out.values():
+            group.sort(key=lambda c: c.key)
+        return out
+
+    def _direction(
+        self,
+        t: DescribedTrain,
+        p: _Progress,
+        station: int,
+        route: Route,
+        readings: dict[int, StationReading],
+        occupancy: dict[str, bool | None],
+        now: float,
+    ) -> tuple[str | None, DirectionRequest | None]:
+        """May `t`'s departure `route` be asked for as far as its interval's permission goes?
+        (None, None): yes. (why, None): it waits. (why, request): ask for the permission first.
+
+        ARS never asks for it against a train in the interval or a route into it from the other
+        end (read from both ends' indications, and its own requests), and of two trains ready
+        to depart into it from its two ends the first in timetable order goes -- unless the
+        other stands on the track it would arrive at and needs the interval itself: then that
+        one goes first (else the two would lock each other up)."""
+        iv = self._departure_interval(station, route)
+        if iv is None:
+            return None, None
+        holds, asks = readings[station].permission.get(iv.name, (None, None))
+        other = iv.east if station == iv.west else iv.west
+        if holds is None or self._not_worked(iv, readings):
+            return None, None  # its interlockings work no permission: nothing to ask for
+        first = self._goes_first(t, p, station, iv)
+        if first is not None:
+            return first, None
+        if holds:
+            return None, None
+        far = readings.get(other)
+        if far is None:
+            return f"interval {iv.name} not held here, no indications from station {other}", None
+        reading = self.model.interval(iv)
+        held = (f"interval {iv.name} held by {reading.holder}" if reading.holder is not None
+                else f"interval {iv.name}: no end holds its permission")  # fmt: skip
+        against = self._against(t, iv, other, far, occupancy)
+        if against is not None:
+            return f"{held}, {against}", None
+        if reading.holder is None:
+            return held, None  # the link between the two resyncs: nothing to ask of anyone
+        key = (station, iv.name)
+        if key in self.pending_direction or asks or now < self.asked.get(key, -1.0):
+            return f"{held}, asked for it", None
+        retry = self.direction_retry.get(key)
+        if retry is not None and now < retry[0]:
+            return f"{held}, not given ({retry[1]}), asking again at {retry[0]:.1f} s", None
+        self.direction_retry.pop(key, None)
+        return f"{held}, asked for it", DirectionRequest(t.id, station, iv.name, reading.holder)
+
+    @staticmethod
+    def _not_worked(iv: Interval, readings: dict[int, StationReading]) -> bool:
+        """Both ends show the interval's direction alike, yet neither holds nor asks for its
+        permission: interlockings that work no permission (from before SPEC §6.6) -- each
+        shows its direction, and departures are theirs to refuse. (Where the permission is
+        worked, an end showing a direction knows its holder; in a handover or a lost one the
+        ends do not show one alike.)"""
+        ends = [readings.get(iv.west), readings.get(iv.east)]
+        if any(r is None for r in ends):
+            return False
+        shown = {r.directions.get(iv.name) for r in ends if r is not None}
+        perm = [r.permission.get(iv.name, (None, None)) for r in ends if r is not None]
+        return len(shown) == 1 and None not in shown and not any(h or a for h, a in perm)
+
+    def _against(
+        self,
+        t: DescribedTrain,
+        iv: Interval,
+        other: int,
+        far: StationReading,
+        occupancy: dict[str, bool | None],
+    ) -> str | None:
+        """What in `iv` or at its other end `other` a departure of `t`'s into it would meet:
+        a train in it, a circuit of it occupied (or not known), a route into it set (or asked
+        for, by ARS) at the other end. None: nothing."""
+        for tc in iv.track_circuits:
+            o = self.describer.train_at(tc)
+            if o is not None and o.id != t.id:
+                return f"train {o.id} in it"
+        for tc in iv.track_circuits:
+            occ = occupancy.get(tc)
+            if occ is not False:
+                return f"{tc} {'occupied' if occ else 'occupancy unknown'}"
+        view = self.line.view(other)
+        for r in self._set_or_asked(other, far):
+            exit_iv = view.interval_of_exit(self._station(other).route(r))
+            if exit_iv is not None and exit_iv.name == iv.name:
+                how = "set" if r in far.routes_set else "asked for"
+                return f"route {self._route_text(other, r)} into it {how} at station {other}"
+        return None
+
+    def _goes_first(
+        self, t: DescribedTrain, p: _Progress, station: int, iv: Interval
+    ) -> str | None:
+        """Why another train departs into `iv` before `t` (None: `t` may go first)."""
+        ready = self._contenders.get(iv.name, [])
+        mine = next((c for c in ready if c.train == t.id), None)
+        blocker = self._standing_on_my_track(t, p, iv)
+        if blocker is not None:
+            bp = self.progress[blocker]
+            if not self._mutual(blocker, iv):
+                far = iv.east if station == iv.west else iv.west
+                return (f"interval {iv.name}: train {blocker} stands on track {bp.track} "
+                        f"at {far} and needs it, it goes first")  # fmt: skip
+            # each stands on the other's track: the timetable locks them up; its order decides
+            other_key = next((c.key for c in ready if c.train == blocker), None)
+            if mine is not None and other_key is not None and other_key < mine.key:
+                return (f"interval {iv.name}: trains {t.id} and {blocker} each stand on the "
+                        f"other's track; {blocker} goes first (timetable order)")  # fmt: skip
+            return None
+        rivals = [c for c in ready if c.station != station
+                  and (self._blocked(c.train, iv) is None or self._mutual(c.train, iv))
+                  and (c.station, iv.name) not in self.direction_retry]  # fmt: skip
+        # (a rival whose ask was refused lets this end go meanwhile: no waiting on a train
+        # that cannot have the permission, the link between the two down, say)
+        if mine is None or not rivals or mine.key <= rivals[0].key:
+            return None
+        return f"interval {iv.name} given to train {rivals[0].train} first (timetable order)"
+
+    def _blocked(self, train: str, iv: Interval) -> str | None:
+        t, p = self.describer.trains.get(train), self.progress.get(train)
+        return None if t is None or p is None else self._standing_on_my_track(t, p, iv)
+
+    def _mutual(self, train: str, iv: Interval) -> bool:
+        """`train` stands on the arrival track of the train standing on its own (a lock-up the
+        timetable makes): each would wait for the other."""
+        other = self._blocked(train, iv)
+        return other is not None and self._blocked(other, iv) == train
+
+    def _standing_on_my_track(self, t: DescribedTrain, p: _Progress, iv: Interval) -> str | None:
+        """A train standing at `iv`'s far end on the track `t` is booked to arrive at there, and
+        going the other way (so it needs `iv` itself): its number, else None."""
+        stops = t.service.stops
+        if p.stop + 1 >= len(stops):
+            return None
+        nxt = stops[p.stop + 1]
+        if nxt.station not in (iv.west, iv.east):
+            return None
+        for other_id, op in self.progress.items():
+            o = self.describer.trains.get(other_id)
+            if o is None or o.direction == t.direction or other_id == t.id:
+                continue
+            if op.phase in ("dwell", "terminated") and op.track == nxt.track:
+                if o.service.stops[op.stop].station == nxt.station:
+                    return other_id
+        return None
+
+    def _whole_picture(
+        self, readings: dict[int, StationReading], occupancy: dict[str, bool | None]
+    ) -> bool:
+        """Every station's indications known, none showing its fail-safe picture."""
+        return set(readings) == set(self.model.models) and all(
+            v is not None for v in occupancy.values()
+        )
+
+    def _hints(self, readings: dict[int, StationReading]) -> dict[str, Direction]:
+        """The direction the indications show over each circuit they show one for: an
+        interval's traffic direction, a set route's direction (for picking trains up)."""
+        out: dict[str, Direction] = {}
+        for st, reading in readings.items():
+            view = self.line.view(st)
+            for iv in view.intervals:
+                d = reading.directions.get(iv.name)
+                if d == "up":
+                    out.update(dict.fromkeys(iv.track_circuits, "up"))
+                elif d == "down":
+                    out.update(dict.fromkeys(iv.track_circuits, "down"))
+            for name in sorted(reading.routes_set):
+                route = self._station(st).route(name)
+                out.update(dict.fromkeys(route.track_circuits, route.direction))
+        return out
+
     def _readings(self) -> dict[int, StationReading]:
         """Each station whose indications the CTC knows, read (again only if its table moved)."""
-        out: dict[int, StationReading] = {}
-        for st, model in self.model.models.items():
-            table = self.model.table(st)
-            if table is None or not table.known:
-                continue
-            cached = self._read.get(st)
-            if cached is None or cached[0] != table.version:
-                cached = self._read[st] = (table.version, model.read(table.state))
-            out[st] = cached[1]
-        return out
+        return {st: r for st in self.model.models if (r := self.model.reading(st)) is not None}
 
     @staticmethod
     def _occupancy(reading: StationReading) -> dict[str, bool | None]:
@@ -213,12 +483,24 @@ class Ars:
             return dict.fromkeys(tcs, None)
         return tcs
 
-    def handle_timer(self, now: float) -> list[RouteRequest]:
+    def handle_timer(self, now: float) -> list[ArsRequest]:
         """Timers (a dwell over, a train due, a retry): call at (or after) `next_deadline()`."""
         return self.update(now)
 
-    def result(self, request: RouteRequest, accepted: bool, why: str | None, now: float) -> None:
+    def result(self, request: ArsRequest, accepted: bool, why: str | None, now: float) -> None:
         """What came of `request`: accepted by the interlocking, or not (`why`)."""
+        if isinstance(request, DirectionRequest):
+            key2 = (request.station, request.interval)
+            self.pending_direction.pop(key2, None)
+            if accepted:
+                self.asked[key2] = now + ASKED_S
+                self.direction_retry.pop(key2, None)
+            else:
+                self.direction_retry[key2] = (now + RETRY_S, str(why))
+            verdict = "asked" if accepted else f"not asked: {why}"
+            self._log(now, f"train {request.train}: {request.text} {verdict}",
+                      station=request.station, train=request.train)  # fmt: skip
+            return
         self.pending.pop((request.station, request.route), None)
         key = (request.train, request.station, request.route)
         if accepted:
@@ -243,6 +525,7 @@ class Ars:
 
     def next_deadline(self) -> float | None:
         due: list[float] = [at for at, _ in self.retry_at.values()]
+        due += [at for at, _ in self.direction_retry.values()] + list(self.asked.values())
         due += [g.at + GRANT_GRACE_S for g in self.granted.values() if not g.seen]
         for train_id, p in self.progress.items():
             service = self.describer.trains[train_id].service
@@ -298,10 +581,45 @@ class Ars:
     # ------------------------------------------------------------------ the timetable
 
     def _start(self, t: DescribedTrain) -> _Progress:
+        if t.picked_up:
+            return self._picked(t)
         first = t.service.stops[0]
         if first.home_route is None:  # entered standing on its first platform
             return _Progress(0, "dwell", t.identified_at, first.track)
         return _Progress()
+
+    def _picked(self, t: DescribedTrain) -> _Progress:
+        """Where in its timetable a train picked up on the line stands, from where it is: on a
+        platform of a stop (dwelling there from now; terminated at its last), in a stop's station
+        short of its stop point (arriving), or on the way to the next stop ahead of it. Its
+        first stop's times are not waited for again: it was on its way before the CTC started."""
+        stops, now = t.service.stops, t.identified_at
+        head = self.describer.circuits[t.berth]
+        up = t.direction == "up"
+        for k, stop in enumerate(stops):
+            station = self._station(stop.station)
+            if not set(t.footprint) & {c.name for c in station.track_circuits}:
+                continue
+            track = self._platform(t, stop.station)
+            if track is not None:
+                last = k == len(stops) - 1 and not t.service.leaves_lab
+                p = _Progress(k, "terminated" if last else "dwell", now, track, picked=True)
+            elif (head.to_m <= stop.stop_m + 1e-6) if up else (head.from_m >= stop.stop_m - 1e-6):
+                p = _Progress(k, "arriving", picked=True)
+            else:
+                p = _Progress(k + 1, "approach" if k + 1 < len(stops) else "leaving", picked=True)
+            self._log(now, f"train {t.id}: {self._state_text(t, p)}", stop.station, t.id)
+            return p
+        for k, stop in enumerate(stops):
+            tcs = self._station(stop.station).track_circuits
+            lo, hi = min(c.from_m for c in tcs), max(c.to_m for c in tcs)
+            if (lo >= head.to_m - 1e-6) if up else (hi <= head.from_m + 1e-6):
+                p = _Progress(k, "approach", picked=True)
+                break
+        else:
+            p = _Progress(len(stops), "leaving", picked=True)
+        self._log(now, f"train {t.id}: {self._state_text(t, p)}", train=t.id)
+        return p
 
     def _station(self, number: int) -> Station:
         return self.line.station(number)
@@ -356,7 +674,7 @@ class Ars:
         )
 
     def _not_before(self, stop: Stop, p: _Progress, train: TimetableTrain) -> tuple[float, ...]:
-        times = [train.enters_at_s, train.depart_s] if p.stop == 0 else []
+        times = [train.enters_at_s, train.depart_s] if p.stop == 0 and not p.picked else []
         if p.arrived_at is not None:
             times.append(p.arrived_at + stop.dwell_s)
         return tuple(times)
@@ -375,7 +693,7 @@ class Ars:
             assert route is not None
             if t.footprint[-1] not in self._approach_zone(stop.station, route):
                 return _Want(stop.station, route, "")  # not yet approaching
-            due = t.service.enters_at_s if p.stop == 0 else now
+            due = t.service.enters_at_s if p.stop == 0 and not p.picked else now
         else:
             route = self._start_route(t, p)
             if route is None:

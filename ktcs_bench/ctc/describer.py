@@ -14,6 +14,13 @@ circuits ahead of it occupy and those behind it clear:
   running with its detection failed) and found again when that berth or the one ahead occupies --
   unless its last berth was at the end of the line: then it has **left** the lab.
 
+After a CTC restart the trains already on the line are **picked up** (`pick_up`) from the first
+whole picture: each run of occupied circuits no train explains (and not where the next train
+comes onto the line: that one is identified as ever) is given the timetable train not yet seen
+whose booked path covers it, the one the indications agree with best (the direction an
+interval or a set route over it shows, the platform track its timetable uses there), the leading
+run of a direction going to the earlier train of the timetable.
+
 Unknown occupancy (a station whose link is down, or showing its fail-safe picture: ARS hands
 that on as unknown) neither steps nor clears anything. Adjacency is
 data: two track circuits are next to each other where one ends at the chainage the other begins
@@ -36,7 +43,7 @@ EPS_M = 1e-6
 class DescriberEvent:
     time: float
     train: str | None
-    kind: str  # identified, lost, found, left, unexplained
+    kind: str  # identified, picked up, lost, found, left, unexplained
     track_circuit: str
     text: str
 
@@ -49,6 +56,7 @@ class DescribedTrain:
     footprint: list[str] = field(default_factory=list)
     berth: str = ""  # the head's track circuit (kept while the train is lost)
     identified_at: float = 0.0
+    picked_up: bool = False  # found on the line at the CTC's start, not seen coming onto it
 
     @property
     def id(self) -> str:
@@ -86,6 +94,7 @@ class Describer:
         )  # not yet on the line, in the order they enter
         self.trains: dict[str, DescribedTrain] = {}
         self.gone: list[str] = []  # trains that left the lab
+        self._paths: dict[str, set[str]] = {}
         self._unexplained: set[str] = set()
 
     def ahead(self, tc: str, direction: Direction) -> tuple[str, ...]:
@@ -179,6 +188,117 @@ class Describer:
                     )
                 )
         return events
+
+    def pick_up(
+        self,
+        occupancy: Mapping[str, bool | None],
+        now: float,
+        hints: Mapping[str, Direction] | None = None,
+    ) -> list[DescriberEvent]:
+        """Name the trains already on the line (see the module docstring): each run of occupied
+        circuits no described train explains gets the best-fitting timetable train not yet seen.
+        `hints`: the direction the indications show over a circuit (an interval's traffic
+        direction, a set route's). A run no train's path covers stays unexplained."""
+        hints = hints or {}
+        owned = {tc for t in self.trains.values() for tc in t.footprint}
+        runs = self._runs([tc for tc, occ in occupancy.items() if occ is True and tc not in owned])
+        appears = {s.appears_on for s in self.expected}
+        runs = [r for r in runs if not appears & set(r)]  # where a train appears: identified
+        order = {s.id: i for i, s in enumerate(self.expected)}
+        fits: list[dict[str, int]] = []  # per run: train -> how well it fits
+        for run in runs:
+            shown = {hints[tc] for tc in run if tc in hints}
+            fit: dict[str, int] = {}
+            for s in self.expected:
+                if not set(run) <= self._path(s):
+                    continue
+                score = 2 if shown == {s.direction} else -2 if shown else 0
+                fit[s.id] = score + any(self._on_booked_platform(s, tc) for tc in run)
+            fits.append(fit)
+        by_id = {s.id: s for s in self.expected}
+        way = {  # the direction of the train each run fits best
+            i: by_id[max(fit.items(), key=lambda kv: (kv[1], -order[kv[0]]))[0]].direction
+            for i, fit in enumerate(fits) if fit
+        }  # fmt: skip
+        events: list[DescriberEvent] = []
+        for direction in ("up", "down"):
+            # the runs of this direction, the leading one first
+            mine = []
+            for i in (i for i, d in way.items() if d == direction):
+                lo = min(self.circuits[tc].from_m for tc in runs[i])
+                mine.append((-lo if direction == "up" else lo, i))
+            for _, i in sorted(mine):
+                free = [x for x in fits[i] if x in by_id and by_id[x].direction == direction]
+                if not free:
+                    continue
+                sid = min(free, key=lambda x: (-fits[i][x], order[x]))
+                s = by_id.pop(sid)
+                run = self._along(runs[i], s.direction)
+                self.expected.remove(s)
+                self.trains[s.id] = DescribedTrain(s, run, run[-1], now, picked_up=True)
+                events.append(DescriberEvent(now, s.id, "picked up", run[-1],
+                              f"train {s.id} picked up at {' '.join(run)} (on the line as the "
+                              "CTC started)"))  # fmt: skip
+        return events
+
+    def _runs(self, tcs: list[str]) -> list[list[str]]:
+        """The occupied circuits `tcs` in runs of circuits next to each other."""
+        left, out = set(tcs), []
+        for tc in sorted(tcs, key=lambda x: self.circuits[x].from_m):
+            if tc not in left:
+                continue
+            run, todo = [], [tc]
+            left.discard(tc)
+            while todo:
+                x = todo.pop()
+                run.append(x)
+                for y in self.ahead(x, "up") + self.ahead(x, "down"):
+                    if y in left:
+                        left.discard(y)
+                        todo.append(y)
+            out.append(run)
+        return out
+
+    def _along(self, run: list[str], direction: Direction) -> list[str]:
+        """`run` rear first in `direction` of travel."""
+        up = sorted(run, key=lambda x: (self.circuits[x].from_m, self.circuits[x].to_m))
+        return up if direction == "up" else up[::-1]
+
+    def _on_booked_platform(self, s: TimetableTrain, tc: str) -> bool:
+        c = self.circuits[tc]
+        return any(len(c.tracks) == 1 and c.tracks[0] == stop.track and tc in
+                   {t.name for t in self.line.station(stop.station).track_circuits}
+                   for stop in s.stops)  # fmt: skip
+
+    def _path(self, s: TimetableTrain) -> set[str]:
+        """Every circuit `s` runs over by its timetable: onto the line, each stop's routes in and
+        out and its platform, and the intervals between."""
+        cached = self._paths.get(s.id)
+        if cached is not None:
+            return cached
+        path = {s.appears_on}
+        for k, stop in enumerate(s.stops):
+            st = self.line.station(stop.station)
+            view = self.line.view(stop.station)
+            path |= {t.name for t in st.track_circuits if t.tracks == (stop.track,)}
+            for name in (stop.home_route, stop.start_route):
+                if name is None:
+                    continue
+                route = st.route(name)
+                path |= set(route.track_circuits)
+                iv = view.interval_of_exit(route)
+                if iv is not None and (k + 1 < len(s.stops) or s.leaves_lab):
+                    path |= set(iv.track_circuits)
+                if name == stop.home_route and k == 0:  # the line behind its first home signal
+                    path |= set(route.approach)
+                    for iv in view.intervals:
+                        behind = (
+                            iv.east == st.number if s.direction == "up" else iv.west == st.number
+                        )
+                        if behind:
+                            path |= set(iv.track_circuits)
+        self._paths[s.id] = path
+        return path
 
     def _at_edge(self, tc: str, direction: Direction) -> bool:
         """`tc` ends where the line does, in `direction`: a train there leaves the lab."""

@@ -11,6 +11,7 @@ from ktcs_bench.ctc.model import signal_name
 from ktcs_bench.errors import UsageError
 from ktcs_bench.messages import (
     Ars,
+    AskDirection,
     Control,
     Log,
     Message,
@@ -45,6 +46,8 @@ def command_words(command: Message | Mapping[str, Any]) -> str:
         return f"signal {command.get('action', 'stop')} {st} {sig('signal')}"
     if cmd == "mode":
         return f"mode {command.get('mode', '?')} {st}"
+    if cmd == "direction":
+        return f"direction {st} {command.get('interval', '?')}"
     if cmd == "control":
         return f"control {st} {command.get('code', '?')} {command.get('value', 1)}"
     return " ".join([cmd, *(f"{k}={v}" for k, v in command.items() if k != "cmd")])
@@ -67,6 +70,8 @@ def parse_words(words: list[str]) -> Message:
             return Signal(action=w[1], station=int(w[2]), signal=words[3])
         if w[0] == "mode" and w[1] in ("center", "local") and len(w) == 3:
             return Mode(mode=w[1], station=int(w[2]))
+        if w[0] == "direction" and len(w) == 3:
+            return AskDirection(station=int(w[1]), interval=words[2])
         if w[0] == "control" and len(w) in (3, 4):
             value = int(w[3], 0) if len(w) == 4 else 1
             return Control(station=int(w[1]), code=words[2].upper(), value=value)

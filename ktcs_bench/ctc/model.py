@@ -5,7 +5,12 @@ commands as control codes (pure: no sockets, no clock).
 station data (`station_codes.stations.station_chart`, as the IXL derives its own), and reads an
 indication table once (`read`) into mode, routes, track circuits, points, signals and traffic
 directions. Two renderings of that one reading: `picture` (what the web console draws) and
-`summary` (what `ktcs-bench ctc show` and `lab status` print). Operator commands become `Action`s:
+`summary` (what `ktcs-bench ctc show` and `lab status` print).
+
+An interval's traffic permission (SPEC §6.6) is read from both its stations' tables together
+(`CtcModel.interval`): the direction each end indicates (TDU/TDD), which end holds the
+permission (PHI) and which asks for it (PRQ). `IntervalWatch` turns successive readings into the
+sentences the CTC's log carries ("interval 1820: permission to 20"). Operator commands become `Action`s:
 chart code, value, and the sentence the console shows. `CtcModel` holds one per station of the
 line, over the CTC's `IndicationTables`.
 
@@ -17,13 +22,21 @@ so sections already released one by one behind a train stay shown locked until t
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
-from typing import Any, TypedDict
+from dataclasses import dataclass, field
+from typing import Any, NotRequired, TypedDict
 
 from ktcs_bench.ctc.tables import IndicationTable, IndicationTables
 from ktcs_bench.errors import UsageError
-from ktcs_bench.messages import Control, Mode, OperatorCommand, Point, Route, Signal
-from ktcs_bench.station.model import Line, Station, StationView
+from ktcs_bench.messages import (
+    AskDirection,
+    Control,
+    Mode,
+    OperatorCommand,
+    Point,
+    Route,
+    Signal,
+)
+from ktcs_bench.station.model import Interval, Line, Station, StationView
 from ktcs_bench.station_codes import names as n
 from ktcs_bench.station_codes.chart import CodeChart
 from ktcs_bench.station_codes.stations import station_chart
@@ -77,6 +90,86 @@ class StationReading:
     points: dict[str, PointReading]
     signals: dict[str, SignalReading]
     directions: dict[str, str | None]  # interval -> "up" / "down" / None
+    # interval -> (this end holds the permission: PHI, it asks for it: PRQ); None where the
+    # table holds no such indication
+    permission: dict[str, tuple[bool | None, bool | None]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class IntervalReading:
+    """One interval's traffic direction as the CTC reads it from both its stations' tables.
+
+    `direction`: "up" / "down" (both ends that are known agree, or one end is known), None (no
+    end indicates one), "disagree" (the two ends indicate opposite directions). `holder`: the
+    station that indicates it holds the permission (PHI); for a lab-edge (boundary) interval, the
+    station outside the lab its fixed direction comes from; None when no end holds it (in transit,
+    lost, or not known). `holders`: every end that claims it (two is a fault to show).
+    `asking`: the ends that ask for it (PRQ). `known`: the ends whose tables the CTC knows."""
+
+    name: str
+    west: int
+    east: int
+    boundary: bool
+    direction: str | None
+    holder: int | None
+    holders: tuple[int, ...]
+    asking: tuple[int, ...]
+    known: tuple[int, ...]
+
+    @property
+    def departs_from(self) -> int | None:
+        """The end trains may depart from into the interval, by its direction (None: neither)."""
+        if self.direction == "up":
+            return self.west
+        if self.direction == "down":
+            return self.east
+        return None
+
+    @property
+    def text(self) -> str:
+        """As `ctc show` prints it: `1820  18 ──▶ 20  (held by 18)`, `no direction`, `asked by`."""
+        arrow = {"up": "──▶", "down": "◀──"}.get(self.direction or "", "───")
+        out = f"{self.name}  {self.west} {arrow} {self.east}"
+        if not self.known:
+            return out + "  unknown (no indications from either end)"
+        notes = []
+        if self.direction == "disagree":
+            notes.append("the ends disagree")
+        elif self.direction is None:
+            notes.append("no direction")
+        if len(self.holders) > 1:
+            notes.append(f"held by both {self.west} and {self.east}")
+        elif self.holder is not None:
+            outside = "" if self.holder in self.known else ", outside the lab"
+            notes.append(f"(held by {self.holder}{outside})")
+        elif self.direction is not None:
+            notes.append("no holder")
+        if self.asking:
+            notes.append("asked by " + " and ".join(map(str, self.asking)))
+        return out + "  " + ", ".join(notes)
+
+    def summary(self) -> IntervalSummary:
+        return {
+            "interval": self.name,
+            "west": self.west,
+            "east": self.east,
+            "direction": self.direction,
+            "holder": self.holder,
+            "asking": list(self.asking),
+            "text": self.text,
+        }
+
+
+class IntervalSummary(TypedDict):
+    """An interval as `ctc show` (JSON) and the console carry it (`IntervalReading.summary`)."""
+
+    interval: str
+    west: int
+    east: int
+    direction: str | None
+    holder: int | None
+    asking: list[int]
+    text: str
 
 
 class RoutePicture(TypedDict):
@@ -117,6 +210,7 @@ class StationPicture(TypedDict):
     signals: dict[str, SignalPicture]
     routes: dict[str, RoutePicture]
     directions: dict[str, str | None]
+    intervals: NotRequired[dict[str, IntervalSummary]]  # both ends read together (`CtcModel`)
 
 
 class StationSummary(TypedDict):
@@ -132,6 +226,7 @@ class StationSummary(TypedDict):
     points: dict[str, str]
     signals: dict[str, str]
     occupied: list[str]
+    intervals: NotRequired[dict[str, IntervalSummary]]  # both ends read together (`CtcModel`)
 
 
 class StationModel:
@@ -179,9 +274,15 @@ class StationModel:
                 bool(get(n.lfi(st, s.name))) if s.has_lamps else False,
             )
         directions: dict[str, str | None] = {}
+        permission: dict[str, tuple[bool | None, bool | None]] = {}
         for iv in self.view.intervals:
             directions[iv.name] = (
                 "up" if get(n.tdu(iv.name)) else "down" if get(n.tdd(iv.name)) else None
+            )
+            holds, asks = get(n.phi(iv.name)), get(n.prq(iv.name))
+            permission[iv.name] = (
+                None if holds is None else bool(holds),
+                None if asks is None else bool(asks),
             )
         occupied = {tc.name: get(tc.name) for tc in self.view.track_circuits}
         return StationReading(
@@ -195,6 +296,7 @@ class StationModel:
             points=points,
             signals=signals,
             directions=directions,
+            permission=permission,
         )
 
     def named(self, state: Mapping[int, int]) -> dict[str, int]:
@@ -362,6 +464,23 @@ class StationModel:
             return self._action(n.lmq(self.number), f"station {self.number}: hand back to local")
         raise UsageError(f"mode must be center or local, not {wanted!r}")
 
+    def ask_direction(self, interval: str) -> Action:
+        """Ask the neighbour for `interval`'s traffic permission (DRC{interval}=1), ahead of a
+        departure route into it."""
+        name = str(interval).strip()
+        ivs = {iv.name: iv for iv in self.view.intervals}
+        if name not in ivs:
+            have = ", ".join(ivs) or "none"
+            raise UsageError(f"station {self.number}: no interval {name} here (its: {have})")
+        if ivs[name].boundary:
+            raise UsageError(
+                f"station {self.number}: interval {name} is at the lab's edge: its direction "
+                "is fixed, there is no neighbour to ask"
+            )
+        return self._action(
+            n.drc(name), f"station {self.number}: ask for the permission of interval {name}"
+        )
+
     def control(self, name: str, value: int = 1) -> Action:
         """Any CTC->IXL code of the chart, by name."""
         return self._action(name, f"station {self.number}: control {name}={value}", value)
@@ -381,6 +500,18 @@ class CtcModel:
         self.models: dict[int, StationModel] = {
             st: StationModel(line.view(st)) for st in numbers if st in line.stations
         }
+        self._read: dict[int, tuple[int, StationReading]] = {}  # station -> (version, reading)
+
+    def reading(self, station: int) -> StationReading | None:
+        """Station `station`'s table read (again only when it changed); None while the CTC does
+        not know it (link down, no full state yet) or does not serve it."""
+        table, model = self.table(station), self.models.get(station)
+        if table is None or model is None or not table.known:
+            return None
+        cached = self._read.get(station)
+        if cached is None or cached[0] != table.version:
+            cached = self._read[station] = (table.version, model.read(table.state))
+        return cached[1]
 
     def station(self, station: object) -> StationModel:
         """The model of station `station` (a number or its digits); UsageError if not served."""
@@ -399,21 +530,48 @@ class CtcModel:
 
     def picture(self, station: int) -> StationPicture:
         table = self.table(station)
+        model = self.station(station)
         if table is None:
-            return self.station(station).picture({}, False, False)
-        return self.station(station).picture(table.state, table.connected, table.synced)
+            picture = model.picture({}, False, False)
+        else:
+            picture = model.picture(table.state, table.connected, table.synced)
+        picture["intervals"] = self._interval_summaries(model)
+        return picture
 
     def summary(self, station: int) -> StationSummary:
-        return self.station(station).summary(self.table(station))
+        model = self.station(station)
+        summary = model.summary(self.table(station))
+        summary["intervals"] = self._interval_summaries(model)
+        return summary
+
+    def _interval_summaries(self, model: StationModel) -> dict[str, IntervalSummary]:
+        return {iv.name: self.interval(iv).summary() for iv in model.view.intervals}
+
+    def interval(self, interval: Interval | str) -> IntervalReading:
+        """`interval` as the indications of both its stations show it (see `IntervalReading`)."""
+        iv = interval if isinstance(interval, Interval) else self._interval(interval)
+        ends = {st: r for st in (iv.west, iv.east) if (r := self.reading(st)) is not None}
+        return read_interval(iv, ends)
+
+    def intervals(self) -> list[IntervalReading]:
+        """Every interval of the line that a station of this CTC borders, in line order."""
+        return [self.interval(iv) for iv in self.line.intervals
+                if iv.west in self.models or iv.east in self.models]  # fmt: skip
+
+    def _interval(self, name: str) -> Interval:
+        for iv in self.line.intervals:
+            if iv.name == name:
+                return iv
+        raise UsageError(f"no interval {name} on line {self.line.name}")
 
     def named(self, station: int) -> dict[str, int]:
         return self.station(station).named(self.state(station))
 
     def action(self, command: OperatorCommand | Mapping[str, Any]) -> Action:
         """The Action of one operator command (`messages.OperatorCommand`: route set/cancel, point,
-        signal, mode, control), or of its JSON object as the CTC control port takes it (read here
-        by `operator_command`). UsageError when it cannot be carried out."""
-        if not isinstance(command, Route | Point | Signal | Mode | Control):
+        signal, mode, direction, control), or of its JSON object as the CTC control port takes it
+        (read here by `operator_command`). UsageError when it cannot be carried out."""
+        if not isinstance(command, Route | Point | Signal | Mode | AskDirection | Control):
             command = operator_command(command)
         model = self.station(command.station)
         try:
@@ -430,6 +588,8 @@ class CtcModel:
                     return model.signal(signal, action)
                 case Mode(mode=mode):
                     return model.mode(mode)
+                case AskDirection(interval=interval):
+                    return model.ask_direction(interval)
                 case Control(code=code, value=value):
                     return model.control(code, value)
         except ValueError as exc:
@@ -442,7 +602,8 @@ def operator_command(command: Mapping[str, Any]) -> OperatorCommand:
     18, "entry": "S1", "exit": "S11"}`, cancel without "exit": the route set from "entry";
     `{"cmd": "point", "position": "normal"|"reverse", "point": "31"}`, `{"cmd": "signal",
     "action": "stop"|"release", "signal": "01"}`, `{"cmd": "mode", "mode": "center"|"local"}`,
-    `{"cmd": "control", "code": "RSC180111", "value": 1}`) as its message, read leniently (a
+    `{"cmd": "direction", "interval": "1820"}`, `{"cmd": "control", "code": "RSC180111",
+    "value": 1}`) as its message, read leniently (a
     number where a name is meant is its name). UsageError when it is none of them."""
     cmd = command.get("cmd")
     station = command.get("station")
@@ -463,6 +624,8 @@ def operator_command(command: Mapping[str, Any]) -> OperatorCommand:
                           action=str(command.get("action", "stop")))  # fmt: skip
         if cmd == "mode":
             return Mode(station=at, mode=str(command["mode"]))
+        if cmd == "direction":
+            return AskDirection(station=at, interval=str(command["interval"]))
         if cmd == "control":
             return Control(station=at, code=str(command["code"]),
                            value=int(command.get("value", 1)))  # fmt: skip
@@ -471,3 +634,66 @@ def operator_command(command: Mapping[str, Any]) -> OperatorCommand:
     except ValueError as exc:
         raise UsageError(f"{cmd} command: {exc}") from None
     raise UsageError(f"unknown command {cmd!r}")
+
+
+def read_interval(iv: Interval, ends: Mapping[int, StationReading]) -> IntervalReading:
+    """`iv` from the readings of whichever of its two stations are known (`ends`)."""
+    shown = {ends[st].directions.get(iv.name) for st in ends} - {None}
+    direction = shown.pop() if len(shown) == 1 else "disagree" if shown else None
+    holders = tuple(st for st in (iv.west, iv.east)
+                    if st in ends and ends[st].permission.get(iv.name, (None, None))[0])  # fmt: skip
+    asking = tuple(st for st in (iv.west, iv.east)
+                   if st in ends and ends[st].permission.get(iv.name, (None, None))[1])  # fmt: skip
+    holder = holders[0] if len(holders) == 1 else None
+    if not holders and iv.boundary and direction in ("up", "down"):
+        # a lab-edge interval: its fixed direction comes from the station outside the lab
+        outside = iv.west if direction == "up" else iv.east
+        holder = outside if outside not in ends else None
+    return IntervalReading(iv.name, iv.west, iv.east, iv.boundary, direction, holder, holders,
+                           asking, tuple(sorted(ends)))  # fmt: skip
+
+
+class IntervalWatch:
+    """What changed in each interval's permission between one reading and the next, in the
+    words of the CTC's log ("interval 1820: permission to 20"). Pure: fed readings, it returns
+    sentences; the first reading of an interval (or one no end is known of) says nothing."""
+
+    def __init__(self) -> None:
+        self._last: dict[str, IntervalReading] = {}
+
+    def update(self, readings: Iterable[IntervalReading]) -> list[str]:
+        out: list[str] = []
+        for r in readings:
+            before = self._last.get(r.name)
+            if not r.known:
+                self._last.pop(r.name, None)
+                continue
+            self._last[r.name] = r
+            if before is None:
+                continue
+            out += self._changes(before, r)
+        return out
+
+    @staticmethod
+    def _changes(a: IntervalReading, b: IntervalReading) -> list[str]:
+        iv = f"interval {b.name}"
+        out = []
+        if b.holders != a.holders or b.holder != a.holder:
+            if len(b.holders) > 1:
+                out.append(f"{iv}: both {b.west} and {b.east} claim the permission")
+            elif b.holder is not None:
+                out.append(f"{iv}: permission to {b.holder}")
+            else:
+                gone = f" (was {a.holder})" if a.holder is not None else ""
+                out.append(f"{iv}: no end holds the permission{gone}")
+        for st in sorted(set(b.asking) - set(a.asking)):
+            out.append(f"{iv}: {st} asks for the permission")
+        for st in sorted(set(a.asking) - set(b.asking)):
+            if b.holder != st:
+                out.append(f"{iv}: {st} no longer asks for the permission")
+        if b.direction != a.direction and b.direction in ("up", "down", "disagree"):
+            if b.direction == "disagree":
+                out.append(f"{iv}: the two ends indicate opposite directions")
+            else:
+                out.append(f"{iv}: direction {b.direction}")
+        return out

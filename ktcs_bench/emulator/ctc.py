@@ -14,6 +14,10 @@ same desk, logged with source "ars"; ARS's log (what it asked for, what came of 
 waits) goes to the device's events and the console's Log panel. The operator
 switches it per station (`{"cmd": "ars", "station": N, "on": bool}`, `ktcs-bench ctc ars`, the
 console's ARS button); where it is off, routes are set by hand.
+
+Each interval's traffic permission changing hands (SPEC §6.6, read from both its stations'
+indications) goes to the device's events (kind `direction`: "interval 1820: permission to 20");
+`ktcs-bench ctc direction ST INTERVAL` asks for it like any other command.
 """
 
 from __future__ import annotations
@@ -28,9 +32,9 @@ from ktcs_bench import kinds
 from ktcs_bench import messages as msg
 from ktcs_bench.console.server import ConsoleServer
 from ktcs_bench.console.trains import TrainPosition, position_from_status
-from ktcs_bench.ctc.ars import Ars, ArsLogEntry, RouteRequest
+from ktcs_bench.ctc.ars import Ars, ArsLogEntry, ArsRequest
 from ktcs_bench.ctc.desk import Desk, Outcome
-from ktcs_bench.ctc.model import CtcModel, signal_name
+from ktcs_bench.ctc.model import CtcModel, IntervalWatch, signal_name
 from ktcs_bench.ctc.tables import IndicationTables
 from ktcs_bench.emulator import variants
 from ktcs_bench.emulator.device import Device
@@ -40,6 +44,7 @@ from ktcs_bench.messages import (
     AddTrain,
     Answer,
     ArsAnswer,
+    AskDirection,
     Control,
     ControlAnswer,
     Log,
@@ -162,7 +167,8 @@ class CtcDevice(Device):
         # automatic route setting, when given a timetable (its clock starts with the device)
         self.ars = Ars(self.model, timetable, ars_on) if timetable is not None else None
         self._ars_tasks: set[asyncio.Task[None]] = set()
-        app = _Watched(self.model.tables, self.ars_update) if self.ars else self.model.tables
+        self.intervals = IntervalWatch()  # each interval's permission changing hands, logged
+        app = _Watched(self.model.tables, self.indications_changed)
         self.server: CtcServer = variants.ctc_server(
             faults, stations, app,
             allowed_sources=list(allowed_sources) if allowed_sources else None,
@@ -186,7 +192,7 @@ class CtcDevice(Device):
                 return ShowAnswer(summary=self.model.summary(st), state=self.model.named(st))
             case Log(last=last):
                 return LogAnswer(log=self.desk.log.last(last))
-            case Route() | Point() | Signal() | Mode() | Control():
+            case Route() | Point() | Signal() | Mode() | AskDirection() | Control():
                 return await self.operate(message)
             case msg.Ars():
                 return self.ars_command(message)
@@ -217,6 +223,13 @@ class CtcDevice(Device):
             self.note("control", f"station {action.station} {action.name}={action.value}{by}: "
                       f"{outcome.result}")  # fmt: skip
         return outcome
+
+    def indications_changed(self) -> None:
+        """The server brought a change: log each interval's permission changing hands, and let
+        ARS look."""
+        for text in self.intervals.update(self.model.intervals()):
+            self.note("direction", text)
+        self.ars_update()
 
     # -- automatic route setting -----------------------------------------------------------------
     def ars_state(self) -> dict[str, bool] | None:
@@ -260,14 +273,14 @@ class CtcDevice(Device):
         now = self._ars_now()
         self._ars_send(now, self.ars.update(now))
 
-    def _ars_send(self, now: float, requests: list[RouteRequest]) -> None:
+    def _ars_send(self, now: float, requests: list[ArsRequest]) -> None:
         for request in requests:
             task = asyncio.get_running_loop().create_task(self._ars_request(request))
             self._ars_tasks.add(task)
             task.add_done_callback(self._ars_tasks.discard)
         self.poke()
 
-    async def _ars_request(self, request: RouteRequest) -> None:
+    async def _ars_request(self, request: ArsRequest) -> None:
         assert self.ars is not None
         outcome = await self.carry_out(request.command, "ars")
         self.ars.result(request, outcome.accepted, outcome.why, self._ars_now())

@@ -17,6 +17,7 @@ class Reason(IntEnum):
     POINT_LOCKED = 4
     POINT_FAILED = 5
     UNKNOWN_CODE = 6
+    DIRECTION = 7  # the interval's traffic permission is not held here (SPEC §6.6)
 
     @property
     def text(self) -> str:

@@ -8,6 +8,9 @@ read from words and checked against the lab's names before anything runs.
     ctc 18 link is up                  up | down;  ctc 18 synced is yes
     ctc 18 tc TC1855 is occupied       occupied | clear;  ctc 18 occupied contains TC1855
     ctc 18 code RSC180111 is 1         any indication code, by name
+    ctc 20 interval 1820 is down       the interval's direction (up | down | none | disagree),
+    ctc 20 interval 1820 holder is 20    the station holding its permission (or none), the
+    ctc 20 interval 1820 asking contains 20   stations asking for it
     ctc 18 view equals ixl             every indication the CTC shows is the IXL's own
     ixl 18 signal 01 is R              the interlocking itself: signal, point, route (idle,
     ixl 18 route 0111 is entered         setting, set, entered, cancelling), mode, link atc|io|ctc,
@@ -202,6 +205,17 @@ def _ctc(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str, .
             rest[1:],
             (ctc,),
         )
+    if what == "interval" and rest:
+        iv, rest = _interval(names, st, rest[0]), rest[1:]
+        pick = _INTERVAL_FIELDS["direction"]
+        if rest and rest[0].lower() in _INTERVAL_FIELDS:
+            pick, rest = _INTERVAL_FIELDS[rest[0].lower()], rest[1:]
+
+        def read_interval(s: dict[str, Any]) -> Any:
+            shown = (s.get("intervals") or {}).get(iv)
+            return None if not isinstance(shown, dict) else pick(shown)
+
+        return field("intervals", read_interval), rest, (ctc,)
     if what == "code" and rest:
         code = rest[0].upper()
 
@@ -233,7 +247,23 @@ def _ctc(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str, .
 
         return read_view, ["is", "equal"], (ctc, ixl)
     raise StepError(f"ctc {st}: unknown {' '.join(w[1:3])!r} (signal, point, route, mode, link, "
-                    "synced, occupied, routes, tc, code, view)")  # fmt: skip
+                    "synced, occupied, routes, tc, interval, code, view)")  # fmt: skip
+
+
+_INTERVAL_FIELDS: dict[str, Callable[[dict[str, Any]], Any]] = {
+    "direction": lambda i: i.get("direction") or "none",
+    "holder": lambda i: "none" if i.get("holder") is None else i["holder"],
+    "asking": lambda i: list(i.get("asking") or []),
+}
+"""What `ctc ST interval IV [direction|holder|asking]` reads of the CTC's interval (SPEC §6.6)."""
+
+
+def _interval(names: LabNames, station: int, word: str) -> str:
+    """`word` as one of the intervals `station` borders; StepError naming them otherwise."""
+    mine = [iv.name for iv in names.line.view(station).intervals]
+    if word not in mine:
+        raise StepError(f"station {station} borders no interval {word!r} (its: {', '.join(mine)})")
+    return word
 
 
 def _ixl(names: LabNames, w: list[str]) -> tuple[Reader, list[str], tuple[str, ...]]:

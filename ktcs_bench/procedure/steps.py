@@ -3,6 +3,9 @@ carried out through the run's context, giving a verdict:
 
     - ctc: route set 18 S1 S11         a CTC command in the `ctc` console's words; it must be
       refused: conflict                  accepted -- or, with `refused`, refused for that reason
+    - ctc: direction 20 1820             (a reason as the interlocking names it: `Reason`, e.g.
+                                           `refused: direction`); `direction ST INTERVAL` asks
+                                           for the interval's traffic permission
     - local: 18 grant                  the station's local panel: grant | refuse | take, or
                                          control CODE [VALUE]
     - train: T1 place TC1851           a train the procedure moves itself (no process): place AT
@@ -37,6 +40,7 @@ from ktcs_bench import messages as msg
 from ktcs_bench.argtypes import seconds
 from ktcs_bench.ctc.log import parse_words
 from ktcs_bench.errors import UsageError, excerpt, kind_of
+from ktcs_bench.ixl.reasons import Reason
 from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.messages import Message
 from ktcs_bench.procedure.expect import Expectation, Observer, parse_expectation
@@ -141,6 +145,19 @@ def _answer_text(answer: dict[str, Any]) -> str:
                                                                 "failed"))  # fmt: skip
 
 
+def _refusal_words(answer: dict[str, Any]) -> str:
+    """What a refusal says, with the interlocking's reason named as `Reason` names it (so that
+    `refused: direction` matches reason 7 even where a profile prints only its number)."""
+    words = _answer_text(answer).lower()
+    reason = answer.get("reason")
+    if isinstance(reason, int) and not isinstance(reason, bool):
+        try:
+            words += f" ({Reason(reason).text})"
+        except ValueError:  # a number the bench does not know: its words alone
+            pass
+    return words
+
+
 @dataclass
 class Step:
     index: int  # 1-based
@@ -171,7 +188,7 @@ class CtcStep(Step):
             if answer.get("ok"):
                 return Outcome("pass", text)
             return Outcome("fail", "the CTC command was not accepted", text)
-        if not answer.get("ok") and self.refused.lower() in text.lower():
+        if not answer.get("ok") and self.refused.lower() in _refusal_words(answer):
             return Outcome("pass", text)
         want = f"refused ({self.refused})"
         return Outcome("fail", f"expected the command {want}", text)
@@ -484,6 +501,14 @@ def _local_step(names: LabNames, base: dict[str, Any], text: str) -> LocalStep:
     raise StepError(f"local: cannot read {text!r} ({', '.join(LOCAL_ACTIONS)}, control CODE [V])")
 
 
+def _askable_interval(names: LabNames, station: int, interval: str) -> None:
+    """`interval` borders `station` and has a neighbour to ask (not at the lab's edge)."""
+    askable = [iv.name for iv in names.line.view(station).intervals if not iv.boundary]
+    if interval not in askable:
+        raise StepError(f"ctc: station {station} has no interval {interval!r} to ask the "
+                        f"permission of (its: {', '.join(askable) or 'none'})")  # fmt: skip
+
+
 def parse_step(index: int, raw: object, names: LabNames) -> Step:
     """One step's mapping -> its Step; StepError says what is wrong."""
     if not isinstance(raw, dict):
@@ -514,6 +539,8 @@ def parse_step(index: int, raw: object, names: LabNames) -> Step:
         station = getattr(command, "station", None)
         if station is not None:
             names.station(str(station))
+        if isinstance(command, msg.AskDirection):
+            _askable_interval(names, int(str(command.station)), command.interval)
         refused = raw.get("refused")
         if refused is not None and not isinstance(refused, str):
             raise StepError(f"refused: give the reason's words as text, not {excerpt(refused)}")

@@ -146,6 +146,7 @@ def _ixl_to_ctc(v: StationView) -> list[CodeName]:
         out += [CodeName(F.RSI, st, r.name), CodeName(F.ALI, st, r.name)]
     for iv in v.intervals:
         out += [CodeName(F.TDU, None, iv.name), CodeName(F.TDD, None, iv.name)]
+        out += [CodeName(F.PHI, None, iv.name), CodeName(F.PRQ, None, iv.name)]
     return out
 
 
@@ -157,6 +158,7 @@ def _ctc_to_ixl(v: StationView) -> list[CodeName]:
     out += [CodeName(F.SSC, st, s.name) for s in station.lamp_signals]
     for r in station.routes:
         out += [CodeName(F.RSC, st, r.name), CodeName(F.RCC, st, r.name)]
+    out += [CodeName(F.DRC, None, iv.name) for iv in v.intervals if not iv.boundary]
     return out
 
 

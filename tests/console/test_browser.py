@@ -246,3 +246,35 @@ def test_console_without_taps_or_trains_says_so(browser_context: Any, bench: Ben
         expect(pg.locator("#card-18 .link")).to_have_text("link up")
     finally:
         pg.close()
+
+
+def interval(page: Any, name: str) -> Any:
+    return page.locator(f"#iv-{name}")
+
+
+def test_each_interval_draws_an_arrow_of_its_direction_and_a_neutral_mark_without_one(
+    page: Any, bench: Bench
+) -> None:
+    """Each interval's arrow keeps the head of the direction its stations indicate (as the
+    CTC's model reads both ends); a lab-edge interval names the station outside the lab as its
+    holder; an interval no end is known of shows the dashed shaft alone, "no direction"."""
+    for iv in bench.line.intervals:
+        shown = bench.do(lambda name=iv.name: bench.model.interval(name))
+        if shown.direction in ("up", "down"):
+            other = "down" if shown.direction == "up" else "up"
+            expect(interval(page, iv.name)).to_have_attribute("data-direction", shown.direction)
+            expect(interval(page, iv.name).locator(f".iv-head.{shown.direction}")).to_be_visible()
+            expect(interval(page, iv.name).locator(f".iv-head.{other}")).to_be_hidden()
+        else:
+            expect(interval(page, iv.name)).to_have_attribute("data-direction", "")
+            expect(interval(page, iv.name).locator(".iv-head.up")).to_be_hidden()
+            expect(interval(page, iv.name).locator(".iv-head.down")).to_be_hidden()
+    expect(interval(page, "2224")).to_have_attribute("data-direction", "down")
+    expect(interval(page, "2224").locator(".iv-dir")).to_have_text("held by 24")
+    bench.call(bench.rigs[22].close())  # the only station 2224 borders: nothing known of it
+    expect(interval(page, "2224")).to_have_class(re.compile(r"\bnone\b"))
+    expect(interval(page, "2224").locator(".iv-head")).to_have_count(2)
+    expect(interval(page, "2224").locator(".iv-head.down")).to_be_hidden()
+    expect(interval(page, "2224").locator(".iv-dir")).to_have_text("no direction")
+    bench.do(lambda: bench.start_rig(22, Mode.LOCAL))
+    expect(interval(page, "2224")).to_have_attribute("data-direction", "down")

@@ -40,6 +40,24 @@ def test_every_track_circuit_point_and_signal_is_drawn_once_with_its_id() -> Non
         assert svg.count(f'id="st-{st.number}"') == 1
 
 
+def test_each_interval_is_drawn_with_an_arrow_over_its_own_stretch_neutral_until_told() -> None:
+    """Every interval has one arrow: a shaft and both heads over its stretch of the line, the up
+    head to the right (rising chainage); the page keeps one head by the direction it reads."""
+    layout = build(LINE)
+    assert layout.scale is not None
+    for iv in LINE.intervals:
+        group = re.search(rf'<g class="interval none" id="iv-{iv.name}"[^>]*>(.*?)</g>', layout.svg)
+        assert group is not None, iv.name
+        shaft = re.search(r'class="iv-shaft" x1="([\d.]+)" y1="[\d.]+" x2="([\d.]+)"', group[1])
+        assert shaft is not None
+        x1, x2 = float(shaft[1]), float(shaft[2])
+        assert layout.scale.x(iv.from_m) <= x1 < x2 <= layout.scale.x(iv.to_m)
+        up = re.search(r'class="iv-head up" points="([\d.]+),', group[1])
+        down = re.search(r'class="iv-head down" points="([\d.]+),', group[1])
+        assert up is not None and down is not None
+        assert float(down[1]) < x1 < x2 < float(up[1])  # each head beyond its end of the shaft
+
+
 def test_lanes_keep_a_siding_beyond_the_track_it_branches_from() -> None:
     assert lane_order(LINE.station(18)) == {"1": 0, "2": 1}
     assert lane_order(LINE.station(20)) == {"1": 0, "2": 1, "3": -1}  # 3 branches off the main

@@ -10,7 +10,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ktcs_bench.ctc.ars import Ars, RouteRequest
+from ktcs_bench.ctc.ars import Ars, ArsRequest, DirectionRequest, RouteRequest
 from ktcs_bench.ctc.model import CtcModel
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.ixl.interlocking import ControlResult
@@ -65,7 +65,8 @@ class ArsLine:
             self.model.tables.link_up(st, "rig")
         self.owner = {tc.name: tc.station for tc in line.all_track_circuits()}
         self.clock = VirtualClock()
-        self.sent: list[Sent] = []
+        self.sent: list[Sent] = []  # the routes ARS asked for
+        self.asked: list[tuple[float, DirectionRequest, ControlResult]] = []  # the permissions
         self.hold = False  # True: the CTC's tables stop following the IXLs (a slow link)
         self._pushed: dict[int, dict[str, int]] = {}
         self.sync()
@@ -91,8 +92,16 @@ class ArsLine:
             chart = self.model.station(st).indications
             self.model.tables.full_state(st, [(chart.number_of(k), v) for k, v in rig.ctc.items()])
 
-    def send(self, requests: list[RouteRequest]) -> None:
+    def send(self, requests: list[ArsRequest]) -> None:
         for req in requests:
+            if isinstance(req, DirectionRequest):  # an interval's permission: asked, not a route
+                action = self.model.action(req.command)
+                answer = self.rig(req.station).control(action.name, action.value)
+                self.asked.append((self.now, req, answer))
+                self.sync()
+                why = None if answer.accepted else answer.reason.text
+                self.ars.result(req, answer.accepted, why, self.now)
+                continue
             action = self.model.action(req.command)
             before = self.status(req.station, req.route)
             result = self.rig(req.station).control(action.name, action.value)

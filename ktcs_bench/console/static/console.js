@@ -184,9 +184,26 @@ function applyState(stations) {
       el.classList.toggle("lamp-failed", !!s.lamp_failed);
       el.dataset.aspect = live && s.aspect ? s.aspect : "";
     }
-    for (const [iv, d] of Object.entries(st.directions)) {
-      const t = document.querySelector(`#iv-${iv} .iv-dir`);
-      if (t) t.textContent = d === "up" ? "→" : d === "down" ? "←" : "";
+    // each interval read from both its stations (ctc.model.IntervalReading): the arrow keeps
+    // the head of the permission's direction, a dashed shaft alone when there is none
+    for (const [name, iv] of Object.entries(st.intervals || {})) {
+      const g = document.getElementById(`iv-${name}`);
+      if (!g) continue;
+      const d = iv.direction === "up" || iv.direction === "down" ? iv.direction : "none";
+      g.classList.remove("up", "down", "none", "disagree");
+      g.classList.add(iv.direction === "disagree" ? "disagree" : d);
+      g.dataset.direction = d === "none" ? "" : d;
+      g.dataset.holder = iv.holder == null ? "" : String(iv.holder);
+      const words = [];
+      if (iv.direction === "disagree") words.push("ends disagree");
+      if (iv.holder != null) words.push(`held by ${iv.holder}`);
+      else if (d === "none") words.push("no direction");
+      if (iv.asking && iv.asking.length) words.push(`asked by ${iv.asking.join(", ")}`);
+      g.querySelector(".iv-dir").textContent = words.join(", ");
+      g.querySelector("title")?.remove();
+      const title = document.createElementNS("http://www.w3.org/2000/svg", "title");
+      title.textContent = iv.text;
+      g.appendChild(title);
     }
   }
 }
