@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
+import yaml
 
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.binding import ControlLink
@@ -11,6 +14,8 @@ from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station import Line, load_line
 from ktcs_bench.station_codes import names as n
 from ktcs_bench.station_codes.stations import link_charts
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -24,8 +29,11 @@ def rig(line: Line) -> StationRig:
 
 
 def test_reason_numbers_are_the_wire_values() -> None:
-    assert [int(r) for r in Reason] == [0, 1, 2, 3, 4, 5, 6]
-    assert Reason.NOT_IN_CENTER_MODE == 1 and Reason.UNKNOWN_CODE == 6
+    assert [int(r) for r in Reason] == [0, 1, 2, 3, 4, 5, 6, 7]
+    assert Reason.NOT_IN_CENTER_MODE == 1 and Reason.UNKNOWN_CODE == 6 and Reason.DIRECTION == 7
+    profile = yaml.safe_load((ROOT / "protocols" / "type2.yaml").read_text(encoding="utf-8"))
+    (result,) = [op for op in profile["opcodes"] if op.get("name") == "CONTROL_RESULT"]
+    assert result["reasons"] == {int(r): r.text for r in Reason}  # the wire names them alike
 
 
 def test_route_set_throws_points_awaits_detection_then_clears(rig: StationRig) -> None:
