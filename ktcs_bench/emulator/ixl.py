@@ -83,11 +83,15 @@ class IxlDevice(Device):
         self.faults, self.ssl, self.server_hostname = faults, ssl, server_hostname
 
     # -- the CTC's controls, by name -------------------------------------------------------------
-    def _control(self, name: str, value: int) -> tuple[bool, int]:
+    def _control(self, name: str, value: int) -> tuple[bool, int] | None:
+        """The interlocking's answer now; None when a departure waits for its interval's
+        permission: `apply` sends the answer when the interlocking gives it."""
         out = self.ixl.control(name, value, self.now())
-        result = out.results[0]
+        result = next((r for r in out.results if r.name == name), None)
+        if result is not None:
+            out.results.remove(result)
         self.apply(out)
-        return result.accepted, int(result.reason)
+        return None if result is None else (result.accepted, int(result.reason))
 
     def _unknown_control(self, code: int, value: int) -> None:
         self.note("control", f"ctc: unknown control code {code} rejected")
@@ -107,6 +111,10 @@ class IxlDevice(Device):
             items = self.ctc_link.send(ctc)
             if items and self.client is not None:
                 self.client.indicate(items)
+        for late in out.results:  # answers to controls that waited (`_control`)
+            if late.name is not None and self.client is not None:
+                number = self.ctc_link.control_number(late.name)
+                self.client.control_result(number, late.accepted, int(late.reason))
         for e in out.events:
             self.note(e.kind, e.text)
         self.poke()

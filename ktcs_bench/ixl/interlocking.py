@@ -348,7 +348,9 @@ class Interlocking:
         if kind in (F.RSC, F.RCC):
             if not value:
                 return Reason.NONE
-            return self._request_route(obj, now) if kind is F.RSC else self._cancel_route(obj, now)
+            if kind is F.RCC:
+                return self._cancel_route(obj, now)
+            return self._request_route(obj, now, wait=source == kinds.CTC)
         if kind is F.DRC:
             if not value:
                 return Reason.NONE
@@ -435,9 +437,10 @@ class Interlocking:
         self._event(now, "route", f"route {name} locked")
         return Reason.NONE
 
-    def _request_route(self, name: str, now: float) -> Reason | None:
+    def _request_route(self, name: str, now: float, wait: bool) -> Reason | None:
         """Set a route; a departure into an interval whose permission we lack asks for it and
-        waits (None) when every other check passes now."""
+        waits (None) when every other check passes now. From the local panel (`wait` False) it
+        asks and is refused at once: the operator sets it again once the permission is here."""
         iv = self.view.interval_of_exit(self.routes[name].route)
         end = self.ends[iv.name] if iv is not None else None
         if end is None or end.boundary or end.holds:
@@ -447,7 +450,8 @@ class Interlocking:
         reason = self._set_route(name, now, check_only=True)
         if reason is not Reason.DIRECTION:
             return reason
-        return None if self._ask(end.interval.name, now) is Reason.NONE else Reason.DIRECTION
+        asked = self._ask(end.interval.name, now) is Reason.NONE
+        return None if asked and wait else Reason.DIRECTION
 
     def _ask(self, interval: str, now: float) -> Reason:
         """Ask the neighbour for the interval's permission (DRC, or a departure wanting it)."""
