@@ -2,7 +2,10 @@
 
 A code is a speed code from the line's table with its target speed, the gradient under the
 track circuit (‰, in the direction of travel, the lowest — most adverse for braking — over it),
-and the target distance: metres from the track circuit's entry end to the next stop point.
+and the target distance: metres from the track circuit's entry end to the next stop point. A
+code is given for one direction of travel (`direction`, SPEC §6.6): a train running the other way
+over the track circuit must not read it as its own (`TrackCircuitModel.code_for` gives it the most
+restrictive code); None -- the most restrictive code itself -- is for any train.
 """
 
 from __future__ import annotations
@@ -10,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ktcs_bench.station.model import Line
+from ktcs_bench.station.model import Direction, Line
 
 
 @dataclass(frozen=True, slots=True)
@@ -19,6 +22,7 @@ class AtcCode:
     target_speed_kmh: float
     gradient_permille: float
     target_distance_m: float
+    direction: Direction | None = None
 
 
 def most_restrictive(line: Line, gradient_permille: float = 0.0) -> AtcCode:

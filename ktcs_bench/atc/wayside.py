@@ -271,7 +271,7 @@ class WaysideAtc:
                 allowed = min(allowed, next_limit)
             allowed = min(allowed, braking_speed_kmh(beyond_exit, self.line.service_brake_mps2))
         code, kmh = quantise(self.line, allowed)
-        return AtcCode(code, kmh, self._gradient(t, path.direction), distance)
+        return AtcCode(code, kmh, self._gradient(t, path.direction), distance, path.direction)
 
     # ------------------------------------------------------------------ outputs
 
