@@ -616,6 +616,9 @@ class Interlocking:
                 self._event(now, "point", f"point {name}: demand taken as detected, {det}")
         if self.startup_held and live:
             self._startup_release(now)
+        # a permission just received sets its waiting departures before the rules may give it
+        # away again; an ask that failed in this step is answered in it
+        self._answer_waiting(now)
         for iv in self.intervals.values():
             facts = self._facts(iv)
             self._follow_transit(iv, facts)
