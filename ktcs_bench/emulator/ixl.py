@@ -87,7 +87,7 @@ class IxlDevice(Device):
         """The interlocking's answer now; None when a departure waits for its interval's
         permission: `apply` sends the answer when the interlocking gives it."""
         out = self.ixl.control(name, value, self.now())
-        result = next((r for r in out.results if r.name == name), None)
+        result = next((r for r in out.results if not r.late), None)
         if result is not None:
             out.results.remove(result)
         self.apply(out)
@@ -112,7 +112,7 @@ class IxlDevice(Device):
             if items and self.client is not None:
                 self.client.indicate(items)
         for late in out.results:  # answers to controls that waited (`_control`)
-            if late.name is not None and self.client is not None:
+            if late.late and late.name is not None and self.client is not None:
                 number = self.ctc_link.control_number(late.name)
                 self.client.control_result(number, late.accepted, int(late.reason))
         for e in out.events:

@@ -75,6 +75,8 @@ class ControlResult:
     name: str | None  # None when the CTC->IXL chart has no such control
     accepted: bool
     reason: Reason
+    late: bool = False
+    """The answer to an earlier CTC control that waited for an interval's permission."""
 
 
 @dataclass
@@ -487,7 +489,7 @@ class Interlocking:
                 reason = self._set_route(route, now) if end.holds else Reason.DIRECTION
                 verdict = "accepted" if reason is Reason.NONE else f"rejected: {reason.text}"
                 self._event(now, "control", f"{source}: {name}=1 {verdict}")
-                self._results.append(ControlResult(name, reason is Reason.NONE, reason))
+                self._results.append(ControlResult(name, reason is Reason.NONE, reason, late=True))
 
     def _cancel_route(self, name: str, now: float) -> Reason:
         rs = self.routes[name]

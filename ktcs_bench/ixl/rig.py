@@ -70,10 +70,7 @@ class StationRig:
         """A control; None while it waits for an interval's permission (its answer comes into
         `results`)."""
         out = self.ixl.control(name, value, self.now)
-        mine = [r for r in out.results if r.name == name]
-        result = mine[0] if mine else None
-        if out.results and not mine:
-            result = out.results[0]  # an unknown code: answered without its name
+        result = next((r for r in out.results if not r.late), None)
         out.results = [r for r in out.results if r is not result]  # the rest came late
         self.take(out)
         return result
@@ -135,7 +132,7 @@ class StationRig:
 
     def take(self, out: IxlOutput) -> None:
         self.events += out.events
-        self.results += out.results
+        self.results += [r for r in out.results if r.late]
         for role, changes in self.to_neighbour.items():
             changes += out.of(role)
         ctc = out.of(kinds.CTC)
