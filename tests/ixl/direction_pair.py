@@ -58,9 +58,11 @@ class Pair:
         for rig, role, _, _ in self.ends():
             rig.set_link(role, up)
             rig.to_neighbour[role].clear()  # nothing queued survives an outage
-        if up:
-            for sender, role, receiver, back in self.ends():
-                receiver.deliver(back, sender.ixl.full_state(role))
+        if up:  # both full states cross on the wire: each is taken before either is read
+            states = [(receiver, back, sender.ixl.full_state(role))
+                      for sender, role, receiver, back in self.ends()]  # fmt: skip
+            for receiver, back, state in states:
+                receiver.deliver(back, state)
         self.shuttle()
 
     def restart(self, station: int) -> None:
