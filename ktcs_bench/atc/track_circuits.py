@@ -25,7 +25,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
-from ktcs_bench.atc.track_codes import AtcCode
+from ktcs_bench.atc.track_codes import AtcCode, most_restrictive
 from ktcs_bench.station.geometry import LineGeometry, Track, beyond, meets
 from ktcs_bench.station.model import Line, PointPosition, TrackCircuit
 
@@ -215,11 +215,18 @@ class TrackCircuitModel:
         return None
 
     def code_for(self, train: str) -> AtcCode | None:
-        """The code the train's antenna picks up; None when no code reaches it."""
+        """The code the train's antenna picks up; None when no code reaches it. A code given for
+        the other direction of travel (tail -> head) is no proceed for this train: it reads the
+        most restrictive code."""
         tc = self.under_antenna(train)
         if tc is None or self.faults.get(tc) == "no_code":
             return None
-        return self.codes.get(tc)
+        code = self.codes.get(tc)
+        t = self.trains[train]
+        running = "up" if t.head_m >= t.tail_m else "down"
+        if code is not None and code.direction is not None and code.direction != running:
+            return most_restrictive(self.line, -code.gradient_permille)
+        return code
 
     # ------------------------------------------------------------------ the path
 

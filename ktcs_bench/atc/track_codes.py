@@ -9,6 +9,10 @@ a train brakes down to the next circuit's code over that circuit, on the line's 
 corrected for the most adverse gradient to the stop point in its running direction, after running
 on for the line's brake build-up time -- so that the step a train meets at each circuit's entry is
 one its ATP's curves on that gradient let it brake for.
+
+A code is given for one direction of travel (`direction`, SPEC §6.6): a train running the other way
+over the track circuit must not read it as its own (`TrackCircuitModel.code_for` gives it the most
+restrictive code); None -- the most restrictive code itself -- is for any train.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ktcs_bench.station.model import Line
+from ktcs_bench.station.model import Direction, Line
 from ktcs_bench.train.deceleration import RotatingMass, gradient_acceleration
 
 
@@ -26,6 +30,7 @@ class AtcCode:
     target_speed_kmh: float
     gradient_permille: float
     target_distance_m: float
+    direction: Direction | None = None
 
 
 def most_restrictive(line: Line, gradient_permille: float = 0.0) -> AtcCode:

@@ -284,7 +284,7 @@ class WaysideAtc:
         gradient = self._slope(t, path.direction)
         if not free:  # the stop is at this circuit's exit
             code, kmh = quantise(self.line, 0.0)
-            return AtcCode(code, kmh, gradient, distance)
+            return AtcCode(code, kmh, gradient, distance, path.direction)
         adverse = min([gradient, *(self._slope(x, path.direction) for x in free)])
         decel = braking_decel(self.line, adverse)
         build_up = self.line.brake_build_up_s
@@ -294,7 +294,7 @@ class WaysideAtc:
             entry = braking_speed_kmh(free[i].length_m, decel, build_up, exit_kmh)
             exit_kmh = quantise(self.line, min(limits[i], limits[i + 1], entry))[1]
         code, kmh = quantise(self.line, exit_kmh)
-        return AtcCode(code, kmh, gradient, distance)
+        return AtcCode(code, kmh, gradient, distance, path.direction)
 
     def _slope(self, t: TrackCircuit, direction: Direction) -> float:
         """`_gradient`, kept: the line does not change."""

@@ -13,7 +13,9 @@ which numbers the chart lacks); a control the peer sends is named by `control_na
 
 `ControlLink` is a link whose peer sends controls, each answered (the IXL's Type II side): it is
 the application the Type II client serves (`full_state`, `on_control`), answering a number the
-chart lacks itself and handing every other control to the core by name.
+chart lacks itself and handing every other control to the core by name. A control the core
+answers later (a departure waiting for an interval's permission, SPEC §6.6) is answered None
+now; its answer is numbered by `control_number` when it comes.
 """
 
 from __future__ import annotations
@@ -101,7 +103,8 @@ class LinkBinding:
 
 class ControlLink(LinkBinding):
     """A link whose peer sends controls, each answered (accepted, reason): the Type II
-    application of the IXL. `control(name, value)` is the core's answer; `unknown_reason` the
+    application of the IXL. `control(name, value)` is the core's answer (None: it comes later);
+    `unknown_reason` the
     reason number for a control the chart lacks, `on_unknown(number, value)` told of one."""
 
     def __init__(
@@ -109,7 +112,7 @@ class ControlLink(LinkBinding):
         tx: CodeChart,
         rx: CodeChart,
         state: StateOf,
-        control: Callable[[str, int], tuple[bool, int]],
+        control: Callable[[str, int], tuple[bool, int] | None],
         unknown_reason: int,
         on_unknown: Callable[[int, int], None] | None = None,
     ) -> None:
@@ -119,11 +122,15 @@ class ControlLink(LinkBinding):
         self.unknown_reason = unknown_reason
         self.on_unknown = on_unknown
 
-    def on_control(self, code: int, value: int) -> tuple[bool, int]:
-        """One CONTROL item (number, value) -> (accepted, reason)."""
+    def on_control(self, code: int, value: int) -> tuple[bool, int] | None:
+        """One CONTROL item (number, value) -> (accepted, reason); None: answered later."""
         name = self.control_name(code)
         if name is None:
             if self.on_unknown is not None:
                 self.on_unknown(code, value)
             return False, self.unknown_reason
         return self.control(name, value)
+
+    def control_number(self, name: str) -> int:
+        """The number of control `name` (a late answer is sent by it)."""
+        return self.rx.number_of(name)

@@ -5,7 +5,9 @@ types, order) are what `station_codes.stations` derives. Against the emulators: 
 cores (the interlocking, the trackside, the wayside ATC, and the CTC's model) are built and bound
 to their links as the emulator processes bind them (`binding.LinkBinding`), and every code a link
 carries -- the number each end puts on the wire or reads from it -- must be the file's code of
-that number; and every code a core gives or takes must be one its link carries.
+that number; and every code a core gives or takes must be one its link carries. Between two
+neighbouring IXLs (SPEC §6.6) both ends must agree: what one sends its east neighbour is what that
+neighbour reads from its west, code for code, and each interlocking gives and takes exactly those.
 """
 
 from __future__ import annotations
@@ -31,7 +33,13 @@ from ktcs_bench.station.geometry import (
 )
 from ktcs_bench.station.model import Line
 from ktcs_bench.station_codes.chart import CodeChart
-from ktcs_bench.station_codes.stations import ChartSpec, build_specs, link_charts
+from ktcs_bench.station_codes.stations import (
+    ChartSpec,
+    build_specs,
+    link_charts,
+    neighbour_intervals,
+    station_chart,
+)
 
 
 def check_charts(line: Line, chart_dir: Path, emulators: bool = True) -> list[str]:
@@ -56,6 +64,7 @@ def check_charts(line: Line, chart_dir: Path, emulators: bool = True) -> list[st
         problems += _compare(path, chart, spec)
     if emulators:
         problems += _check_emulators(line, files)
+        problems += _check_neighbours(line, files)
     problems += check_point_geometry(line)
     return problems
 
@@ -211,6 +220,49 @@ def _file_against_wire(path: Path, file: CodeChart, ends: Iterable[_End]) -> lis
         if more:
             text += f" (and {more} more code{'s differ' if more > 1 else ' differs'})"
         out.append(text)
+    return out
+
+
+def _check_neighbours(line: Line, files: dict[str, tuple[Path, CodeChart]]) -> list[str]:
+    """The links between neighbouring IXLs: station A's `ixl_to_east` file is its east
+    neighbour B's `west_to_ixl` file, code for code (the two ends number alike); and each
+    interlocking, linked with its neighbours, gives and takes exactly what its links carry."""
+    out: list[str] = []
+    for st in sorted(line.stations):
+        view = line.view(st)
+        roles = neighbour_intervals(view)
+        ixl = Interlocking(view, neighbour_links=roles)
+        for role, iv in roles.items():
+            outward, inward = kinds.chart_name(role, True), kinds.chart_name(role, False)
+            stem = f"st{st}_{outward}"
+            chart = station_chart(view, outward)
+            out += _core_against_link(stem, _End("the IXL", "sends", chart,
+                                                 frozenset(ixl.full_state(role))))  # fmt: skip
+            out += _core_against_link(
+                f"st{st}_{inward}",
+                _End("the IXL", "reads", station_chart(view, inward),
+                     frozenset(ixl.input_names(role))),
+            )  # fmt: skip
+            if role != kinds.EAST:
+                continue
+            other = f"st{iv.east}_{kinds.chart_name(kinds.WEST, False)}"
+            if stem in files and other in files:
+                (path, ours), (their_path, theirs) = files[stem], files[other]
+                if ours.names != theirs.names:
+                    k = next(
+                        (
+                            i
+                            for i, (a, b) in enumerate(zip(ours.names, theirs.names, strict=False))
+                            if a != b
+                        ),
+                        min(len(ours.names), len(theirs.names)),
+                    )
+                    a = ours.names[k] if k < len(ours.names) else "no code"
+                    b = theirs.names[k] if k < len(theirs.names) else "no code"
+                    out.append(
+                        f"{path}: code {k + 1} is {a!r}, but {their_path} (the other end of "
+                        f"interval {iv.name}) reads {b!r} as code {k + 1}: the ends disagree"
+                    )
     return out
 
 

@@ -61,7 +61,7 @@ class RigIxl:
     def full_state(self) -> list[tuple[int, int]]:
         return self.link.full_state()
 
-    def on_control(self, code: int, value: int) -> tuple[bool, int]:
+    def on_control(self, code: int, value: int) -> tuple[bool, int] | None:
         self._catch_up()
         answer = self.link.on_control(code, value)
         self._poke()

@@ -5,13 +5,13 @@ Until the rails connect, and whenever their connection is lost, every track circ
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import astuple
 from typing import Any
 
 from ktcs_bench import kinds
 from ktcs_bench.atc.track_codes import AtcCode
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.emulator.device import IxlPeerDevice
+from ktcs_bench.emulator.rails import WireCode, code_to_wire
 from ktcs_bench.messages import JsonObject
 from ktcs_bench.station.model import Line
 from ktcs_bench.transport.endpoints import Endpoint
@@ -45,8 +45,8 @@ class AtcDevice(IxlPeerDevice):
                 self.rails.send({"codes": self._wire(self.atc.track_codes())})
 
     @staticmethod
-    def _wire(codes: Mapping[str, AtcCode]) -> dict[str, list[float]]:
-        return {tc: list(astuple(code)) for tc, code in codes.items()}
+    def _wire(codes: Mapping[str, AtcCode]) -> dict[str, WireCode]:
+        return {tc: code_to_wire(code) for tc, code in codes.items()}
 
     def apply(self, out: AtcOutput) -> None:
         if out.ixl and self.port is not None:

@@ -8,7 +8,6 @@ the device's for the CTC link."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Mapping
 from functools import partial
 from typing import Any
 
@@ -32,9 +31,7 @@ from ktcs_bench.messages import (
     Refused,
 )
 from ktcs_bench.station.model import Line, StationView
-from ktcs_bench.station_codes.chart import CodeChart
-from ktcs_bench.station_codes.names import Function as F
-from ktcs_bench.station_codes.stations import link_charts, station_chart
+from ktcs_bench.station_codes.stations import link_charts
 from ktcs_bench.transport.endpoints import Endpoint
 from ktcs_bench.transport.ixl_client import IxlClient
 from ktcs_bench.type1 import LinkConfig
@@ -47,16 +44,6 @@ def neighbour_roles(view: StationView) -> tuple[str, ...]:
     return tuple(
         kinds.neighbour_role(iv.west == view.number) for iv in view.intervals if not iv.boundary
     )
-
-
-def _ignore(codes: dict[str, int]) -> None:
-    """Codes nobody reads."""
-
-
-def _fail_safe(chart: CodeChart) -> dict[str, int]:
-    """A neighbour's chart as an IXL that does not work the interval sends it: holding no
-    permission, asking none, no departure route locked, its half of the interval occupied."""
-    return {c.name: int(c.type == F.TTC) for c in chart.codes}
 
 
 class IxlDevice(Device):
@@ -82,35 +69,28 @@ class IxlDevice(Device):
         super().__init__(name, control)
         self.station = station
         view = line.view(station)
-        # restarted in a running lab (a crash recovery): start-up locking (ixl.interlocking)
-        self.ixl = Interlocking(view, mode=mode, tc_sources=(kinds.ATC,), startup_locking=restarted)
-        self.drive(self.ixl, lambda now, out: self.apply(out))
-        self.ports: dict[str, CodePort] = {}
-        self._neighbours_up: dict[str, bool] = {}  # the links `_neighbour_link` logs
         neighbours = neighbour_roles(view)
-        served = (*LINKS, *getattr(self.ixl, "neighbours", {}))  # the roles the core reads
-        # the Type I peers and the neighbouring IXLs (SPEC §6.6): each link bound the one way,
-        # the IXL sending ixl_to_ROLE and reading ROLE_to_ixl
-        for role in (*LINKS, *kinds.NEIGHBOUR_ROLES):
-            if role not in links:
-                continue
-            if role in kinds.NEIGHBOUR_ROLES and role not in neighbours:
+        for role in kinds.NEIGHBOUR_ROLES:
+            if role in links and role not in neighbours:
                 raise UsageError(f"--link {role}=...: station {station} has no {role} "
                                  "neighbour (no interval on that side shared with a station)")  # fmt: skip
+        # restarted in a running lab (a crash recovery): start-up locking (ixl.interlocking);
+        # the neighbours it is linked with work its intervals' permission (SPEC §6.6)
+        self.ixl = Interlocking(
+            view, mode=mode, tc_sources=(kinds.ATC,), startup_locking=restarted,
+            neighbour_links=tuple(r for r in neighbours if r in links),
+        )  # fmt: skip
+        self.drive(self.ixl, lambda now, out: self.apply(out))
+        self.ports: dict[str, CodePort] = {}
+        # the Type I peers and the neighbouring IXLs (SPEC §6.6): each link bound the one way,
+        # the IXL sending ixl_to_ROLE and reading ROLE_to_ixl
+        for role in (*LINKS, *self.ixl.neighbours):
+            if role not in links:
+                continue
             charts = (kinds.chart_name(role, True), kinds.chart_name(role, False))
-            # an interlocking that takes no neighbour's codes: the link runs, carrying the
-            # fail-safe reading of its chart
-            state: Callable[[], Mapping[str, int]] = partial(
-                _fail_safe, station_chart(view, charts[0])
-            )
-            on_codes: Callable[[dict[str, int]], None] = _ignore
-            on_link: Callable[[bool], None] = partial(self._neighbour_link, role)
-            if role in served:
-                state = partial(self.ixl.full_state, role)
-                on_codes = partial(self._codes_from, role)
-                on_link = partial(self._link_of, role)
             self.ports[role] = self.bind_code_link(
-                role, links[role], charts, view, state, on_codes, on_link,
+                role, links[role], charts, view, partial(self.ixl.full_state, role),
+                partial(self._codes_from, role), partial(self._link_of, role),
                 type1_profile, type1, faults,
             )  # fmt: skip
         # the application the Type II client serves: full states, controls by number
@@ -125,11 +105,15 @@ class IxlDevice(Device):
         self.faults, self.ssl, self.server_hostname = faults, ssl, server_hostname
 
     # -- the CTC's controls, by name -------------------------------------------------------------
-    def _control(self, name: str, value: int) -> tuple[bool, int]:
+    def _control(self, name: str, value: int) -> tuple[bool, int] | None:
+        """The interlocking's answer now; None when a departure waits for its interval's
+        permission: `apply` sends the answer when the interlocking gives it."""
         out = self.ixl.control(name, value, self.now())
-        result = out.results[0]
+        result = next((r for r in out.results if not r.late), None)
+        if result is not None:
+            out.results.remove(result)
         self.apply(out)
-        return result.accepted, int(result.reason)
+        return None if result is None else (result.accepted, int(result.reason))
 
     def _unknown_control(self, code: int, value: int) -> None:
         self.note("control", f"ctc: unknown control code {code} rejected")
@@ -141,13 +125,6 @@ class IxlDevice(Device):
     def _link_of(self, role: str, up: bool) -> None:
         self.apply(self.ixl.link_state(role, up, self.now()))
 
-    def _neighbour_link(self, role: str, up: bool) -> None:
-        """A neighbour's link the interlocking does not read, each transition logged once in
-        the interlocking's words for its links ("east link up")."""
-        if self._neighbours_up.get(role, False) != up:
-            self._neighbours_up[role] = up
-            self.note("link", f"{role} link {'up' if up else 'in communication error'}")
-
     def apply(self, out: IxlOutput) -> None:
         for role, changes in out.changes.items():
             if role in self.ports:
@@ -156,6 +133,10 @@ class IxlDevice(Device):
             items = self.ctc_link.send(ctc)
             if items and self.client is not None:
                 self.client.indicate(items)
+        for late in out.results:  # answers to controls that waited (`_control`)
+            if late.late and late.name is not None and self.client is not None:
+                number = self.ctc_link.control_number(late.name)
+                self.client.control_result(number, late.accepted, int(late.reason))
         for e in out.events:
             self.note(e.kind, e.text)
         self.poke()

@@ -4,7 +4,9 @@ The track-circuit emulator serves it (JSON lines over TCP, admitting only who pr
 token, as every control port does). Clients say who they are first:
   {"hello": {"role": "atc"|"trackside"|"train"|"observer", "name": ..., "train": id}, "token": T}
 then the server sends {"occupancy": {TC: 0|1}} (all on hello, changes after). An ATC sends
-{"codes": {TC: [code, speed_kmh, gradient_permille, target_distance_m]}}; a train sends
+{"codes": {TC: [code, speed_kmh, gradient_permille, target_distance_m, direction]}} -- direction
+"up", "down" or null (any train: the most restrictive code); a code of 4 elements (an older
+sender) has no direction (`code_from_wire`, `code_to_wire`); a train sends
 {"position": {"head": m, "tail": m, "track": "1"}} and receives {"code": [...] | null} for the
 track circuit under its antenna. Faults: {"fault": {"tc": NAME, "kind": KIND}}, {"clear": NAME|null}.
 
@@ -24,7 +26,9 @@ import logging
 from collections.abc import Callable
 from typing import Required, TypedDict
 
+from ktcs_bench.atc.track_codes import AtcCode
 from ktcs_bench.messages import JsonObject
+from ktcs_bench.station.model import DIRECTIONS
 from ktcs_bench.transport import jsonlines
 from ktcs_bench.transport.endpoints import Endpoint
 
@@ -56,11 +60,30 @@ class Blades(TypedDict):
     points: dict[str, str]
 
 
+WireCode = list[float | str | None]
+"""A code on the rails: [code, speed_kmh, gradient_permille, target_distance_m, direction]."""
+
+
+def code_to_wire(code: AtcCode) -> WireCode:
+    return [code.code, code.target_speed_kmh, code.gradient_permille, code.target_distance_m,
+            code.direction]  # fmt: skip
+
+
+def code_from_wire(value: object) -> AtcCode:
+    """A code from the rails; ValueError (or TypeError) when it is not one."""
+    if not isinstance(value, list | tuple) or len(value) not in (4, 5):
+        raise ValueError(f"a code is 4 or 5 elements, not {value!r}")
+    direction = value[4] if len(value) == 5 else None
+    if direction not in (None, *DIRECTIONS):
+        raise ValueError(f"a code's direction is up, down or null, not {direction!r}")
+    return AtcCode(int(value[0]), float(value[1]), float(value[2]), float(value[3]), direction)
+
+
 class ToRails(TypedDict, total=False):
     """What a client sends once it has said hello: an ATC its codes, a train its position, a
     trackside its blades."""
 
-    codes: dict[str, list[float]]
+    codes: dict[str, WireCode]
     position: Position
     blades: Blades
 

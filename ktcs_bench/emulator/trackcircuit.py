@@ -12,8 +12,8 @@ from typing import Any
 
 from ktcs_bench import kinds
 from ktcs_bench.atc.track_circuits import RailEvent, TrackCircuitModel, TrainPosition
-from ktcs_bench.atc.track_codes import AtcCode
 from ktcs_bench.emulator.device import Device
+from ktcs_bench.emulator.rails import code_from_wire
 from ktcs_bench.messages import (
     TRACK_CIRCUITS,
     Answer,
@@ -89,7 +89,7 @@ class TrackCircuitDevice(Device):
             codes = {}
             for tc, v in obj["codes"].items():
                 try:
-                    codes[tc] = AtcCode(int(v[0]), float(v[1]), float(v[2]), float(v[3]))
+                    codes[tc] = code_from_wire(v)
                 except (TypeError, ValueError, IndexError):
                     return {"error": f"bad code for {tc}"}
             self.model.set_codes(codes)

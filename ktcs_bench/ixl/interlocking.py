@@ -3,9 +3,22 @@
 Inputs: CTC controls (`control`, by code name), local-panel actions (`local`), Type I
 code changes from the ATC and the trackside (`receive`), link up/down (`link_state`) and timers
 (`handle_timer` at `next_deadline()`: the automatic center-mode grant, timed route and overlap
-releases -- the timer shape of every core, `ktcs_bench.timed`). Every call takes `now` (seconds)
-and returns an `IxlOutput`: per peer role (`kinds.PEER_ROLES`: the CTC, the ATC, the trackside's
-`io`) the changes of its IXL->ROLE chart, control results and events. After every input the whole station is
+releases, the 3 s an ask for an interval's permission waits -- the timer shape of every core,
+`ktcs_bench.timed`). Every call takes `now` (seconds) and returns an `IxlOutput`: per peer role
+(`kinds.PEER_ROLES`: the CTC, the ATC, the trackside's `io`; and each neighbouring IXL it is
+linked with, `kinds.WEST`/`kinds.EAST`) the changes of its IXL->ROLE chart, control results and
+events.
+
+Traffic direction (SPEC §6.6, `ixl.direction`): each adjacent interval's permission is one
+`IntervalEnd`; only its holder locks a departure route into the interval. A departure asked at
+the end that does not hold it asks the neighbour (PRQ) and stays pending: it is answered -- in a
+later output's `results` -- when the permission comes (the route is then set with every check as
+of that moment) or refused with reason `direction` after 3 s without it; it is refused at once
+when the permission cannot be asked (link down, nothing known). `neighbour_links` names the
+neighbour roles this IXL has a link on; an interval whose neighbour it is not linked with (a
+single station on the bench) is worked as if its default end held the permission for good: the
+default end departs, the other end refuses departures into it (`direction`). The neighbour links
+are not among the links a signal depends on: a holder departs with its neighbour link down. After every input the whole station is
 re-evaluated at once, so a failing condition puts a signal to stop in the same call that reported
 it (invariant 4: within one cycle).
 
@@ -32,6 +45,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 from ktcs_bench import kinds
+from ktcs_bench.ixl.direction import Facts, Holding, IntervalEnd
 from ktcs_bench.ixl.modes import Mode, ModeControl
 from ktcs_bench.ixl.points import BITS, Detection, PointState
 from ktcs_bench.ixl.reasons import Reason
@@ -41,7 +55,7 @@ from ktcs_bench.station.loader import onward
 from ktcs_bench.station.model import Direction, Interval, PointPosition, Route, StationView
 from ktcs_bench.station_codes import names as n
 from ktcs_bench.station_codes.names import Function as F
-from ktcs_bench.station_codes.stations import StationCodes
+from ktcs_bench.station_codes.stations import StationCodes, neighbour_intervals
 
 LINKS = kinds.TYPE1_ROLES
 """The Type I links, by peer role: the ATC's and the trackside's."""
@@ -61,6 +75,8 @@ class ControlResult:
     name: str | None  # None when the CTC->IXL chart has no such control
     accepted: bool
     reason: Reason
+    late: bool = False
+    """The answer to an earlier CTC control that waited for an interval's permission."""
 
 
 @dataclass
@@ -76,7 +92,8 @@ class IxlOutput:
 
 
 class Interlocking:
-    """One station's IXL. `tc_sources` names the links whose reports give track occupancy."""
+    """One station's IXL. `tc_sources` names the links whose reports give track occupancy;
+    `neighbour_links` the neighbouring IXLs it is linked with (see the module docstring)."""
 
     def __init__(
         self,
@@ -87,6 +104,7 @@ class Interlocking:
         tc_sources: Iterable[str] = (kinds.ATC,),
         log_limit: int = 10_000,
         startup_locking: bool = False,
+        neighbour_links: Iterable[str] = (),
     ) -> None:
         self.view = view
         self.st = view.number
@@ -101,10 +119,34 @@ class Interlocking:
         self.signals = {s.name: SignalState(s) for s in st.lamp_signals}
         self.routes = {r.name: RouteState(r) for r in st.routes}
         self.intervals: dict[str, Interval] = {iv.name: iv for iv in view.intervals}
-        self.direction: dict[str, Direction] = {
-            iv.name: iv.default_direction for iv in view.intervals
+        self.codes = StationCodes(view)
+        linked = set(neighbour_links)
+        for role in linked - set(kinds.NEIGHBOUR_ROLES):
+            raise ValueError(f"unknown neighbour link {role!r}")
+        self.neighbours: dict[str, str] = {
+            role: iv.name for role, iv in neighbour_intervals(view).items() if role in linked
         }
-        self.link_up = dict.fromkeys(LINKS, False)
+        """Role -> interval of each neighbouring IXL this one is linked with (non-boundary)."""
+        for missing in sorted(linked - set(self.neighbours)):
+            raise ValueError(f"station {self.st} has no {missing} neighbour")
+        self.ends: dict[str, IntervalEnd] = {}
+        roles = {name: role for role, name in self.neighbours.items()}
+        for iv in view.intervals:
+            peer = roles.get(iv.name)
+            has_ttc = peer is not None and any(
+                c.function is F.TTC for c in self.codes.specs[kinds.chart_name(peer, False)].names
+            )
+            self.ends[iv.name] = IntervalEnd(iv, self.st, linked=peer is not None,
+                                             peer_has_ttc=has_ttc)  # fmt: skip
+        self._departures: dict[str, tuple[str, ...]] = {
+            iv: tuple(r.name for r in st.routes if (x := view.interval_of_exit(r)) and x.name == iv)
+            for iv in self.intervals
+        }
+        self._waiting: dict[str, list[tuple[str, str, str]]] = {iv: [] for iv in self.intervals}
+        # a train of ours in the interval (entered by our departure), and seen in its far half
+        self._transit = dict.fromkeys(self.intervals, False)
+        self._far_seen = dict.fromkeys(self.intervals, False)
+        self.link_up = dict.fromkeys((*LINKS, *self.neighbours), False)
         self.tc_reports: dict[str, dict[str, int]] = {src: {} for src in LINKS}
         self.izc: dict[str, int] = {}
         self.ttc: dict[str, int] = {}
@@ -114,9 +156,10 @@ class Interlocking:
         # by comparing each live picture with this one)
         self._occupied_before: dict[str, bool] = dict.fromkeys(self.tc_names, True)
         self._noticed: set[str] = set()
-        self.codes = StationCodes(view)
         self._controls = set(self.codes.names("ctc_to_ixl"))
-        self._inputs = {link: set(self.input_names(link)) for link in LINKS}
+        self._inputs = {link: set(self.input_names(link)) for link in self.link_up}
+        self.outputs: tuple[str, ...] = (*OUTPUTS, *self.neighbours)
+        """Every role this IXL sends to: its peers' and its linked neighbours'."""
         self.log: list[IxlEvent] = []
         self._log_limit = log_limit
         self._events: list[IxlEvent] = []
@@ -132,20 +175,30 @@ class Interlocking:
             for ps in self.points.values():
                 ps.demanded = None
         self._evaluate(0.0)
-        self._sent = {k: self.full_state(k) for k in OUTPUTS}
+        self._sent = {k: self.full_state(k) for k in self.outputs}
         self._events.clear()
 
     # ------------------------------------------------------------------ public inputs
 
     def control(self, name: str, value: int, now: float) -> IxlOutput:
-        """A CTC control (Type II CONTROL item): the code's name and its value."""
-        self._results.append(self._control(name, value, now, source=kinds.CTC))
+        """A CTC control (Type II CONTROL item): the code's name and its value. Its result is in
+        the output's `results`, except a departure waiting for the interval's permission: its
+        result comes in the output of the input that answers it (`pending`)."""
+        self._answer(self._control(name, value, now, source=kinds.CTC))
         return self._finish(now)
 
     def local_control(self, name: str, value: int, now: float) -> IxlOutput:
         """The same controls from the local panel: accepted only in local mode."""
-        self._results.append(self._control(name, value, now, source="local"))
+        self._answer(self._control(name, value, now, source="local"))
         return self._finish(now)
+
+    def pending(self) -> list[tuple[str, str]]:
+        """The route requests waiting for an interval's permission: (control name, source)."""
+        return [(name, src) for waits in self._waiting.values() for _, name, src in waits]
+
+    def _answer(self, result: ControlResult | None) -> None:
+        if result is not None:
+            self._results.append(result)
 
     def local(self, action: str, now: float) -> IxlOutput:
         """Local operator: "grant" / "refuse" a center-mode request, or "take" local control."""
@@ -163,7 +216,8 @@ class Interlocking:
         return self._finish(now)
 
     def receive(self, link: str, codes: Mapping[str, int], now: float) -> IxlOutput:
-        """Code changes or a full state from a Type I peer: one of `LINKS`.
+        """Code changes or a full state from a Type I peer: one of `LINKS`, or a linked
+        neighbour (`neighbours`).
 
         Codes that come while the link is in communication error are ignored: the IXL has gone
         fail-safe for that link and rebuilds its view from what comes after `link_state(up)`.
@@ -181,13 +235,15 @@ class Interlocking:
 
     def link_state(self, link: str, up: bool, now: float) -> IxlOutput:
         """A Type I link came up or went into communication error."""
-        if link not in LINKS:
+        if link not in self.link_up:
             raise ValueError(f"unknown link {link!r}")
         if self.link_up[link] != up:
             self.link_up[link] = up
             what = "up" if up else "in communication error"
             self._event(now, "link", f"{link} link {what}")
-            if not up:
+            if link in self.neighbours:
+                self.ends[self.neighbours[link]].link_state(up, now)
+            elif not up:
                 # What the link reported is stale from now on: after recovery each report is
                 # believed again only once the peer sends it (its ALL_INFO), not before.
                 self.tc_reports[link].clear()
@@ -212,6 +268,7 @@ class Interlocking:
         waits while no train movement can be read (a dead occupancy link): it is no deadline
         then, and the report that brings the link back runs it."""
         due = [self.modes.next_deadline()]
+        due += [end.next_deadline() for end in self.ends.values()]
         live = self._reports_live()
         # like an overlap timer, the start-up lock's waits while occupancy cannot be read
         due.append(self.startup_release_at if self.startup_held and live else None)
@@ -245,25 +302,40 @@ class Interlocking:
         return self.signals[signal].commanded
 
     def full_state(self, kind: str) -> dict[str, int]:
-        """Every code of the IXL->ROLE chart of peer role `kind` (one of `OUTPUTS`)."""
+        """Every code of the IXL->ROLE chart of peer role `kind` (one of `outputs`)."""
         states = {kinds.CTC: self._ctc_state, kinds.ATC: self._atc_state, kinds.IO: self._io_state}
+        if kind in self.neighbours:
+            return self._neighbour_state(self.neighbours[kind])
         if kind not in states:
-            raise ValueError(f"unknown output {kind!r} ({', '.join(OUTPUTS)})")
+            raise ValueError(f"unknown output {kind!r} ({', '.join(self.outputs)})")
         return states[kind]()
+
+    def traffic_direction(self, interval: str) -> Direction | None:
+        """The direction interval `interval` is worked in as this IXL knows it (None: nobody
+        holds its permission, as far as it knows)."""
+        return self.ends[interval].direction
+
+    def holding(self, interval: str) -> Holding:
+        """This IXL's part in the interval's permission."""
+        return self.ends[interval].holding
 
     # ------------------------------------------------------------------ controls
 
-    def _control(self, name: str, value: int, now: float, source: str) -> ControlResult:
+    def _control(self, name: str, value: int, now: float, source: str) -> ControlResult | None:
         code = self.codes.parse_code(name) if name in self._controls else None
         if code is None:
             self._event(now, "control", f"{source}: unknown control code {name!r} rejected")
             return ControlResult(None, False, Reason.UNKNOWN_CODE)
         reason = self._dispatch(code.function, code.object, value, now, source)
+        if reason is None:
+            self._wait(code.object, name, source, now)
+            return None
         verdict = "accepted" if reason is Reason.NONE else f"rejected: {reason.text}"
         self._event(now, "control", f"{source}: {name}={value} {verdict}")
         return ControlResult(name, reason is Reason.NONE, reason)
 
-    def _dispatch(self, kind: F, obj: str, value: int, now: float, source: str) -> Reason:
+    def _dispatch(self, kind: F, obj: str, value: int, now: float, source: str) -> Reason | None:
+        """The control's answer; None: a departure waits for its interval's permission."""
         if kind is F.CMQ:
             if value and self.modes.request_center(now):
                 self._event(now, "mode", "center mode requested (CMR): awaiting local operator")
@@ -278,7 +350,13 @@ class Interlocking:
         if kind in (F.RSC, F.RCC):
             if not value:
                 return Reason.NONE
-            return self._set_route(obj, now) if kind is F.RSC else self._cancel_route(obj, now)
+            if kind is F.RCC:
+                return self._cancel_route(obj, now)
+            return self._request_route(obj, now, wait=source == kinds.CTC)
+        if kind is F.DRC:
+            if not value:
+                return Reason.NONE
+            return self._ask(obj, now)
         if kind in (F.SNC, F.SRC):
             if not value:
                 return Reason.NONE
@@ -302,7 +380,8 @@ class Interlocking:
                 return rs
         return None
 
-    def _set_route(self, name: str, now: float) -> Reason:
+    def _set_route(self, name: str, now: float, check_only: bool = False) -> Reason:
+        """Check and lock route `name`; `check_only`: check only (the direction last)."""
         rs = self.routes[name]
         r = rs.route
         if rs.status in (RouteStatus.SETTING, RouteStatus.SET):
@@ -340,12 +419,17 @@ class Interlocking:
                 self._event(now, "route", f"route {name} refused: point {s.point} failed")
                 return Reason.POINT_FAILED
         iv = self.view.interval_of_exit(r)
-        if iv is not None and self.direction[iv.name] != r.direction:
-            if self._interval_occupied(iv):
+        if iv is not None:
+            end = self.ends[iv.name]
+            if end.boundary and not end.take_boundary(self._facts(iv)):
                 self._event(now, "route", f"route {name} refused: interval {iv.name} occupied")
                 return Reason.TRACK_OCCUPIED
-            self.direction[iv.name] = r.direction
-            self._event(now, "route", f"interval {iv.name} traffic direction now {r.direction}")
+            if not end.holds:
+                if not check_only:
+                    self._event(now, "route", f"route {name} refused: no permission for {iv.name}")
+                return Reason.DIRECTION
+        if check_only:
+            return Reason.NONE
         rs.lock()
         if onward_holds:
             rs.cede_overlap(rs.overlap_elements)
@@ -354,6 +438,58 @@ class Interlocking:
             self._event(now, "route", f"route {name} takes over the overlap of {holder.route.name}")
         self._event(now, "route", f"route {name} locked")
         return Reason.NONE
+
+    def _request_route(self, name: str, now: float, wait: bool) -> Reason | None:
+        """Set a route; a departure into an interval whose permission we lack asks for it and
+        waits (None) when every other check passes now. From the local panel (`wait` False) it
+        asks and is refused at once: the operator sets it again once the permission is here."""
+        iv = self.view.interval_of_exit(self.routes[name].route)
+        end = self.ends[iv.name] if iv is not None else None
+        if end is None or end.boundary or end.holds:
+            return self._set_route(name, now)
+        if self.routes[name].status is not RouteStatus.IDLE:
+            return self._set_route(name, now)  # already set or in use: answered as ever
+        reason = self._set_route(name, now, check_only=True)
+        if reason is not Reason.DIRECTION:
+            return reason
+        asked = self._ask(end.interval.name, now) is Reason.NONE
+        return None if asked and wait else Reason.DIRECTION
+
+    def _ask(self, interval: str, now: float) -> Reason:
+        """Ask the neighbour for the interval's permission (DRC, or a departure wanting it)."""
+        end = self.ends.get(interval)
+        if end is None:
+            return Reason.UNKNOWN_CODE  # pragma: no cover - DRC exists for our intervals only
+        if end.ask(now):
+            return Reason.NONE
+        self._event(now, "route", f"interval {interval}: permission cannot be asked "
+                    f"({'link down' if not end.link_up else end.holding.value})")  # fmt: skip
+        return Reason.DIRECTION
+
+    def _wait(self, interval: str, name: str, source: str, now: float) -> None:
+        """A departure (control `name`) waits for the permission of the interval it leads to."""
+        code = self.codes.parse_code(name)
+        assert code is not None
+        iv = self.view.interval_of_exit(self.routes[code.object].route)
+        assert iv is not None
+        self._waiting[iv.name].append((code.object, name, source))
+        self._event(now, "control", f"{source}: {name}=1 waits for the permission of {iv.name}")
+
+    def _answer_waiting(self, now: float) -> None:
+        """Departures waiting for a permission: set once it is ours, refused once it cannot
+        come."""
+        for iv, waits in self._waiting.items():
+            if not waits:
+                continue
+            end = self.ends[iv]
+            if end.holding is Holding.ASKING:
+                continue
+            self._waiting[iv] = []
+            for route, name, source in waits:
+                reason = self._set_route(route, now) if end.holds else Reason.DIRECTION
+                verdict = "accepted" if reason is Reason.NONE else f"rejected: {reason.text}"
+                self._event(now, "control", f"{source}: {name}=1 {verdict}")
+                self._results.append(ControlResult(name, reason is Reason.NONE, reason, late=True))
 
     def _cancel_route(self, name: str, now: float) -> Reason:
         rs = self.routes[name]
@@ -401,15 +537,15 @@ class Interlocking:
         code = self.codes.parse_code(name)
         assert code is not None  # every name of the link's chart has a meaning
         kind, obj = code.function, code.object
+        if link in self.neighbours:
+            self.ends[self.neighbours[link]].receive(kind, state, now)
+            return
         if kind is F.TC:
             self.tc_reports[link][name] = state
             return
         if link == kinds.ATC:
             if kind is F.IZC:
-                before = self.izc.get(obj, 1)
                 self.izc[obj] = state
-                if state and not before:
-                    self._infer_direction(self.intervals[obj], now)
             elif kind is F.TTC:
                 self.ttc[name] = state
             return
@@ -426,32 +562,43 @@ class Interlocking:
             lamp.lamp_bits[code.aspect] = state
             lamp.lamp_reported = True
 
-    def _interval_occupied(self, iv: Interval) -> bool:
-        if not self.link_up[kinds.ATC] or self.izc.get(iv.name, 1) != 0:
-            return True
-        return any(self.occupied(tc) for tc in self.view.owned_half(iv))
+    def _facts(self, iv: Interval) -> Facts:
+        """What this IXL knows of interval `iv` now (`ixl.direction.Facts`)."""
+        end = self.ends[iv.name]
+        clear = self.link_up[kinds.ATC] and self.izc.get(iv.name, 1) == 0
+        clear = clear and not any(self.occupied(tc) for tc in self.view.owned_half(iv))
+        if end.linked and end.peer_has_ttc:
+            clear = clear and end.synced and end.peer.get(F.TTC, 1) == 0
+        locked = any(
+            self.routes[r].status is not RouteStatus.IDLE or self.routes[r].holds_anything
+            for r in self._departures[iv.name]
+        )
+        return Facts(clear, locked, self._transit[iv.name])
 
-    def _infer_direction(self, iv: Interval, now: float) -> None:
-        """A train entered the interval while no route of ours leads into it, or at its far end
-        (our half of it clear) while one does: it comes to us. A departure route of ours into
-        the interval then shows no proceed (its direction is gone), and our ATC codes our half
-        for the train that comes -- not for the one we meant to send, which a train coming
-        towards us would read as a proceed past our home signal."""
-        ours_clear = not any(self.occupied(tc) for tc in self.view.owned_half(iv))
-        for rs in self.routes.values():
-            if rs.holds_anything and self.view.interval_of_exit(rs.route) is iv and not ours_clear:
-                return
-        toward = iv.toward(self.st)
-        if self.direction[iv.name] != toward:
-            self.direction[iv.name] = toward
-            self._event(now, "route", f"interval {iv.name}: train approaching, direction {toward}")
+    def _follow_transit(self, iv: Interval, facts: Facts) -> None:
+        """A train of ours entered the interval (its half occupied under our entered departure);
+        it has arrived when it was seen in the far half (the neighbour's TTC) and the whole
+        interval is clear again -- where no neighbour reports a half, when it is clear."""
+        name = iv.name
+        entered = any(self.routes[r].status is RouteStatus.ENTERED for r in self._departures[name])
+        if entered and any(self.occupied(tc) for tc in self.view.owned_half(iv)):
+            if not self._transit[name]:
+                self._transit[name], self._far_seen[name] = True, False
+        end = self.ends[name]
+        if not self._transit[name]:
+            return
+        far = end.linked and end.peer_has_ttc
+        if far and end.peer.get(F.TTC) == 1:
+            self._far_seen[name] = True
+        if facts.clear and (self._far_seen[name] or not far):
+            self._transit[name] = False
 
     # ------------------------------------------------------------------ evaluation
 
     def _finish(self, now: float) -> IxlOutput:
         self._evaluate(now)
         out = IxlOutput(results=self._results, events=self._events)
-        for kind in OUTPUTS:
+        for kind in self.outputs:
             state = self.full_state(kind)
             last = self._sent[kind]
             changes = [(k, v) for k, v in state.items() if last.get(k) != v]
@@ -471,6 +618,15 @@ class Interlocking:
                 self._event(now, "point", f"point {name}: demand taken as detected, {det}")
         if self.startup_held and live:
             self._startup_release(now)
+        # a permission just received sets its waiting departures before the rules may give it
+        # away again; an ask that failed in this step is answered in it
+        self._answer_waiting(now)
+        for iv in self.intervals.values():
+            facts = self._facts(iv)
+            self._follow_transit(iv, facts)
+            for note in self.ends[iv.name].step(self._facts(iv), now):
+                self._event(now, "route", f"interval {iv.name}: {note}")
+        self._answer_waiting(now)
         for rs in self.routes.values():
             if rs.release_at is not None:
                 if now >= rs.release_at:
@@ -654,8 +810,8 @@ class Interlocking:
         if not self._overlap_locked(rs):
             why.append("overlap not locked")
         iv = self.view.interval_of_exit(route)
-        if iv is not None and self.direction[iv.name] != route.direction:
-            why.append(f"interval {iv.name} direction")
+        if iv is not None and not self.ends[iv.name].holds:
+            why.append(f"interval {iv.name}: no traffic permission")
         if self.signals[route.entry].stop_held:
             why.append("held at stop")
         return why
@@ -719,12 +875,28 @@ class Interlocking:
             out[n.rsi(st, rname)] = int(rs.status is not RouteStatus.IDLE)
             out[n.ali(st, rname)] = int(rs.release_at is not None)
         self._directions(out)
+        for iv, end in self.ends.items():
+            out[n.phi(iv)] = end.phi
+            out[n.prq(iv)] = end.prq
         return out
 
     def _directions(self, out: dict[str, int]) -> None:
-        for iv, d in self.direction.items():
+        """TDU/TDD follow the permission: the holder's departure direction; both 0 while
+        nobody holds it, as far as this IXL knows."""
+        for iv, end in self.ends.items():
+            d = end.direction
             out[n.tdu(iv)] = int(d == "up")
             out[n.tdd(iv)] = int(d == "down")
+
+    def _neighbour_state(self, interval: str) -> dict[str, int]:
+        """What this IXL tells the neighbour of their interval (its IXL->ROLE chart)."""
+        end, iv = self.ends[interval], self.intervals[interval]
+        out = {n.phi(interval): end.phi, n.prq(interval): end.prq}
+        out[n.drl(interval)] = int(self._facts(iv).departure_locked)
+        for ttc in self.codes.totalisers:
+            if ttc.interval == interval:
+                out[ttc.name] = int(any(self.occupied(tc) for tc in ttc.track_circuits))
+        return out
 
     def _atc_state(self) -> dict[str, int]:
         st = self.st

@@ -17,7 +17,7 @@ class Reason(IntEnum):
     POINT_LOCKED = 4
     POINT_FAILED = 5
     UNKNOWN_CODE = 6
-    DIRECTION = 7  # the interval's traffic permission is not held here (SPEC §6.6)
+    DIRECTION = 7  # a departure into an interval whose traffic permission this end lacks
 
     @property
     def text(self) -> str:

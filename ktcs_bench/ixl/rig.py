@@ -6,12 +6,15 @@ one `Timed` core (`ktcs_bench.timed`): `next_deadline()` is the earlier of the t
 `handle_timer(now)` runs both and returns the interlocking's new events; `advance` walks it
 through virtual time on the virtual clock, and a wall-clock driver can run it as well (the
 console's demo stations). `ctc` is the CTC's picture, kept by the IXL->CTC changes, which are
-also handed to `on_ctc` as they come (a Type II link to a real CTC). No I/O, no clock.
+also handed to `on_ctc` as they come (a Type II link to a real CTC). With `neighbour_links` the
+interlocking is linked with neighbouring IXLs (SPEC §6.6): what it tells each is gathered in
+`to_neighbour[role]` for whoever carries it across (`deliver` hands codes in), and a departure
+waiting for an interval's permission is answered later, into `results`. No I/O, no clock.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 
 from ktcs_bench import kinds
 from ktcs_bench.field.trackside import Trackside
@@ -31,12 +34,18 @@ class StationRig:
         now: float = 0.0,
         occupied: Iterable[str] = (),
         startup_locking: bool = False,
+        neighbour_links: Iterable[str] = (),
     ) -> None:
         """`occupied`: track circuits with a train in them when the interlocking starts;
-        `startup_locking`: it starts as one restarted in a running railway."""
+        `startup_locking`: it starts as one restarted in a running railway; `neighbour_links`:
+        the neighbouring IXLs it is linked with (their links start down: `set_link`)."""
         self.view = view
         self.now = now
-        self.ixl = Interlocking(view, mode=mode, startup_locking=startup_locking)
+        self.ixl = Interlocking(
+            view, mode=mode, startup_locking=startup_locking, neighbour_links=neighbour_links
+        )
+        self.to_neighbour: dict[str, list[tuple[str, int]]] = {r: [] for r in self.ixl.neighbours}
+        self.results: list[ControlResult] = []  # answers that came later (a permission waited)
         self.io = Trackside(view)
         self.occupancy = {t.name: t.name in set(occupied) for t in view.track_circuits}
         self.io.set_occupancy(self.occupancy, now)
@@ -51,10 +60,24 @@ class StationRig:
         self._report_occupancy()
 
     def control(self, name: str, value: int = 1) -> ControlResult:
+        """A control answered at once (a departure that waits for a permission: `request`)."""
+        result = self.request(name, value)
+        if result is None:
+            raise RuntimeError(f"{name} waits for an interval's permission: use request()")
+        return result
+
+    def request(self, name: str, value: int = 1) -> ControlResult | None:
+        """A control; None while it waits for an interval's permission (its answer comes into
+        `results`)."""
         out = self.ixl.control(name, value, self.now)
-        result = out.results[0]
+        result = next((r for r in out.results if not r.late), None)
+        out.results = [r for r in out.results if r is not result]  # the rest came late
         self.take(out)
         return result
+
+    def deliver(self, role: str, codes: Mapping[str, int]) -> None:
+        """Codes from the neighbour `role` (as its link delivers them)."""
+        self.take(self.ixl.receive(role, codes, self.now))
 
     def occupy(self, tc: str, occupied: bool = True) -> None:
         self.occupancy[tc] = occupied
@@ -63,6 +86,8 @@ class StationRig:
 
     def set_link(self, link: str, up: bool) -> None:
         self.take(self.ixl.link_state(link, up, self.now))
+        if link in self.ixl.neighbours:
+            return  # its codes come from the neighbour (`deliver`)
         if link == kinds.IO:
             self.from_field(self.io.link_state(up, self.now).changes)
         if up:
@@ -107,6 +132,9 @@ class StationRig:
 
     def take(self, out: IxlOutput) -> None:
         self.events += out.events
+        self.results += [r for r in out.results if r.late]
+        for role, changes in self.to_neighbour.items():
+            changes += out.of(role)
         ctc = out.of(kinds.CTC)
         self.ctc.update(ctc)
         if ctc and self.on_ctc is not None:

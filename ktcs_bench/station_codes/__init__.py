@@ -13,19 +13,23 @@ from ktcs_bench.station_codes.chart import Code, CodeChart
 from ktcs_bench.station_codes.names import CodeName, Function
 from ktcs_bench.station_codes.stations import (
     LINKS,
+    NEIGHBOUR_LINKS,
     ChartSpec,
     StationCodes,
     Totaliser,
     build_specs,
     chart_spec,
     link_charts,
+    neighbour_intervals,
     reverse,
     station_chart,
+    station_links,
     totalisers,
 )
 
 __all__ = [
     "LINKS",
+    "NEIGHBOUR_LINKS",
     "ChartSpec",
     "Code",
     "CodeChart",
@@ -36,7 +40,9 @@ __all__ = [
     "build_specs",
     "chart_spec",
     "link_charts",
+    "neighbour_intervals",
     "reverse",
     "station_chart",
+    "station_links",
     "totalisers",
 ]

@@ -1,7 +1,10 @@
 """The codes each station link carries, derived from station and line data (SPEC §5).
 
 One chart per station, link and direction: `ixl_to_ctc`, `ctc_to_ixl` (Type II), `ixl_to_atc`,
-`atc_to_ixl`, `ixl_to_io`, `io_to_ixl` (Type I). Codes are collected object by object (station,
+`atc_to_ixl`, `ixl_to_io`, `io_to_ixl` (Type I), and for each neighbouring IXL the station shares a
+non-boundary interval with (SPEC §6.6) `ixl_to_east`/`east_to_ixl` or `ixl_to_west`/`west_to_ixl`
+(Type I: per shared interval PHI, PRQ, DRL and the sender's TTC of its half; one end's
+`ixl_to_east` is its east neighbour's `west_to_ixl`, code for code). Codes are collected object by object (station,
 points, signals, track circuits, routes, intervals) in data order, so a code's number is stable
 while the data is. `StationCodes` holds one station's charts and what each of its names means
 (`parse_code`); the totalisers (TTC) are the runs of plain-line track circuits a station owns in
@@ -24,13 +27,14 @@ from ktcs_bench.station_codes.names import Function as F
 # (`kinds.charts`), and the file stem suffix of each chart
 LINKS: tuple[tuple[str, str, str], ...] = kinds.charts()
 
-# the charts of an IXL's links with its neighbouring IXLs (SPEC §6.6), each way, per role
 NEIGHBOUR_LINKS: tuple[tuple[str, str, str], ...] = tuple(
-    (kinds.chart_name(role, outward), kinds.TYPE1, f"IXL->{label}" if outward else f"{label}->IXL")
+    (kinds.chart_name(role, outward), kinds.TYPE1, f"IXL->{role.upper()}" if outward else
+     f"{role.upper()}->IXL")
     for role in kinds.NEIGHBOUR_ROLES
-    for label in (role.upper(),)
     for outward in (True, False)
-)
+)  # fmt: skip
+"""The links to the neighbouring IXLs, each way: a station has those of the neighbours it has
+(`neighbour_intervals`)."""
 
 # the chart's status column: what state 1 (and 0) of each function means
 ONE_ZERO: dict[str, str] = {
@@ -146,6 +150,7 @@ def _ixl_to_ctc(v: StationView) -> list[CodeName]:
         out += [CodeName(F.RSI, st, r.name), CodeName(F.ALI, st, r.name)]
     for iv in v.intervals:
         out += [CodeName(F.TDU, None, iv.name), CodeName(F.TDD, None, iv.name)]
+    for iv in v.intervals:  # after every older code: their numbers stay
         out += [CodeName(F.PHI, None, iv.name), CodeName(F.PRQ, None, iv.name)]
     return out
 
@@ -160,6 +165,35 @@ def _ctc_to_ixl(v: StationView) -> list[CodeName]:
         out += [CodeName(F.RSC, st, r.name), CodeName(F.RCC, st, r.name)]
     out += [CodeName(F.DRC, None, iv.name) for iv in v.intervals if not iv.boundary]
     return out
+
+
+def neighbour_intervals(view: StationView) -> dict[str, Interval]:
+    """The station's neighbour link roles (`kinds.NEIGHBOUR_ROLES`) and the interval each link
+    carries: `east` for the non-boundary interval it is the west end of, `west` for the other.
+    A boundary interval (a lab edge) has no IXL at its far end."""
+    out: dict[str, Interval] = {}
+    for iv in view.intervals:
+        if iv.boundary:
+            continue
+        out[kinds.EAST if iv.west == view.number else kinds.WEST] = iv
+    return out
+
+
+def _to_neighbour(v: StationView, role: str) -> list[CodeName]:
+    """What this IXL tells its neighbour `role` of their shared interval (SPEC §6.6)."""
+    iv = neighbour_intervals(v)[role]
+    out = [CodeName(f, None, iv.name) for f in (F.PHI, F.PRQ, F.DRL)]
+    half = v.owned_half(iv)
+    if half:
+        out.append(_ttc(v, iv.name, half))
+    return out
+
+
+def _from_neighbour(v: StationView, role: str) -> list[CodeName]:
+    """What the neighbour `role` tells this IXL: its own `_to_neighbour` the other way."""
+    iv = neighbour_intervals(v)[role]
+    other = iv.east if role == kinds.EAST else iv.west
+    return _to_neighbour(v.line.view(other), kinds.WEST if role == kinds.EAST else kinds.EAST)
 
 
 def _ixl_to_atc(v: StationView) -> list[CodeName]:
@@ -205,36 +239,6 @@ def _io_to_ixl(v: StationView) -> list[CodeName]:
     return out
 
 
-def _shared(v: StationView, role: str) -> list[Interval]:
-    """The station's intervals with its `role` neighbour (not a boundary: an IXL at each end)."""
-    return [
-        iv
-        for iv in v.intervals
-        if not iv.boundary and kinds.neighbour_role(iv.west == v.number) == role
-    ]
-
-
-def _to_neighbour(v: StationView, role: str) -> list[CodeName]:
-    """Per shared interval: the sender holds its permission, asks for it, has a departure route
-    into it locked, and its half of the interval's occupancy (its TTC)."""
-    out: list[CodeName] = []
-    for iv in _shared(v, role):
-        out += [CodeName(f, None, iv.name) for f in (F.PHI, F.PRQ, F.DRL)]
-        if half := v.owned_half(iv):
-            out.append(_ttc(v, iv.name, half))
-    return out
-
-
-def _from_neighbour(v: StationView, role: str) -> list[CodeName]:
-    """What the `role` neighbour sends this station: its own chart towards us."""
-    shared = _shared(v, role)
-    if not shared:
-        return []
-    iv = shared[0]
-    peer = v.line.view(iv.east if iv.west == v.number else iv.west)
-    return _to_neighbour(peer, kinds.opposite_role(role))
-
-
 _BUILDERS: dict[str, Callable[[StationView], list[CodeName]]] = {
     "ixl_to_ctc": _ixl_to_ctc,
     "ctc_to_ixl": _ctc_to_ixl,
@@ -242,22 +246,28 @@ _BUILDERS: dict[str, Callable[[StationView], list[CodeName]]] = {
     "atc_to_ixl": _atc_to_ixl,
     "ixl_to_io": _ixl_to_io,
     "io_to_ixl": _io_to_ixl,
-    **{
-        kinds.chart_name(role, outward): partial(
-            _to_neighbour if outward else _from_neighbour, role=role
-        )
-        for role in kinds.NEIGHBOUR_ROLES
-        for outward in (True, False)
-    },
 }
+for _role in kinds.NEIGHBOUR_ROLES:
+    _BUILDERS[kinds.chart_name(_role, True)] = partial(_to_neighbour, role=_role)
+    _BUILDERS[kinds.chart_name(_role, False)] = partial(_from_neighbour, role=_role)
+
+
+def station_links(view: StationView) -> tuple[tuple[str, str, str], ...]:
+    """(link, protocol, direction) of every chart station `view` has: its peers' (`LINKS`) and
+    those of the neighbouring IXLs it has (`neighbour_intervals`)."""
+    roles = neighbour_intervals(view)
+    mine = tuple(x for x in NEIGHBOUR_LINKS if x[0].removeprefix("ixl_to_").removesuffix(
+        "_to_ixl") in roles)  # fmt: skip
+    return LINKS + mine
 
 
 def chart_spec(view: StationView, link: str) -> ChartSpec:
     """One station link's chart as the data gives it (`link` is e.g. "ixl_to_ctc")."""
+    links = station_links(view)
     try:
-        protocol, direction = next((p, d) for k, p, d in LINKS + NEIGHBOUR_LINKS if k == link)
+        protocol, direction = next((p, d) for k, p, d in links if k == link)
     except StopIteration:
-        raise ValueError(f"unknown link {link!r} ({', '.join(k for k, _, _ in LINKS)})") from None
+        raise ValueError(f"unknown link {link!r} ({', '.join(k for k, _, _ in links)})") from None
     names = tuple(_BUILDERS[link](view))
     return ChartSpec(f"st{view.number}_{link}", protocol, direction, view.number, names)
 
@@ -275,7 +285,11 @@ def link_charts(view: StationView, link: str) -> tuple[CodeChart, CodeChart]:
 
 def build_specs(line: Line) -> list[ChartSpec]:
     """Every chart of the line: station by station, link by link."""
-    return [chart_spec(line.view(st), link) for st in sorted(line.stations) for link, _, _ in LINKS]
+    return [
+        chart_spec(line.view(st), link)
+        for st in sorted(line.stations)
+        for link, _, _ in station_links(line.view(st))
+    ]
 
 
 class StationCodes:
@@ -284,7 +298,7 @@ class StationCodes:
     def __init__(self, view: StationView) -> None:
         self.view = view
         self.number = view.number
-        self.specs = {link: chart_spec(view, link) for link, _, _ in LINKS}
+        self.specs = {link: chart_spec(view, link) for link, _, _ in station_links(view)}
         self._meaning = {c.text: c for spec in self.specs.values() for c in spec.names}
         self.totalisers = totalisers(view)
 

@@ -32,8 +32,9 @@ class IxlApplication(Protocol):
         """Every indication code's state, (code number, state), in chart order."""
         ...
 
-    def on_control(self, code: int, value: int) -> tuple[bool, int]:
-        """Act on one CTC control: (accepted, reason) -- reason 0 when accepted."""
+    def on_control(self, code: int, value: int) -> tuple[bool, int] | None:
+        """Act on one CTC control: (accepted, reason) -- reason 0 when accepted; None when the
+        answer comes later (`IxlClient.control_result`)."""
         ...
 
 
@@ -54,7 +55,7 @@ class StateTable:
     def full_state(self) -> list[tuple[int, int]]:
         return sorted(self.state.items())
 
-    def on_control(self, code: int, value: int) -> tuple[bool, int]:
+    def on_control(self, code: int, value: int) -> tuple[bool, int] | None:
         if self._control is None:
             return False, REJECT_UNKNOWN_CODE
         return self._control(code, value)
@@ -148,6 +149,16 @@ class IxlClient(Waitable):
         if self._pump is not None and self._session is not None:
             self._pump.feed(self._session.close(reason))
 
+    # -- late answers ----------------------------------------------------------------------------
+    def control_result(self, code: int, accepted: bool, reason: int) -> None:
+        """Answer a control the application answered None to, now that its answer is here. A
+        connection lost meanwhile took the control with it: nothing is sent."""
+        session, pump = self._session, self._pump
+        if session is None or pump is None or not session.identified or session.closed:
+            return
+        session.send_control_result(code, accepted, reason, pump.now())
+        pump.flush()
+
     # -- pushing indications -------------------------------------------------------------------
     def indicate(self, changes: Iterable[tuple[int, int]]) -> None:
         """Queue change indications; update the state `app.full_state()` reads before calling.
@@ -235,10 +246,11 @@ class IxlClient(Waitable):
                 session.send_full_state(self.app.full_state(), pump.now())
             elif isinstance(e, ev.ControlRequested):
                 for code, value in e.items:
-                    accepted, reason = self.app.on_control(code, value)
+                    answer = self.app.on_control(code, value)
                     if session.closed:
                         break
-                    session.send_control_result(code, accepted, reason, pump.now())
+                    if answer is not None:  # None: answered later (`control_result`)
+                        session.send_control_result(code, *answer, pump.now())
             elif isinstance(e, ev.IdentRefused):
                 log.warning("Type II station %s: refused by the CTC at %s:%s",
                             self.station, self.host, self.port)  # fmt: skip

@@ -30,6 +30,7 @@ from ktcs_bench.field.trackside import FieldOutput
 from ktcs_bench.ixl import Interlocking, Mode
 from ktcs_bench.ixl.interlocking import IxlOutput
 from ktcs_bench.station import load_line
+from ktcs_bench.station.model import Route
 from ktcs_bench.station_codes import names as n
 
 LINE = load_line()
@@ -55,7 +56,9 @@ class RailsLostMachine(RuleBasedStateMachine):
         self.from_io(self.io.set_occupancy(dict.fromkeys(ALL_TCS, False), self.now))
         self.from_atc(self.atc.set_occupancy(dict.fromkeys(ALL_TCS, False), self.now))
         # with the rails up a route is set and its signal clears: the harness can clear signals
-        route = view.station.route(data.draw(st.sampled_from(self.routes)))
+        # (a lone station departs only into intervals it holds: SPEC §6.6, no neighbour to ask)
+        settable = [r for r in self.routes if self._may_depart(view.station.route(r))]
+        route = view.station.route(data.draw(st.sampled_from(settable)))
         self.from_ixl(self.ixl.control(n.rsc(station, route.name), 1, self.now))
         self.advance(10.0)
         assert self.ixl.aspect(route.entry) != "R", f"route {route.name} did not clear"
@@ -63,6 +66,10 @@ class RailsLostMachine(RuleBasedStateMachine):
         self.from_atc(self.atc.rails_state(False, self.now))
         self.from_io(self.io.rails_state(False, self.now))
         assert self.ixl.aspect(route.entry) == "R"
+
+    def _may_depart(self, route: Route) -> bool:
+        iv = self.view.interval_of_exit(route)
+        return iv is None or iv.boundary or self.ixl.ends[iv.name].holds
 
     # ---------------------------------------------------------------- wiring (perfect links)
 

@@ -13,7 +13,7 @@ from ktcs_bench.chart_files.files import load_chart
 from ktcs_bench.cli.main import main
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.station import load_line
-from ktcs_bench.station_codes.stations import LINKS, build_specs, station_chart
+from ktcs_bench.station_codes.stations import LINKS, build_specs, station_chart, station_links
 
 CHARTS = data_dir("code_charts")
 
@@ -23,7 +23,9 @@ def test_generate_reproduces_the_committed_charts_exactly(tmp_path: Path) -> Non
     made = sorted(p.name for p in tmp_path.glob("*.yaml"))
     shipped = sorted(p.name for p in CHARTS.glob("st*.yaml"))
     assert made == shipped
-    assert len(made) == 3 * len(LINKS)
+    line = load_line()
+    links = sum(len(station_links(line.view(st))) for st in line.stations)
+    assert len(made) == links == 3 * len(LINKS) + 8  # 18-20 and 20-22: two neighbour links each way
     for name in made:
         assert (tmp_path / name).read_text() == (CHARTS / name).read_text(), name
 
@@ -145,7 +147,7 @@ def test_check_catches_disagreement_with_station_data(
 
 def test_station_chart_matches_the_loaded_file() -> None:
     line = load_line()
-    for link, _, _ in LINKS:
+    for link, _, _ in station_links(line.view(20)):
         built = station_chart(line.view(20), link)
         loaded = load_chart(CHARTS / f"st20_{link}.yaml")
         assert [c.name for c in built.codes] == [c.name for c in loaded.codes]
@@ -177,6 +179,10 @@ def _swap(path: Path, a: str, b: str) -> None:
     path.write_text(text.replace("name: @@,", f"name: {b},"))
 
 
+# every code after code 8 is one number off (derived: the chart grows with the data)
+_AFTER_8_OF_ST20_IXL_TO_CTC = len(station_chart(load_line().view(20), "ixl_to_ctc")) - 8
+
+
 @pytest.mark.parametrize(
     ("file", "edit", "wire"),
     [
@@ -189,7 +195,7 @@ def _swap(path: Path, a: str, b: str) -> None:
             "st20_ixl_to_ctc.yaml",
             lambda p: _drop(p, "SLI2031"),
             "code 8 is 'SFI2031' in the file, but the IXL sends and the CTC reads 'SLI2031' as "
-            "code 8 (and 102 more codes differ)",
+            f"code 8 (and {_AFTER_8_OF_ST20_IXL_TO_CTC} more codes differ)",
         ),
         (  # reordered: two route controls swapped
             "st22_ctc_to_ixl.yaml",
@@ -211,3 +217,17 @@ def test_check_compares_each_file_with_what_the_emulators_put_on_the_wire(
     code, err = _check(charts, capsys)
     assert code == 1
     assert f"{charts / file}: {wire}" in err, err
+
+
+def test_check_finds_two_neighbours_that_disagree_on_their_interval(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Station 18's ixl_to_east and station 20's west_to_ixl are one link's two ends: a chart
+    file changed at one end only is a disagreement chart check names."""
+    charts = tmp_path / "charts"
+    shutil.copytree(CHARTS, charts)
+    _swap(charts / "st20_west_to_ixl.yaml", "PHI1820", "PRQ1820")
+    assert main(["chart", "check", "--charts", str(charts)]) == 1
+    err = capsys.readouterr().err
+    assert "st18_ixl_to_east.yaml: code 1 is 'PHI1820', but" in err
+    assert "st20_west_to_ixl.yaml (the other end of interval 1820) reads 'PRQ1820'" in err

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
+import yaml
 
 from ktcs_bench.atc.wayside import AtcOutput, WaysideAtc
 from ktcs_bench.binding import ControlLink
@@ -11,6 +14,10 @@ from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station import Line, load_line
 from ktcs_bench.station_codes import names as n
 from ktcs_bench.station_codes.stations import link_charts
+
+from .direction_pair import Pair
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -24,8 +31,11 @@ def rig(line: Line) -> StationRig:
 
 
 def test_reason_numbers_are_the_wire_values() -> None:
-    assert [int(r) for r in Reason] == [0, 1, 2, 3, 4, 5, 6]
-    assert Reason.NOT_IN_CENTER_MODE == 1 and Reason.UNKNOWN_CODE == 6
+    assert [int(r) for r in Reason] == [0, 1, 2, 3, 4, 5, 6, 7]
+    assert Reason.NOT_IN_CENTER_MODE == 1 and Reason.UNKNOWN_CODE == 6 and Reason.DIRECTION == 7
+    profile = yaml.safe_load((ROOT / "protocols" / "type2.yaml").read_text(encoding="utf-8"))
+    (result,) = [op for op in profile["opcodes"] if op.get("name") == "CONTROL_RESULT"]
+    assert result["reasons"] == {int(r): r.text for r in Reason}  # the wire names them alike
 
 
 def test_route_set_throws_points_awaits_detection_then_clears(rig: StationRig) -> None:
@@ -263,23 +273,20 @@ def test_point_control_only_when_free_and_unoccupied(rig: StationRig) -> None:
     assert rig.ixl.full_state("io")["PRC2034"] == 1
 
 
-def test_departure_reverses_traffic_direction_only_when_interval_clear(rig: StationRig) -> None:
-    assert rig.ctc["TDU1820"] == 1  # default up
-    rig.occupy("TC2045")
-    assert rig.control("RSC202292").reason is Reason.TRACK_OCCUPIED  # down into 1820: occupied
-    rig.occupy("TC2045", False)
-    assert rig.control("RSC202292").accepted
-    assert rig.ctc["TDD1820"] == 1 and rig.ctc["TDU1820"] == 0
+def test_without_its_neighbour_link_the_interval_is_worked_as_its_default_end_holds_it(
+    rig: StationRig,
+) -> None:
+    """A station on the bench alone (no neighbour link): 1820's default direction is up, so
+    station 18 holds it for good and station 20 (its far end) refuses down departures into it --
+    it cannot ask anybody for the permission. Interval 2022, whose default end 20 is, departs."""
+    assert rig.ctc["TDU1820"] == 1 and rig.ctc[n.phi("1820")] == 0
+    assert rig.control("RSC202292").reason is Reason.DIRECTION  # down into 1820
+    assert rig.ixl.route_status("2292") is RouteStatus.IDLE
+    assert rig.ctc["TDU1820"] == 1 and rig.ctc["TDD1820"] == 0
+    assert rig.ctc[n.phi("2022")] == 1
+    assert rig.control("RSC201191").accepted  # up into 2022
     rig.advance(5)
-    assert rig.ixl.aspect("22") == "G"
-
-
-def test_train_approaching_from_the_interval_turns_the_direction(rig: StationRig) -> None:
-    rig.control("RSC202292")  # direction down in 1820
-    rig.control("RCC202292")
-    assert rig.ctc["TDD1820"] == 1
-    rig.occupy("TC2043")  # a train comes in from station 18's end
-    assert rig.ctc["TDU1820"] == 1
+    assert rig.ixl.aspect("11") == "G"
 
 
 def test_occupied_with_signal_at_stop_does_not_count_as_entry(rig: StationRig) -> None:
@@ -535,25 +542,20 @@ def test_the_start_up_lock_timer_waits_while_occupancy_cannot_be_read(line: Line
     assert not rig.ixl.startup_held
 
 
-def test_a_train_entering_the_interval_at_its_far_end_turns_it_towards_us(rig: StationRig) -> None:
+def test_a_departure_from_the_far_end_cannot_stand_set_while_the_near_end_sends_a_train(
+    line: Line,
+) -> None:
     """Found by the whole-system search: route 21-92 (down, into interval 1820) stood set at
-    station 20 while station 18 sent a train up into 1820 (the two ends do not coordinate the
+    station 20 while station 18 sent a train up into 1820 (the two ends did not coordinate the
     interval's direction); station 20's ATC coded its half of 1820 for the down train it meant to
-    send, and the up train read that as a proceed past home signal 01 at stop. A train entering
-    the interval while our half of it is clear comes to us: the direction turns, and the
-    departure route into it shows no proceed."""
-    assert rig.control("RSC202192").accepted
-    rig.advance(5)
-    assert rig.ixl.direction["1820"] == "down" and rig.ixl.aspect("21") != "R"
-    rig.take(rig.ixl.receive("atc", {n.izc("1820"): 1}, rig.now))  # in at 18's end: ours clear
-    assert rig.ixl.direction["1820"] == "up"
-    assert rig.atc[n.tdu("1820")] == 1 and rig.atc[n.tdd("1820")] == 0
-    assert rig.ixl.aspect("21") == "R"
-
-
-def test_our_own_train_in_our_half_keeps_the_interval_ours(rig: StationRig) -> None:
-    assert rig.control("RSC202192").accepted
-    rig.advance(5)
-    rig.occupy("TC2047")  # our departing train, in our half of the interval
-    rig.take(rig.ixl.receive("atc", {n.izc("1820"): 1}, rig.now))
-    assert rig.ixl.direction["1820"] == "down"
+    send, and the up train read that as a proceed past home signal 01 at stop. Now only the
+    holder of 1820's permission departs into it: with 21-92 set at 20, 18 is refused."""
+    pair = Pair(line)
+    assert pair.east.request("RSC202192") is None
+    pair.shuttle()
+    assert pair.east.results[-1].accepted and pair.holders() == [20]
+    assert pair.west.request("RSC181191") is None  # asks 20, which does not give
+    pair.advance(4)
+    assert pair.west.results[-1].reason is Reason.DIRECTION
+    assert pair.west.ixl.route_status("1191") is RouteStatus.IDLE
+    assert pair.west.atc[n.tdd("1820")] == 1  # 18's ATC codes 1820 for 20's train

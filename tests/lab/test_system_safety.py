@@ -29,7 +29,6 @@ from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any, TypeVar
 
-import pytest
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import (
@@ -303,16 +302,12 @@ def test_an_ixl_restarted_under_a_departing_train_keeps_what_it_may_run_onto_loc
     assert ixl18["startup_held"], "the restarted IXL still holds its station"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known open defect (docs/system_safety.md): a code has no direction, so an up train "
-    "standing on the approach of a down departure reads that departure's code as its own; the fix "
-    "is traffic both ways (SPEC §6.6, §6.7). When this passes, let the search set down routes.",
-)
-def test_known_open_a_down_departure_codes_the_up_train_standing_on_its_approach() -> None:
+def test_a_down_departure_no_longer_codes_the_up_train_standing_on_its_approach() -> None:
     """What the search found (seed 16080, 163 steps, replayed as it was saved): up train 2005
-    stands on station 18's track 1; the operator sets the down departure 21-92 from it; the
-    train departs on that route's code and runs past starting signal 11 at stop into TC1857A."""
+    stood on station 18's track 1; the operator set the down departure 21-92 from it; the train
+    departed on that route's code and ran past starting signal 11 at stop into TC1857A. A code
+    now carries its direction (SPEC §6.6): the up train reads the down route's code as the most
+    restrictive, and stays behind signal 11."""
     replay = load_replay(
         Path(__file__).parent / "replays" / "opposing_departure_from_an_occupied_track.json"
     )
