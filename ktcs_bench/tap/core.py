@@ -139,7 +139,18 @@ class TapCore:
     # -- what comes in -------------------------------------------------------------------------
     def receive(self, direction: str, data: bytes, now: float) -> TapOutput:
         """`data` written by the sending end of `direction` ("a>b")."""
-        self.injectors[direction].feed(data, now)
+        inj = self.injectors[direction]
+        if data and all(i.idle for i in self.injectors.values()):
+            # no fault set, nothing held either way: the bytes pass at once and unchanged, as
+            # the injector would pass them (its counts kept), and nothing else is due
+            inj.stats.bytes_in += len(data)
+            inj.stats.bytes_out += len(data)
+            out = TapOutput()
+            out.deliveries.append((direction, data))
+            self._publish(out, self.recorder.feed(direction, data, now))
+            self._publish(out, self.recorder.handle_timer(now))
+            return out
+        inj.feed(data, now)
         return self._pump(now, TapOutput())
 
     def execute(self, cmd: Command, now: float) -> tuple[CommandAnswer, TapOutput]:
@@ -202,10 +213,12 @@ class TapCore:
         return self._pump(now, TapOutput())
 
     def next_deadline(self) -> float | None:
-        times = [inj.next_deadline() for inj in self.injectors.values()]
-        times.append(self.recorder.next_deadline())
-        due = [t for t in times if t is not None]
-        return min(due) if due else None
+        best = self.recorder.next_deadline()
+        for inj in self.injectors.values():
+            t = inj.next_deadline()
+            if t is not None and (best is None or t < best):
+                best = t
+        return best
 
     def close(self) -> TapOutput:
         """The tap stops: what the recorder still holds, as it stands."""
