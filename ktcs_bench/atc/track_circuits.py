@@ -104,6 +104,8 @@ class TrackCircuitModel:
         # the circuit under each train's antenna, for the head and track it was found for
         self._antenna: dict[str, tuple[float, bool, Track, str | None]] = {}
         self._dirty = True  # trains, paths or faults changed since the occupancy was last taken
+        self._faults_changed = True  # ... faults among them
+        self._last_shunted: set[str] | None = None  # the circuits shunted when it was
         self.trains: dict[str, TrainPosition] = {}
         self.paths: dict[str, TrainPath] = {}
         self.blades: dict[tuple[int, str], Blades] = {
@@ -161,6 +163,7 @@ class TrackCircuitModel:
         self._by_name[tc]  # KeyError on an unknown name
         self.faults[tc] = kind
         self._dirty = True
+        self._faults_changed = True
         return self._changes()
 
     def clear_fault(self, tc: str | None = None) -> dict[str, bool]:
@@ -169,6 +172,7 @@ class TrackCircuitModel:
         else:
             self.faults.pop(tc, None)
         self._dirty = True
+        self._faults_changed = True
         return self._changes()
 
     # ------------------------------------------------------------------ queries
@@ -197,8 +201,11 @@ class TrackCircuitModel:
 
     def occupancy(self) -> dict[str, bool]:
         """Every track circuit of the line: occupied as its receiver reports it."""
+        return self._occupancy(self._shunted_names(self._spans()))
+
+    def _occupancy(self, shunted: set[str]) -> dict[str, bool]:
         out = dict.fromkeys(self._by_name, False)
-        for name in self._shunted_names(self._spans()):
+        for name in shunted:
             out[name] = True
         for name, fault in self.faults.items():
             if fault == "failed_occupied":
@@ -359,7 +366,11 @@ class TrackCircuitModel:
         if not self._dirty:  # nothing the occupancy is made of changed: nothing can
             return {}
         self._dirty = False
-        now = self.occupancy()
+        shunted = self._shunted_names(self._spans())
+        if shunted == self._last_shunted and not self._faults_changed:
+            return {}  # the same circuits shunted, the same faults: the same occupancy
+        self._last_shunted, self._faults_changed = shunted, False
+        now = self._occupancy(shunted)
         changed = {k: v for k, v in now.items() if self._last.get(k) != v}
         self._last = now
         return changed
