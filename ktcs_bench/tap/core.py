@@ -81,7 +81,7 @@ def record_event(record: CaptureRecord) -> TapEvent:
     return {"time": record.time, "direction": record.direction, "hex": record.data.hex()}
 
 
-@dataclass
+@dataclass(slots=True)
 class TapOutput:
     deliveries: list[tuple[str, bytes]] = field(default_factory=list)
     records: list[CaptureRecord] = field(default_factory=list)
