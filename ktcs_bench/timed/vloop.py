@@ -214,7 +214,14 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
             handle = ready.popleft()
             if handle._cancelled:
                 continue
-            handle._run()
+            if self._debug:  # type: ignore[attr-defined]
+                try:
+                    self._current_handle = handle
+                    handle._run()
+                finally:
+                    self._current_handle = None
+            else:
+                handle._run()
         handle = None  # no cycle through the handle when a callback raised
 
     def _advance(self, timeout: float) -> None:
