@@ -79,8 +79,10 @@ def main() -> None:
             profiler.disable()
             text = io.StringIO()
             pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(15)
+            lines = text.getvalue().splitlines()
+            head = next((i for i, line in enumerate(lines) if "ncalls" in line), 0)
             print("where the time goes (a tenth of the run, profiled; by own time):")
-            print("\n".join(text.getvalue().splitlines()[6:28]))
+            print("\n".join(lines[head : head + 16]))
 
 
 if __name__ == "__main__":

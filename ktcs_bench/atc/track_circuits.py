@@ -21,6 +21,7 @@ blades in, no clock.
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Literal
@@ -95,6 +96,16 @@ class TrackCircuitModel:
         self.geometry = LineGeometry(line)
         self.tcs: tuple[TrackCircuit, ...] = line.all_track_circuits()
         self._by_name = {t.name: t for t in self.tcs}
+        # the circuits by where they start, for the few a train's axles can be in (every train
+        # move asks; a line has tens of circuits, a train is over a handful)
+        self._by_from = sorted(self.tcs, key=lambda t: t.from_m)
+        self._froms = [t.from_m for t in self._by_from]
+        self._longest = max((t.to_m - t.from_m for t in self.tcs), default=0.0)
+        # the circuit under each train's antenna, for the head and track it was found for
+        self._antenna: dict[str, tuple[float, bool, Track, str | None]] = {}
+        self._dirty = True  # trains, paths or faults changed since the occupancy was last taken
+        self._faults_changed = True  # ... faults among them
+        self._last_shunted: set[str] | None = None  # the circuits shunted when it was
         self.trains: dict[str, TrainPosition] = {}
         self.paths: dict[str, TrainPath] = {}
         self.blades: dict[tuple[int, str], Blades] = {
@@ -138,6 +149,7 @@ class TrackCircuitModel:
             self.blades[(station, point)] = _BLADES[state]
         for train, path in self.paths.items():
             self._under(train, path)
+        self._dirty = True
         return self._changes()
 
     def take_events(self) -> list[RailEvent]:
@@ -150,6 +162,8 @@ class TrackCircuitModel:
             raise ValueError(f"unknown track-circuit fault {kind!r} {FAULTS}")
         self._by_name[tc]  # KeyError on an unknown name
         self.faults[tc] = kind
+        self._dirty = True
+        self._faults_changed = True
         return self._changes()
 
     def clear_fault(self, tc: str | None = None) -> dict[str, bool]:
@@ -157,6 +171,8 @@ class TrackCircuitModel:
             self.faults.clear()
         else:
             self.faults.pop(tc, None)
+        self._dirty = True
+        self._faults_changed = True
         return self._changes()
 
     # ------------------------------------------------------------------ queries
@@ -185,17 +201,31 @@ class TrackCircuitModel:
 
     def occupancy(self) -> dict[str, bool]:
         """Every track circuit of the line: occupied as its receiver reports it."""
-        out: dict[str, bool] = {}
-        spans = self._spans()  # once for all the track circuits (every train move asks)
-        for tc in self.tcs:
-            fault = self.faults.get(tc.name)
+        return self._occupancy(self._shunted_names(self._spans()))
+
+    def _occupancy(self, shunted: set[str]) -> dict[str, bool]:
+        out = dict.fromkeys(self._by_name, False)
+        for name in shunted:
+            out[name] = True
+        for name, fault in self.faults.items():
             if fault == "failed_occupied":
-                out[tc.name] = True
+                out[name] = True
             elif fault == "failed_clear":
-                out[tc.name] = False
-            else:
-                out[tc.name] = self._shunted(tc, spans) if spans else False
+                out[name] = False
         return out
+
+    def _shunted_names(self, spans: list[tuple[float, float, Track]]) -> set[str]:
+        """The circuits some span shunts (`_shunted` over the circuits that can overlap it)."""
+        names: set[str] = set()
+        froms, by_from, carries = self._froms, self._by_from, self.geometry.carries
+        for lo, hi, track in spans:
+            # only a circuit starting below `hi` and less than the longest circuit below `lo`
+            # can reach into (lo, hi)
+            for i in range(bisect_left(froms, lo - self._longest), bisect_left(froms, hi)):
+                tc = by_from[i]
+                if tc.to_m > lo and tc.name not in names and carries(tc, track):
+                    names.add(tc.name)
+        return names
 
     def set_codes(self, codes: Mapping[str, AtcCode]) -> None:
         """Codes from the wayside ATCs, per track circuit."""
@@ -206,13 +236,19 @@ class TrackCircuitModel:
         t = self.trains[train]
         up = t.head_m >= t.tail_m
         track = self.paths[train].track_at_end(up)
+        known = self._antenna.get(train)
+        if known is not None and known[0] == t.head_m and known[1] == up and known[2] == track:
+            return known[3]
+        found: str | None = None
         for tc in self.tcs:
             if not self.geometry.carries(tc, track):
                 continue
             inside = tc.from_m <= t.head_m < tc.to_m if up else tc.from_m < t.head_m <= tc.to_m
             if inside:
-                return tc.name
-        return None
+                found = tc.name
+                break
+        self._antenna[train] = (t.head_m, up, track, found)
+        return found
 
     def code_for(self, train: str) -> AtcCode | None:
         """The code the train's antenna picks up; None when no code reaches it. A code given for
@@ -233,8 +269,15 @@ class TrackCircuitModel:
     def _drop(self, train: str) -> None:
         self.trains.pop(train, None)
         self.paths.pop(train, None)
+        self._antenna.pop(train, None)
+        self._dirty = True
 
     def _move(self, t: TrainPosition) -> None:
+        if t.train in self.paths and self.trains.get(t.train) == t:
+            # where it was: its path, the points under it and its booking are as they were
+            # (blades moved since were looked at under every train by `set_blades`)
+            return
+        self._dirty = True
         lo, hi = min(t.head_m, t.tail_m), max(t.head_m, t.tail_m)
         path = self.paths.get(t.train)
         if path is None:
@@ -327,7 +370,14 @@ class TrackCircuitModel:
         ))  # fmt: skip
 
     def _changes(self) -> dict[str, bool]:
-        now = self.occupancy()
+        if not self._dirty:  # nothing the occupancy is made of changed: nothing can
+            return {}
+        self._dirty = False
+        shunted = self._shunted_names(self._spans())
+        if shunted == self._last_shunted and not self._faults_changed:
+            return {}  # the same circuits shunted, the same faults: the same occupancy
+        self._last_shunted, self._faults_changed = shunted, False
+        now = self._occupancy(shunted)
         changed = {k: v for k, v in now.items() if self._last.get(k) != v}
         self._last = now
         return changed

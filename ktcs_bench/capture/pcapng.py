@@ -14,6 +14,7 @@ Timestamps are microseconds since the epoch (if_tsresol = 6).
 
 from __future__ import annotations
 
+import functools
 import ipaddress
 import struct
 from collections.abc import Iterator, Mapping
@@ -36,6 +37,8 @@ EPB_FLAGS = 2
 FLAG_INBOUND, FLAG_OUTBOUND = 0b01, 0b10
 TCP_PSH_ACK = 0x18
 ISN = 1000  # initial TCP sequence number of each synthesised direction
+_EPB_HEAD = struct.Struct("<IIIIIII")  # block type, length; interface, time, lengths
+_TOTAL = struct.Struct("<I")
 
 
 def _pad(data: bytes) -> bytes:
@@ -91,12 +94,18 @@ def _checksum(data: bytes) -> int:
     return ~total & 0xFFFF
 
 
+@functools.lru_cache(maxsize=256)
+def _packed_ip(address: str) -> bytes:
+    """A dotted IPv4 address as 4 bytes (a capture has a handful, for every packet)."""
+    return ipaddress.IPv4Address(address).packed
+
+
 def ipv4_tcp_packet(
     src: tuple[str, int], dst: tuple[str, int], seq: int, ack: int, payload: bytes, ident: int = 0
 ) -> bytes:
     """An IPv4 + TCP (PSH|ACK) packet carrying `payload`, with valid checksums."""
-    s_ip = ipaddress.IPv4Address(src[0]).packed
-    d_ip = ipaddress.IPv4Address(dst[0]).packed
+    s_ip = _packed_ip(src[0])
+    d_ip = _packed_ip(dst[0])
     tcp = struct.pack("!HHIIBBHHH", src[1], dst[1], seq & 0xFFFFFFFF, ack & 0xFFFFFFFF,
                       5 << 4, TCP_PSH_ACK, 65535, 0, 0)  # fmt: skip
     pseudo = s_ip + d_ip + struct.pack("!BBH", 0, 6, len(tcp) + len(payload))
@@ -128,6 +137,7 @@ class PcapngEncoder:
         self._endpoints: dict[str, tuple[str, int]] = dict(endpoints or {})
         self._tcp = _TcpState()
         self._started = False
+        self._options: dict[tuple[int, str], bytes] = {}
 
     def set_endpoint(self, name: str, host: str, port: int) -> None:
         """The real address of a Type II endpoint, for the packets that follow. An address the
@@ -167,9 +177,8 @@ class PcapngEncoder:
                 out += interface_description(
                     LINKTYPE_USER0, direction, f"ktcs Type I serial {direction}"
                 )
-            return out + enhanced_packet(
-                self._interfaces[direction], time, record.data, flags, direction
-            )
+            return out + self._packet(self._interfaces[direction], time, record.data, flags,
+                                      direction)  # fmt: skip
         pair = split_direction(direction) or (direction, reverse_direction(direction))
         src, dst = self._endpoint(pair[0]), self._endpoint(pair[1])
         seq = self._tcp.next_seq.get(direction, ISN)
@@ -177,7 +186,24 @@ class PcapngEncoder:
         self._tcp.next_seq[direction] = seq + len(record.data)
         self._tcp.ident += 1
         packet = ipv4_tcp_packet(src, dst, seq, ack, record.data, self._tcp.ident)
-        return out + enhanced_packet(0, time, packet, flags, direction)
+        return out + self._packet(0, time, packet, flags, direction)
+
+    def _packet(self, interface: int, time: float, data: bytes, flags: int, comment: str) -> bytes:
+        """`enhanced_packet`, its options (the same for every packet of a direction) made once."""
+        opts = self._options.get((flags, comment))
+        if opts is None:
+            listed = [(EPB_FLAGS, struct.pack("<I", flags))]
+            if comment:
+                listed.append((OPT_COMMENT, comment.encode()))
+            opts = self._options[(flags, comment)] = _options(listed)
+        us = max(0, round(time * 1_000_000))
+        n = len(data)
+        pad = -n % 4
+        total = 32 + n + pad + len(opts)
+        return b"".join((
+            _EPB_HEAD.pack(BT_EPB, total, interface, us >> 32, us & 0xFFFFFFFF, n, n),
+            data, b"\0" * pad, opts, _TOTAL.pack(total),
+        ))  # fmt: skip
 
 
 # -- reading -------------------------------------------------------------------------------------

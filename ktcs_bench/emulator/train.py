@@ -220,6 +220,7 @@ class TrainDevice(Device):
         self.code_tc: str | None = None
         hello = Hello(role=kinds.TRAIN, name=name, train=config.train_id)  # its kind names its key
         self.rails = RailsClient(rails, hello, self._from_rails, on_lost=self._rails_lost)
+        self._sent_position: Position | None = None  # the last position told the rails
         self.last: Any = None
         self.release = False
         self.origin: float | None = None  # the device clock's reading at the train's start
@@ -340,7 +341,12 @@ class TrainDevice(Device):
         self.last = out
         for e in out.events:
             self.note(e.kind, e.text)
-        self.rails.send({"position": self._position()})
+        position = self._position()
+        if position != self._sent_position or not self.rails.connected:
+            # a train standing where it stood tells the rails nothing new (the rails change
+            # nothing for it); a reconnected client says its last position again itself
+            self.rails.send({"position": position})
+            self._sent_position = position
 
     async def tasks(self) -> list[asyncio.Task[None]]:
         if self.run_ is None:  # a train put on the line by the lab file stands there at once

@@ -62,5 +62,10 @@ class Recorder:
         return out
 
     def next_deadline(self) -> float | None:
-        times = [d.last + self.idle_flush for d in self._dirs.values() if d.decoder.buffered]
-        return min(times) if times else None
+        best: float | None = None
+        for d in self._dirs.values():
+            if d.decoder.buffered:
+                t = d.last + self.idle_flush
+                if best is None or t < best:
+                    best = t
+        return best

@@ -29,6 +29,7 @@ class WireTap(Tap):
         if not self.name:
             raise UsageError("a wire tap needs the link's name")
         self._ends: dict[str, SerialEnd] = {}
+        self._to: dict[str, SerialEnd] = {}  # by direction "a>b": the end it is delivered at
 
     @property
     def paths(self) -> dict[str, str]:
@@ -46,12 +47,13 @@ class WireTap(Tap):
         for end, other in ((a, b), (b, a)):
             se = self._ends[end] = net.serial_end(f"{self.name}/{end}")
             se.join = partial(self._line, f"{end}>{other}")
+            self._to[f"{other}>{end}"] = se  # what goes that way is delivered at this end
 
     def _line(self, direction: str, data: bytes, now: float) -> None:
         self._on_data(direction, data)
 
     def _deliver(self, direction: str, data: bytes) -> None:
-        end = self._ends.get(direction.split(">", 1)[1])
+        end = self._to.get(direction)
         if end is not None:
             end.deliver(data)
 

@@ -46,11 +46,16 @@ class LoopTimer(Generic[Out]):
         if self._stopped:
             return
         deadline = self.core.next_deadline()
-        if deadline == self._at and self._handle is not None:
-            return
-        self._disarm()
-        if deadline is not None:
-            self._handle = self.loop.call_at(deadline + self.origin, self._on_handle)
+        handle = self._handle
+        if handle is not None:
+            if deadline == self._at:
+                return
+            handle.cancel()
+        if deadline is None:
+            self._handle = self._at = None
+        else:
+            loop = asyncio.get_running_loop()
+            self._handle = loop.call_at(deadline + self.origin, self._on_handle)
             self._at = deadline
 
     def fire(self, due: float | None = None) -> None:

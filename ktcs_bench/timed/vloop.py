@@ -29,8 +29,10 @@ self-pipe, which it never waits on.
 from __future__ import annotations
 
 import asyncio
+import heapq
 import selectors
 import time
+from asyncio import base_events, events
 from collections.abc import Callable
 from typing import Any
 
@@ -39,7 +41,7 @@ from ktcs_bench.errors import KtcsError
 MAX_SPEED = 50.0
 """The fastest scaled clock a whole lab in one process is started on (`lab up --in-process`).
 Measured on a 2-core machine others shared: the reference lab with its trains takes a whole core
-at 70x to 110x real time (7% of one at 5x, 18% at 20x; `lab simulate` runs it at about 120x);
+at 70x to 110x real time (7% of one at 5x, 18% at 20x; `lab simulate` runs it at about 180x);
 at 100x its links went down within 20 s and stayed down, at 50x they stayed up but for a few
 resyncs while the machine was busiest."""
 
@@ -118,8 +120,31 @@ class _WallChores:
                 chore[2]()
 
 
+_MAX_SELECT: float = base_events.MAXIMUM_SELECT_TIMEOUT  # type: ignore[attr-defined]
+
+
+class _When(float):
+    """A timer's `when` on the virtual loop's heap, with its handle: compared as the float it
+    is, in C, where asyncio's heap compares `TimerHandle`s by their `when` in Python. The
+    comparisons give the same answers, so the heap orders timers exactly as asyncio's would
+    (timers due at the same instant included); a lab's loop makes hundreds of thousands."""
+
+    __slots__ = ("handle",)
+    handle: Any  # the TimerHandle (its private fields are what asyncio's loop uses)
+
+
 class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
-    """An asyncio loop on a virtual clock that starts at `start` and jumps from timer to timer."""
+    """An asyncio loop on a virtual clock that starts at `start` and jumps from timer to timer.
+
+    Its heap of timers holds `_When`s (`call_at`, `_run_once`: asyncio's own, step for step,
+    on that heap)."""
+
+    _scheduled: list[_When]
+    _timer_cancelled_count: int
+    _ready: Any
+    _stopping: bool
+    _clock_resolution: float
+    _selector: selectors.BaseSelector
 
     def __init__(self, start: float = 0.0) -> None:
         self._virtual_now = start
@@ -131,13 +156,81 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
     def time(self) -> float:
         return self._virtual_now
 
+    def call_at(  # type: ignore[override]
+        self, when: float, callback: Callable[..., object], *args: Any,
+        context: Any = None,
+    ) -> asyncio.TimerHandle:  # fmt: skip
+        if when is None:
+            raise TypeError("when cannot be None")
+        self._check_closed()  # type: ignore[attr-defined]
+        if self._debug:  # type: ignore[attr-defined]
+            self._check_thread()  # type: ignore[attr-defined]
+            self._check_callback(callback, "call_at")  # type: ignore[attr-defined]
+        timer = events.TimerHandle(when, callback, args, self, context)
+        if timer._source_traceback:  # type: ignore[attr-defined]
+            del timer._source_traceback[-1]  # type: ignore[attr-defined]
+        key = _When(when)
+        key.handle = timer
+        heapq.heappush(self._scheduled, key)
+        timer._scheduled = True  # type: ignore[attr-defined]
+        return timer
+
+    def _run_once(self) -> None:
+        """`BaseEventLoop._run_once` (Python 3.11) on the heap of `_When`s."""
+        sched = self._scheduled
+        count = len(sched)
+        if (
+            count > base_events._MIN_SCHEDULED_TIMER_HANDLES  # type: ignore[attr-defined]
+            and self._timer_cancelled_count / count
+            > base_events._MIN_CANCELLED_TIMER_HANDLES_FRACTION  # type: ignore[attr-defined]
+        ):
+            kept = []
+            for key in sched:
+                if key.handle._cancelled:
+                    key.handle._scheduled = False
+                else:
+                    kept.append(key)
+            heapq.heapify(kept)
+            self._scheduled = sched = kept
+            self._timer_cancelled_count = 0
+        else:
+            while sched and sched[0].handle._cancelled:
+                self._timer_cancelled_count -= 1
+                heapq.heappop(sched).handle._scheduled = False
+        timeout: float | None = None
+        if self._ready or self._stopping:
+            timeout = 0
+        elif sched:
+            timeout = min(max(0, sched[0] - self.time()), _MAX_SELECT)
+        self._process_events(self._selector.select(timeout))  # type: ignore[attr-defined]
+        end_time = self.time() + self._clock_resolution
+        ready = self._ready
+        while sched and sched[0] < end_time:
+            due = heapq.heappop(sched).handle
+            due._scheduled = False
+            ready.append(due)
+        handle: Any = None
+        for _ in range(len(ready)):
+            handle = ready.popleft()
+            if handle._cancelled:
+                continue
+            if self._debug:  # type: ignore[attr-defined]
+                try:
+                    self._current_handle = handle
+                    handle._run()
+                finally:
+                    self._current_handle = None
+            else:
+                handle._run()
+        handle = None  # no cycle through the handle when a callback raised
+
     def _advance(self, timeout: float) -> None:
         """Move the clock to the earliest timer (asyncio asked to wait `timeout` for it): exactly
         to its `when`, so the timer is due on the next look, never a rounding short of it."""
-        scheduled: list[asyncio.TimerHandle] = self._scheduled  # type: ignore[attr-defined]
+        scheduled = self._scheduled
         target = self._virtual_now + timeout
-        if scheduled and scheduled[0].when() <= target:
-            target = scheduled[0].when()
+        if scheduled and scheduled[0].handle.when() <= target:
+            target = scheduled[0].handle.when()
         self._virtual_now = max(self._virtual_now, target)
 
 
