@@ -69,6 +69,28 @@ def test_three_shipped_procedures_pass_live(lab: RunningLab, tmp_path: Path) -> 
     assert not faulted(lab, "st22-atc")
 
 
+INTERVALS = ("direction_handover.yaml", "direction_opposing_refused.yaml",
+             "interval_link_cut.yaml", "trailed_point_reported.yaml")  # fmt: skip
+
+
+def test_the_interval_and_point_procedures_pass_live(lab: RunningLab, tmp_path: Path) -> None:
+    """The permission handed over between two IXL processes over their tapped Type I link, an
+    opposing departure refused, that link cut with a train in the interval and restored, and a
+    trailed point reported and repaired -- each leaves the lab as it found it (18 holding 1820,
+    point 31 normal), so they run one after the other on one lab."""
+    report = tmp_path / "report"
+    done = test_run(lab, *(str(SHIPPED / p) for p in INTERVALS), "--report", str(report),
+                    "--json", timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    results = json.loads(done.stdout)["procedures"]
+    assert [(p["id"], p["verdict"]) for p in results] == [
+        ("direction-handover", "pass"), ("direction-opposing-refused", "pass"),
+        ("interval-link-cut", "pass"), ("trailed-point-reported", "pass")]  # fmt: skip
+    cut = next(p for p in results if p["id"] == "interval-link-cut")
+    assert "link iv1820 cleared" in cut["cleared"]
+    assert not faulted(lab, "iv1820")
+
+
 FAILING = """\
 id: must-fail
 title: expects a signal to clear with no route set
