@@ -37,7 +37,7 @@ EXAMPLES: list[m.Message] = [
     m.Fail(tc="TC1851", kind="dead"), m.Clear(), m.Clear(tc="TC1851"),
     m.Place(train="G1", head=1300.0, tail=1260.5, track="2"), m.Remove(train="G1"),
     m.ReleaseEb(), m.Hold(), m.Dispatch(), m.Dispatch(now=True), m.RunTo(at=5200.0),
-    m.SpeedDistance(),
+    m.SpeedDistance(), m.AskDirection(station=20, interval="1820"),
 ]  # fmt: skip
 UNIONS = {"ctc": m.CTC, "ixl": m.IXL, "trackside": m.TRACKSIDE, "tc": m.TRACK_CIRCUITS,
           "train": m.TRAIN, "device": m.DEVICE}  # fmt: skip
@@ -68,7 +68,8 @@ def test_every_message_is_in_a_union_and_round_trips_through_its_json() -> None:
 
 def test_the_ctc_console_words_are_the_messages_the_port_takes() -> None:
     for words in ("route set 18 S1 S11", "route cancel 18 01 11", "point reverse 20 31",
-                  "signal release 18 01", "mode local 20", "control 18 CMQ18 0"):  # fmt: skip
+                  "signal release 18 01", "mode local 20", "control 18 CMQ18 0",
+                  "direction 20 1820"):  # fmt: skip
         message = parse_words(words.split())
         assert m.decode(m.encode(message), m.CTC) == message
         assert command_words(message) == command_words(m.encode(message))
