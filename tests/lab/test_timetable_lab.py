@@ -1,19 +1,24 @@
 """Issue 15 item 1 in the real processes: trains run their timetable through stations 18, 20 and
 22 -- every device its own process, the CTC's ARS setting their routes from the timetable, each
-train's ATO stopping at every platform on the codes from the rails -- and both reach station 22,
-each stop within ±0.5 m of its mark.
+train's ATO stopping at every platform on the codes from the rails -- the up trains reach
+station 22 and the down train station 18, each stop within ±0.5 m of its mark, and the down
+train crosses an up train at station 20: it stands in the loop while the up train stands on the
+main track (issue 23: the interval permissions change hands through the real IXL-IXL links).
 
 Real speed, so the line is the reference's with its intervals shortened (`short_line`: the same
 stations, tables and names; 600 m of plain line between stations instead of ~5 km) and the
 trains start standing at platforms: 1001 at 18, stopping at 20 and 22; 1003 at 20, ahead of it,
-stopping at 22 in the loop. The whole run takes about four minutes. The full reference timetable
-(both trains from the west edge, 18 -> 20 -> 22) is what `make lab` runs.
+stopping at 22 in the loop; 2001 at 22 on the main track, stopping at 20 in the loop (track 2)
+and at 18 on the main track. The full reference timetable (the up trains from the west edge,
+18 -> 20 -> 22, the down one from the east edge) is what `make lab` runs.
 """
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
+from typing import Any
 
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.train.endpoint import STOP_TOLERANCE
@@ -41,18 +46,29 @@ trains:
     stops:
       - {{station: 20, track: "1", stop_m: {st20}, dwell_s: 0}}
       - {{station: 22, track: "2", stop_m: {st22_loop}, dwell_s: 10}}
+  - id: "2001"
+    train: seed001-table1
+    direction: down
+    stops:
+      - {{station: 22, track: "1", stop_m: {st22_down}, dwell_s: 0}}
+      - {{station: 20, track: "2", stop_m: {st20_loop_down}, dwell_s: 10}}
+      - {{station: 18, track: "1", stop_m: 620, dwell_s: 10}}
 """
-RUN_S = 420.0  # both trains at 22 well within this (about 4 minutes measured)
+RUN_S = 600.0  # every train at its last stop well within this
 
 
 def short_lab(tmp: Path, name: str) -> Path:
-    """The reference lab on the short line, its two train devices on the short timetable, ARS
+    """The reference lab on the short line, its three train devices on the short timetable, ARS
     on at every station."""
     folder = tmp / "short"
     shift = write_short_line(folder)
     (folder / "timetable.yaml").write_text(
         TIMETABLE.format(
-            st20=6780 + shift[20], st22_main=12680 + shift[22], st22_loop=12580 + shift[22]
+            st20=6780 + shift[20],
+            st22_main=12680 + shift[22],
+            st22_loop=12580 + shift[22],
+            st22_down=12120 + shift[22],
+            st20_loop_down=6120 + shift[20],
         )
     )
     text = (data_dir("emulators") / "labs" / "reference.yaml").read_text(encoding="utf-8")
@@ -67,7 +83,29 @@ def short_lab(tmp: Path, name: str) -> Path:
     return path
 
 
-def test_both_trains_reach_station_22_stopping_at_every_platform_within_half_a_metre(
+def _stays_at_20(ars_log: list[dict[str, Any]]) -> dict[str, tuple[str, float, float]]:
+    """Per train: the track it stood on at station 20, when it stood wholly on it ("arrived at
+    station 20 track N") and when ARS asked for its departure route from there."""
+    stays: dict[str, tuple[str, float, float]] = {}
+    came: dict[str, tuple[str, float]] = {}
+    for e in ars_log:
+        text, train = str(e.get("text", "")), e.get("train")
+        if train is None:
+            continue
+        m = re.fullmatch(r"train \S+ arrived at station 20 track (\S+)(?: .*)?", text)
+        if m and train not in came:
+            came[train] = (m.group(1), float(e["time"]))
+        elif (
+            train in came
+            and train not in stays
+            and text.startswith(f"train {train}: requests route ")
+            and text.endswith(" at station 20")
+        ):
+            stays[train] = (came[train][0], came[train][1], float(e["time"]))
+    return stays
+
+
+def test_trains_both_ways_stop_within_half_a_metre_and_cross_at_station_20(
     tmp_path: Path,
 ) -> None:
     name = "ttlab"
@@ -75,25 +113,40 @@ def test_both_trains_reach_station_22_stopping_at_every_platform_within_half_a_m
         end = time.monotonic() + RUN_S
         status = {}
         while time.monotonic() < end:
-            status = {t: lab.status(f"train{t}") for t in ("1001", "1003")}
+            status = {t: lab.status(f"train{t}") for t in ("1001", "1003", "2001")}
             if all(s["state"] == "finished" for s in status.values()):
                 break
             time.sleep(1.0)
         log = lab.ctc({"cmd": "log", "last": 1000})["log"]
+        ars_log = lab.ctc({"cmd": "ars", "last": 1000})["log"]
     for train, s in status.items():
         assert s["state"] == "finished", (train, s)
         assert s["emergency_brakes"] == 0, (train, s)
-    t1001, t1003 = status["1001"], status["1003"]
+    t1001, t1003, t2001 = status["1001"], status["1003"], status["2001"]
     assert [a["station"] for a in t1001["arrivals"]] == ["20", "22"], t1001
     assert [a["station"] for a in t1003["arrivals"]] == ["22"], t1003
     assert [d["station"] for d in t1001["departures"]] == ["18", "20"], t1001
     assert [d["station"] for d in t1003["departures"]] == ["20"], t1003
-    for s in (t1001, t1003):
+    assert [a["station"] for a in t2001["arrivals"]] == ["20", "18"], t2001
+    assert [d["station"] for d in t2001["departures"]] == ["22", "20"], t2001
+    for s in (t1001, t1003, t2001):
         for a in s["arrivals"]:
             assert abs(a["error_m"]) <= STOP_TOLERANCE, (s["train"], a)
     # 1001 stood its 10 s at 20 before it left
     arrived = t1001["arrivals"][0]["time_s"]
     assert t1001["departures"][1]["time_s"] >= arrived + 10.0, t1001
+    # the crossing at 20, read off ARS's log (the CTC's one clock): 2001 stood wholly in the
+    # loop (track 2) while an up train stood wholly on the main track -- from the moment each
+    # was on its platform's circuit until ARS asked for its departure route
+    at20 = _stays_at_20(ars_log)
+    assert at20.get("2001", ("", 0.0, 0.0))[0] == "2", (at20, ars_log)
+    loop = at20["2001"][1:]
+    crossed = [
+        t
+        for t, (track, came, left) in at20.items()
+        if t != "2001" and track == "1" and came < loop[1] and loop[0] <= left
+    ]
+    assert crossed, at20
     # the routes were ARS's: nobody else set any
     print({t: [(a["station"], a["error_m"]) for a in s["arrivals"]] for t, s in status.items()})
     assert log and {e["source"] for e in log} == {"ars"}, log
