@@ -15,10 +15,8 @@ and at 18 on the main track. The full reference timetable (the up trains from th
 
 from __future__ import annotations
 
-import re
 import time
 from pathlib import Path
-from typing import Any
 
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.train.endpoint import STOP_TOLERANCE
@@ -57,9 +55,9 @@ trains:
 RUN_S = 600.0  # every train at its last stop well within this
 
 
-def short_lab(tmp: Path, name: str) -> Path:
+def short_lab(tmp: Path, name: str) -> tuple[Path, dict[int, float]]:
     """The reference lab on the short line, its three train devices on the short timetable, ARS
-    on at every station."""
+    on at every station; and how far each station moved (`write_short_line`)."""
     folder = tmp / "short"
     shift = write_short_line(folder)
     (folder / "timetable.yaml").write_text(
@@ -80,40 +78,43 @@ def short_lab(tmp: Path, name: str) -> Path:
     assert "\nars: {}" in text  # ARS on at every station, as in the reference lab
     path = tmp / f"{name}.yaml"
     path.write_text(text, encoding="utf-8")
-    return path
+    return path, shift
 
 
-def _stays_at_20(ars_log: list[dict[str, Any]]) -> dict[str, tuple[str, float, float]]:
-    """Per train: the track it stood on at station 20, when it stood wholly on it ("arrived at
-    station 20 track N") and when ARS asked for its departure route from there."""
-    stays: dict[str, tuple[str, float, float]] = {}
-    came: dict[str, tuple[str, float]] = {}
-    for e in ars_log:
-        text, train = str(e.get("text", "")), e.get("train")
-        if train is None:
-            continue
-        m = re.fullmatch(r"train \S+ arrived at station 20 track (\S+)(?: .*)?", text)
-        if m and train not in came:
-            came[train] = (m.group(1), float(e["time"]))
-        elif (
-            train in came
-            and train not in stays
-            and text.startswith(f"train {train}: requests route ")
-            and text.endswith(" at station 20")
-        ):
-            stays[train] = (came[train][0], came[train][1], float(e["time"]))
-    return stays
+Place = tuple[float, float]  # a train's front (m, chainage) and speed (km/h) at one look
+
+
+def passed_at_20(looks: list[dict[str, Place]], station: tuple[float, float]) -> list[str]:
+    """The up trains that passed 2001 (the down train) inside station 20 (`station`: its home
+    signals' chainages) with one of the two standing: between two looks the up train's front
+    went from below 2001's front to above it, every front at the station and one of the two
+    trains at a stand at both looks. (A look: each train's front and speed, a second apart.)"""
+    lo, hi = station
+    out: list[str] = []
+    for up in ("1001", "1003"):
+        for before, after in zip(looks, looks[1:], strict=False):
+            (ua, us), (ub, vs) = before[up], after[up]
+            (da, ds), (db, es) = before["2001"], after["2001"]
+            if not (ua < da and ub > db):
+                continue
+            standing = max(us, vs) < 0.1 or max(ds, es) < 0.1
+            if standing and all(lo <= x <= hi for x in (ua, ub, da, db)) and up not in out:
+                out.append(up)
+    return out
 
 
 def test_trains_both_ways_stop_within_half_a_metre_and_cross_at_station_20(
     tmp_path: Path,
 ) -> None:
     name = "ttlab"
-    with start_lab(tmp_path, name, clear=False, path=short_lab(tmp_path, name)) as lab:
+    path, shift = short_lab(tmp_path, name)
+    with start_lab(tmp_path, name, clear=False, path=path) as lab:
         end = time.monotonic() + RUN_S
         status = {}
+        looks: list[dict[str, Place]] = []
         while time.monotonic() < end:
             status = {t: lab.status(f"train{t}") for t in ("1001", "1003", "2001")}
+            looks.append({t: (s["head"], s["speed_kmh"]) for t, s in status.items()})
             if all(s["state"] == "finished" for s in status.values()):
                 break
             time.sleep(1.0)
@@ -135,18 +136,11 @@ def test_trains_both_ways_stop_within_half_a_metre_and_cross_at_station_20(
     # 1001 stood its 10 s at 20 before it left
     arrived = t1001["arrivals"][0]["time_s"]
     assert t1001["departures"][1]["time_s"] >= arrived + 10.0, t1001
-    # the crossing at 20, read off ARS's log (the CTC's one clock): 2001 stood wholly in the
-    # loop (track 2) while an up train stood wholly on the main track -- from the moment each
-    # was on its platform's circuit until ARS asked for its departure route
-    at20 = _stays_at_20(ars_log)
-    assert at20.get("2001", ("", 0.0, 0.0))[0] == "2", (at20, ars_log)
-    loop = at20["2001"][1:]
-    crossed = [
-        t
-        for t, (track, came, left) in at20.items()
-        if t != "2001" and track == "1" and came < loop[1] and loop[0] <= left
-    ]
-    assert crossed, at20
+    # the crossing at 20: an up train and 2001 passed each other inside station 20, one of the
+    # two standing at its platform -- 2001 in the loop (track 2), the up train on the main track
+    crossed = passed_at_20(looks, (6000 + shift[20], 7000 + shift[20]))
+    assert crossed, looks
+    assert "train 2001 arrived at station 20 track 2" in [e["text"] for e in ars_log], ars_log
     # the routes were ARS's: nobody else set any
     print({t: [(a["station"], a["error_m"]) for a in s["arrivals"]] for t, s in status.items()})
     assert log and {e["source"] for e in log} == {"ars"}, log
