@@ -92,8 +92,9 @@ REQUESTS = {
     "route_cancel": {"cmd": "route", "action": "cancel"},  # the route set from the clicked entry
     "point": {"cmd": "point"},
     "mode": {"cmd": "mode"},
+    "direction": {"cmd": "direction"},  # the station asks for an interval's permission (§6.6)
 }
-REQUEST_FIELDS = ("station", "entry", "exit", "point", "position", "mode")
+REQUEST_FIELDS = ("station", "entry", "exit", "point", "position", "mode", "interval")
 
 
 class ArsSwitch(Protocol):
@@ -493,7 +494,7 @@ class ConsoleServer:
 
     async def _on_message(self, client: _Client, msg: dict[str, Any]) -> None:
         kind = msg.get("type")
-        if kind in ("route_set", "route_cancel", "point", "mode", "ars"):
+        if isinstance(kind, str) and (kind in REQUESTS or kind == "ars"):
             why = self.gate.admit(client.page, time.monotonic(), client.queue.qsize())
             if why is None:
                 client.queue.put_nowait(msg)

@@ -186,7 +186,9 @@ def test_a_rejected_request_is_asked_again_later_not_at_once() -> None:
 
 def test_two_trains_run_the_timetable_each_route_asked_once_and_taken() -> None:
     """The reference timetable end to end: 1001 then 1003, 18 -> 20 -> 22, platform stops; 1003
-    gets into station 22's loop while 1001 stands terminated in the main-track route."""
+    gets into station 22's loop while 1001 stands terminated in the main-track route. (These
+    rails carry the up trains only: the timetable's down train 2001 never comes on, and ARS
+    says it has not seen it; the crossing is tests/ctc/test_ars_direction.py's and the lab's.)"""
     b = ArsLine()
     path_1003 = [*UP_MAIN[:-1], "TC2256"]  # 1003 ends on track 2 at station 22
     rail = Railway(b, [RailTrain("1001", list(UP_MAIN), 0.0), RailTrain("1003", path_1003, 120.0)])
@@ -200,6 +202,7 @@ def test_two_trains_run_the_timetable_each_route_asked_once_and_taken() -> None:
     assert states == {
         "1001": "terminated at station 22 track 1",
         "1003": "terminated at station 22 track 2",
+        "2001": "not yet seen (expected at TC2261)",
     }
     # each starting route was asked for a full dwell (30 s) after the train stood on its platform
     arrived = {

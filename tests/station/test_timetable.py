@@ -20,11 +20,11 @@ LINE = load_line()
 REFERENCE = data_dir("emulators") / "timetables" / "reference.yaml"
 
 
-def test_the_reference_timetable_runs_two_seed001_trains_18_20_22() -> None:
+def test_the_reference_timetable_runs_two_seed001_trains_18_20_22_and_one_back() -> None:
     tt = load_timetable(REFERENCE, LINE)
-    assert [t.id for t in tt.trains] == ["1001", "1003"]
-    first, second = tt.trains
-    for t in tt.trains:  # seed 001 Table 1
+    assert [t.id for t in tt.trains] == ["1001", "1003", "2001"]
+    first, second, down = tt.trains
+    for t in (first, second):  # seed 001 Table 1
         d = t.data
         assert (d.length_m, d.max_speed_kmh, t.direction) == (200.0, 80.0, "up")
         assert (d.traction_kmh_per_s, d.service_brake_kmh_per_s, d.emergency_brake_kmh_per_s) == (
@@ -42,6 +42,14 @@ def test_the_reference_timetable_runs_two_seed001_trains_18_20_22() -> None:
         ("0111", None),
     ]
     assert second.stops[-1].track == "2" and second.stops[-1].home_route == "0112"
+    # the down train, 22 -> 20 -> 18, waits for the up trains in station 20's loop (track 2)
+    assert (down.data, down.direction, down.appears_on) == (first.data, "down", "TC2261")
+    assert [(s.station, s.track) for s in down.stops] == [(22, "1"), (20, "2"), (18, "1")]
+    assert [(s.home_route, s.start_route) for s in down.stops] == [
+        ("0221", "2192"),
+        ("0222", "2292"),
+        ("0221", None),
+    ]
 
 
 def test_the_timetable_line_generate_writes_loads_too(tmp_path: Path) -> None:

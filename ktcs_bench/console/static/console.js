@@ -5,7 +5,7 @@
 
 const ui = {
   ws: null, tool: "route", entry: null, stations: {}, nextId: 1,
-  taps: [], trains: [],
+  taps: [], trains: [], intervals: {},
 };
 const $ = (sel) => document.querySelector(sel);
 const NS = "http://www.w3.org/2000/svg";
@@ -26,6 +26,7 @@ function describe(m) {
   if (m.type === "point") return `station ${m.station}: point ${m.point} to ${m.position}`;
   if (m.type === "mode") return `station ${m.station}: ${m.mode} mode`;
   if (m.type === "ars") return `station ${m.station}: ARS ${m.on ? "on" : "off"}`;
+  if (m.type === "direction") return `station ${m.station}: ask for interval ${m.interval}`;
   return m.type;
 }
 
@@ -93,6 +94,22 @@ function onPoint(el) {
             position: ui.tool });
 }
 
+// a click on an interval's arrow: the end that does not hold its permission asks for it (SPEC
+// §6.6, `ctc direction ST INTERVAL`); with no end holding it there is nobody to ask
+function onInterval(el) {
+  const name = el.dataset.interval, iv = ui.intervals[name];
+  if (!iv) {
+    showResult("error", `interval ${name}: nothing known of it yet`);
+    return;
+  }
+  const station = iv.holder === iv.west ? iv.east : iv.holder === iv.east ? iv.west : null;
+  if (station === null) {
+    showResult("error", `interval ${name}: no end holds its permission, nothing to ask for`);
+    return;
+  }
+  request({ type: "direction", station, interval: name });
+}
+
 async function loadDiagram() {
   const res = await fetch("/diagram.svg");
   $("#diagram-wrap").innerHTML = await res.text();
@@ -100,6 +117,8 @@ async function loadDiagram() {
     el.addEventListener("click", () => onSignal(el)));
   document.querySelectorAll("#diagram .point").forEach((el) =>
     el.addEventListener("click", () => onPoint(el)));
+  document.querySelectorAll("#diagram .interval").forEach((el) =>
+    el.addEventListener("click", () => onInterval(el)));
   if (ui.lastState) applyState(ui.lastState);
   if (ui.lastTrains) applyTrains(ui.lastTrains);
 }
@@ -187,6 +206,7 @@ function applyState(stations) {
     // each interval read from both its stations (ctc.model.IntervalReading): the arrow keeps
     // the head of the permission's direction, a dashed shaft alone when there is none
     for (const [name, iv] of Object.entries(st.intervals || {})) {
+      ui.intervals[name] = iv;
       const g = document.getElementById(`iv-${name}`);
       if (!g) continue;
       const d = iv.direction === "up" || iv.direction === "down" ? iv.direction : "none";
