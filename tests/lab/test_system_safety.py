@@ -29,7 +29,8 @@ from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any, TypeVar
 
-from hypothesis import HealthCheck, settings
+import pytest
+from hypothesis import HealthCheck, Phase, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import (
     RuleBasedStateMachine,
@@ -40,6 +41,7 @@ from hypothesis.stateful import (
 )
 
 from ktcs_bench.datafiles import data_dir
+from ktcs_bench.ixl.interlocking import Interlocking
 from ktcs_bench.lab.inprocess import InProcessLab
 from ktcs_bench.lab.invariants import Geometry, SafetyChecker
 from ktcs_bench.lab.safety import Replay, StepRun, load_replay, replay_steps, run_step, run_steps
@@ -59,29 +61,27 @@ WARM_UP_S = 8.0  # the links come up, the CTC has every station
 RUN_S = (0.5, 1.0, 2.0, 4.0)
 COUNT = {"steps": 0, "looks": 0, "examples": 0}
 
-# The trains run up on the main track (track 1) at every station, as their timetable says; a train
-# of the emulator follows its timetable's track, not the points. The operator sets routes on that
-# track only: a route into a loop would send the search's trains where the emulated train cannot
-# go (docs/system_safety.md). And in the trains' direction only, until codes carry a direction
-# (SPEC §6.6, §6.7, "traffic both ways"): a down departure from a track where an up train stands
-# is coded for that train too, which reads it as its own and runs past its starting signal at stop
-# -- a known open defect, replayed by `test_known_open_a_down_departure_codes_the_up_train_
-# standing_on_its_approach` below, which fails as soon as it is fixed.
-MAIN_ROUTES = [
-    (st.number, r.name, r.entry, r.exit)
-    for st in LINE.stations.values()
-    for r in st.routes
-    if r.direction == "up"
-    and all(GEO.tc[t].on_track("1") for t in r.all_track_circuits)
-    and all(st.signal(s).track in (None, "1") for s in (r.entry, r.exit))
+# Traffic both ways (SPEC §6.6, §6.7): three trains run up on the main track and 2002 down on the
+# loops, moved by the blades as they lie; the operator sets any route of any station, asks for
+# an interval's permission, throws points under trains and injects wrong-side point faults.
+ROUTES = [(st.number, r.name, r.entry, r.exit) for st in LINE.stations.values() for r in st.routes]
+INTERVALS = [
+    (n, iv.name) for n in LINE.stations for iv in LINE.view(n).intervals if not iv.boundary
 ]
+TRAINS = ["train2001", "train2002", "train2003", "train2005"]
 POINTS = [(st.number, p.name) for st in LINE.stations.values() for p in st.points]
 SIGNALS = [(st.number, s.name) for st in LINE.stations.values() for s in st.lamp_signals]
 TCS = [t.name for t in LINE.all_track_circuits()]
 STATIONS = sorted(LINE.stations)
 
 
-class SystemMachine(RuleBasedStateMachine):
+class SearchMachine(RuleBasedStateMachine):
+    """The lab under search, with no rules of its own: `SystemMachine` is the whole search,
+    `DepartureMachine` the narrower operator of the can-fail demonstrations."""
+
+    FAIL_ON: frozenset[str] | None = None  # violation kinds that fail it (None: every one)
+    SAVE = True  # a failure is saved as a replay file
+
     def __init__(self) -> None:
         super().__init__()
         self.lab: InProcessLab | None = None
@@ -116,10 +116,13 @@ class SystemMachine(RuleBasedStateMachine):
         looks = self.checker.looks
         done = self.run(run_step(self.lab, self.checker, step))
         COUNT["looks"] += self.checker.looks - looks
-        if done.violations:
-            self.fail([str(v) for v in done.violations])
+        found = [v for v in done.violations if self.FAIL_ON is None or v.kind in self.FAIL_ON]
+        if found:
+            self.fail([str(v) for v in found])
 
     def fail(self, violations: list[str]) -> None:
+        if not self.SAVE:
+            raise AssertionError(f"after {len(self.steps)} steps: {violations[0]}")
         replay = Replay(LAB_NAME, self.seed, WARM_UP_S, tuple(self.steps), tuple(violations))
         text = json.dumps(replay.to_json(), sort_keys=True)
         path = FAILURES / f"replay-{hashlib.sha256(text.encode()).hexdigest()[:12]}.json"
@@ -129,22 +132,31 @@ class SystemMachine(RuleBasedStateMachine):
             f"replay: ktcs-bench lab simulate --replay {path}"
         )
 
+
+class SystemMachine(SearchMachine):
     # ---------------------------------------------------------------- the operator
 
-    @rule(route=st.sampled_from(MAIN_ROUTES), cancel=st.booleans(), run_s=st.sampled_from(RUN_S))
+    @rule(route=st.sampled_from(ROUTES), cancel=st.booleans(), run_s=st.sampled_from(RUN_S))
     def route(self, route: tuple[int, str, str, str], cancel: bool, run_s: float) -> None:
         number, _, entry, exit_ = route
         action = "cancel" if cancel else "set"
         self.step({"do": "route", "station": number, "entry": entry, "exit": exit_,
                    "action": action, "run_s": run_s})  # fmt: skip
 
-    @rule(station=st.sampled_from(STATIONS), run_s=st.sampled_from(RUN_S))
-    def routes_for_the_trains(self, station: int, run_s: float) -> None:
-        """The common case, as ARS would: home and starting route of the main track set."""
-        for entry, exit_ in (("01", "11"), ("11", "91")):
+    @rule(station=st.sampled_from(STATIONS), down=st.booleans(), run_s=st.sampled_from(RUN_S))
+    def routes_for_the_trains(self, station: int, down: bool, run_s: float) -> None:
+        """The common case, as ARS would: home and starting route of the main track set (up),
+        or of the loop (down)."""
+        for entry, exit_ in (("02", "22"), ("22", "92")) if down else (("01", "11"), ("11", "91")):
             self.step({"do": "route", "station": station, "entry": entry, "exit": exit_,
                        "action": "set", "run_s": 0.0})  # fmt: skip
         self.step({"do": "wait", "run_s": run_s})
+
+    @rule(interval=st.sampled_from(INTERVALS), run_s=st.sampled_from(RUN_S))
+    def direction(self, interval: tuple[int, str], run_s: float) -> None:
+        """`ctc direction ST IV`: ask for the interval's permission ahead of a departure."""
+        self.step({"do": "direction", "station": interval[0], "interval": interval[1],
+                   "run_s": run_s})  # fmt: skip
 
     @rule(station=st.sampled_from(STATIONS), on=st.booleans(), run_s=st.sampled_from(RUN_S))
     def ars(self, station: int, on: bool, run_s: float) -> None:
@@ -168,7 +180,7 @@ class SystemMachine(RuleBasedStateMachine):
 
     # ---------------------------------------------------------------- the trains and time
 
-    @rule(train=st.sampled_from(["train2001", "train2003", "train2005"]),
+    @rule(train=st.sampled_from(TRAINS),
           run_s=st.sampled_from(RUN_S))  # fmt: skip
     def release_eb(self, train: str, run_s: float) -> None:
         self.step({"do": "release_eb", "train": train, "run_s": run_s})
@@ -190,15 +202,21 @@ class SystemMachine(RuleBasedStateMachine):
                     {"cmd": "restore"},
                     {"cmd": "ber", "rate": 1e-3},
                     {"cmd": "ber", "rate": 1e-2},
+                    {"cmd": "garbage", "hex": "02ff0010"},
+                    {"cmd": "drop-frame", "count": 1},
+                    {"cmd": "drop-frame", "count": 3},
                     {"cmd": "clear"},
                 ]  # fmt: skip
             )
         )
         self.step({"do": "link", "link": link, "fault": fault, "run_s": run_s})
 
-    @rule(point=st.sampled_from(POINTS), run_s=st.sampled_from(RUN_S))
-    def point_detection_lost(self, point: tuple[int, str], run_s: float) -> None:
-        self.step({"do": "point_fault", "station": point[0], "point": point[1], "run_s": run_s})
+    @rule(point=st.sampled_from(POINTS), kind=st.sampled_from(["detection", "crossed"]),
+          run_s=st.sampled_from(RUN_S))  # fmt: skip
+    def point_fault(self, point: tuple[int, str], kind: str, run_s: float) -> None:
+        """Detection lost, or crossed: blades lying one way reported the other (wrong-side)."""
+        self.step({"do": "point_fault", "station": point[0], "point": point[1], "kind": kind,
+                   "run_s": run_s})  # fmt: skip
 
     @rule(tc=st.sampled_from(TCS), run_s=st.sampled_from(RUN_S))
     def track_circuit_failed_occupied(self, tc: str, run_s: float) -> None:
@@ -314,3 +332,60 @@ def test_a_down_departure_no_longer_codes_the_up_train_standing_on_its_approach(
     lab = InProcessLab(LAB, seed=replay.seed)
     runs = lab.run(lambda access: replay_steps(access, replay, LINE))
     assert [str(v) for r in runs for v in r.violations] == []
+
+
+# ------------------------------------------------------------------------ the search can fail
+
+DEPARTURES = [r for r in ROUTES if r[3] in ("91", "92")]
+
+
+class DepartureMachine(SearchMachine):
+    """The search's operator narrowed to departure routes and waits (ARS on, the trains running
+    their timetable): with the IXLs' direction check switched off, a departure against the
+    interval's permission is locked and the search must see a head-on."""
+
+    FAIL_ON = frozenset({"opposing_trains", "entered_against_departure"})  # invariant 6
+    SAVE = False
+
+    @rule(route=st.sampled_from(DEPARTURES), run_s=st.sampled_from(RUN_S))
+    def departure(self, route: tuple[int, str, str, str], run_s: float) -> None:
+        number, _, entry, exit_ = route
+        self.step({"do": "route", "station": number, "entry": entry, "exit": exit_,
+                   "action": "set", "run_s": run_s})  # fmt: skip
+
+    @rule(run_s=st.sampled_from((5.0, 10.0, 20.0)))
+    def wait(self, run_s: float) -> None:
+        self.step({"do": "wait", "run_s": run_s})
+
+
+def _search_fails(machine: type[SearchMachine], steps: int) -> str:
+    """Run `machine` as the search runs, derandomized (a fixed seed), no shrinking: the
+    failure's message (the test fails when the search finds nothing)."""
+    COUNT.update(steps=0, looks=0, examples=0)
+    try:
+        run_state_machine_as_test(
+            machine,
+            settings=settings(
+                max_examples=max(1, steps // 40),
+                stateful_step_count=40,
+                deadline=None,
+                derandomize=True,
+                database=None,
+                phases=[Phase.generate],
+                suppress_health_check=list(HealthCheck),
+            ),  # fmt: skip
+        )
+    except AssertionError as exc:
+        return str(exc)
+    raise AssertionError(f"the search found nothing in {COUNT['steps']} steps")
+
+
+def test_the_search_finds_a_head_on_when_the_direction_check_is_off(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With `Interlocking.direction_check_disabled_for_tests` set (the IXL before SPEC §6.6) the
+    search sees two trains meet in one interval (invariant 6) within a few steps."""
+    monkeypatch.setattr(Interlocking, "direction_check_disabled_for_tests", True)
+    found = _search_fails(DepartureMachine, 200)
+    assert "invariant 6" in found, found
+    assert COUNT["steps"] <= 200, COUNT
