@@ -9,9 +9,9 @@ from ktcs_bench.lab.invariants import (
     LabSnapshot,
     MachineState,
     SafetyChecker,
-    Violation,
     StationState,
     TrainState,
+    Violation,
 )
 from ktcs_bench.lab.safety import LASTING
 from ktcs_bench.station import load_line
