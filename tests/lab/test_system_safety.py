@@ -40,6 +40,7 @@ from hypothesis.stateful import (
     run_state_machine_as_test,
 )
 
+from ktcs_bench.atc.track_circuits import TrackCircuitModel
 from ktcs_bench.datafiles import data_dir
 from ktcs_bench.ixl.interlocking import Interlocking
 from ktcs_bench.lab.inprocess import InProcessLab
@@ -376,6 +377,7 @@ def _search_fails(machine: type[SearchMachine], steps: int) -> str:
             ),  # fmt: skip
         )
     except AssertionError as exc:
+        print(f"{machine.__name__}: {COUNT['steps']} steps, {COUNT['examples']} examples: {exc}")
         return str(exc)
     raise AssertionError(f"the search found nothing in {COUNT['steps']} steps")
 
@@ -389,3 +391,33 @@ def test_the_search_finds_a_head_on_when_the_direction_check_is_off(
     found = _search_fails(DepartureMachine, 200)
     assert "invariant 6" in found, found
     assert COUNT["steps"] <= 200, COUNT
+
+
+class RouteMachine(SearchMachine):
+    """The search's operator narrowed to setting any route and waiting (ARS on): with trains
+    moved along their booked track instead of by the blades, a route into a loop sends a train
+    booked on the main track through the point lying for the loop, and the search must see it."""
+
+    FAIL_ON = frozenset({"through_point_not_lying"})  # invariant 3
+    SAVE = False
+
+    @rule(route=st.sampled_from(ROUTES), run_s=st.sampled_from(RUN_S))
+    def route(self, route: tuple[int, str, str, str], run_s: float) -> None:
+        number, _, entry, exit_ = route
+        self.step({"do": "route", "station": number, "entry": entry, "exit": exit_,
+                   "action": "set", "run_s": run_s})  # fmt: skip
+
+    @rule(run_s=st.sampled_from((5.0, 10.0, 20.0)))
+    def wait(self, run_s: float) -> None:
+        self.step({"do": "wait", "run_s": run_s})
+
+
+def test_the_search_finds_a_train_through_a_point_not_lying_for_it_when_trains_ignore_the_blades(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With `TrackCircuitModel.booked_tracks_for_tests` set (the rails before SPEC §6.7) the
+    search sees a train run through a point that does not lie for it (invariant 3)."""
+    monkeypatch.setattr(TrackCircuitModel, "booked_tracks_for_tests", True)
+    found = _search_fails(RouteMachine, 400)
+    assert "through_point_not_lying" in found, found
+    assert COUNT["steps"] <= 400, COUNT
