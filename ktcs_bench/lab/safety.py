@@ -2,8 +2,8 @@
 
 A step is a JSON object: one operator command, train action or fault, then `run_s` seconds of the
 lab's clock, looked at every `LOOK_S` (each look a `lab.invariants.snapshot` fed to the
-`SafetyChecker`: invariants 1-3). A `settle` step clears every fault (taps restored and cleared,
-point and track-circuit faults cleared), lets the line run and looks until each CTC view equals
+`SafetyChecker`: invariants 1-3, 5 and 6). A `settle` step clears every fault (taps restored and
+cleared, point and track-circuit faults cleared), lets the line run and looks until each CTC view equals
 its IXL and each IXL's occupancy the rails (invariant 4), or says that they never did.
 
     {"do": "route", "station": 20, "entry": "01", "exit": "11", "action": "set", "run_s": 2}
