@@ -345,9 +345,9 @@ def test_a_down_departure_no_longer_codes_the_up_train_standing_on_its_approach(
 
 @pytest.mark.xfail(strict=True, reason="known open defect: docs/system_safety.md")
 def test_known_open_a_restarted_holder_is_read_as_a_gift() -> None:
-    """What the search found (seed 40000, 51 steps, replayed as it was saved): train 2002 ran
-    down into interval 2022 from station 22, which held its permission; ixl22 restarted, and
-    came back before ixl20 saw the link go into communication error. The new ixl22 knows no
+    """What the search found (seed 40000, 51 steps; cut by hand to its 3 steps that matter):
+    train 2002 ran down into interval 2022 from station 22, which held its permission; ixl22
+    restarted, and came back before ixl20 saw the link go into communication error. The new ixl22 knows no
     permission and resyncs saying PHI 0; ixl20 had last read PHI 1, and reads any PHI 1 -> 0 on
     a live link as a gift (`IntervalEnd.receive`): it took the permission, locked departure
     11-91 and sent train 2001 up into the interval against 2002 (invariant 6). Passes -- and
