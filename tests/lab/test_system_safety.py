@@ -68,6 +68,7 @@ STEPS_PER_EXAMPLE = 200
 WARM_UP_S = 8.0  # the links come up, the CTC has every station
 RUN_S = (0.5, 1.0, 2.0, 4.0)
 COUNT = {"steps": 0, "looks": 0, "examples": 0}
+SEEDS: list[int] = []  # the lab seeds drawn, printed at the end (pytest -s shows them)
 
 # Traffic both ways (SPEC §6.6, §6.7): three trains run up on the main track and 2002 down on the
 # loops, moved by the blades as they lie; the operator sets any route of any station, asks for
@@ -104,6 +105,7 @@ class SearchMachine(RuleBasedStateMachine):
     @initialize(seed=st.integers(0, 2**16))
     def up(self, seed: int) -> None:
         COUNT["examples"] += 1
+        SEEDS.append(seed)
         self.seed = seed
         self.lab = InProcessLab(LAB, seed=seed)
         self.loop = self.lab.new_loop()
@@ -245,6 +247,7 @@ class SystemMachine(SearchMachine):
 
 def test_the_integrated_system_stays_safe_under_random_commands_trains_and_faults() -> None:
     COUNT.update(steps=0, looks=0, examples=0)
+    SEEDS.clear()
     while COUNT["steps"] < STEPS:  # an example may end before its last step: run on to STEPS
         run_state_machine_as_test(
             SystemMachine,
@@ -255,6 +258,7 @@ def test_the_integrated_system_stays_safe_under_random_commands_trains_and_fault
                 suppress_health_check=list(HealthCheck),
             ),
         )
+    print(f"{COUNT['steps']} steps clean, lab seeds {SEEDS}")
     # the lab was looked at through every step's run, not only stepped
     assert COUNT["looks"] >= COUNT["steps"], COUNT
 
