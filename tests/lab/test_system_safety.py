@@ -388,7 +388,7 @@ class DepartureMachine(SearchMachine):
         self.step({"do": "wait", "run_s": run_s})
 
 
-def _search_fails(machine: type[SearchMachine], steps: int) -> str:
+def _search_fails(machine: type[SearchMachine], steps: int, per_example: int = 40) -> str:
     """Run `machine` as the search runs, derandomized (a fixed seed), no shrinking: the
     failure's message (the test fails when the search finds nothing)."""
     COUNT.update(steps=0, looks=0, examples=0)
@@ -396,8 +396,8 @@ def _search_fails(machine: type[SearchMachine], steps: int) -> str:
         run_state_machine_as_test(
             machine,
             settings=settings(
-                max_examples=max(1, steps // 40),
-                stateful_step_count=40,
+                max_examples=max(1, steps // per_example),
+                stateful_step_count=per_example,
                 deadline=None,
                 derandomize=True,
                 database=None,
