@@ -91,6 +91,12 @@ class RailEvent:
 
 
 class TrackCircuitModel:
+    booked_tracks_for_tests = False
+    """Test-only, never set by the bench: when True a booked train runs along its booked track
+    whatever the blades (facing it takes the leg to its booked track; no trailing, no derailing)
+    -- the model before SPEC §6.7, so that a test shows the whole-system search catching a train
+    run through a point not lying for it (tests/lab/test_system_safety.py)."""
+
     def __init__(self, line: Line) -> None:
         self.line = line
         self.geometry = LineGeometry(line)
@@ -288,13 +294,15 @@ class TrackCircuitModel:
             self._extend(t.train, path, t.head_m, upper=up)
             self.paths[t.train] = path
         else:
+            booked = t.track if t.booked and self.booked_tracks_for_tests else None
             if hi > path.hi:
-                self._extend(t.train, path, hi, upper=True)
+                self._extend(t.train, path, hi, upper=True, booked=booked)
             if lo < path.lo:
-                self._extend(t.train, path, lo, upper=False)
+                self._extend(t.train, path, lo, upper=False, booked=booked)
         self._trim(path, lo, hi)
         self.trains[t.train] = t
-        self._under(t.train, path)
+        if not (t.booked and self.booked_tracks_for_tests):
+            self._under(t.train, path)
         if t.booked and t.track is not None and not path.misrouted:
             actual = path.track_at_end(t.head_m >= t.tail_m)
             if actual is not None and actual != t.track and self.geometry.runs(t.track, t.head_m):
@@ -304,8 +312,11 @@ class TrackCircuitModel:
                     f"{t.head_m:.0f} m, booked on track {t.track}", track=actual,
                 ))  # fmt: skip
 
-    def _extend(self, train: str, path: TrainPath, to: float, upper: bool) -> None:
-        """Run the path's upper (or lower) end out to `to` over the points on its way."""
+    def _extend(
+        self, train: str, path: TrainPath, to: float, upper: bool, booked: str | None = None
+    ) -> None:
+        """Run the path's upper (or lower) end out to `to` over the points on its way (`booked`:
+        along that track whatever the blades, `booked_tracks_for_tests`)."""
         start = path.hi if upper else path.lo
         for station, point in self.geometry.passed(start, to):
             track = path.track_at_end(upper)
@@ -319,7 +330,11 @@ class TrackCircuitModel:
                 leg = "reverse" if blades == "reverse" else "normal"
             else:
                 leg = meeting
-            if blades not in ("normal", "reverse"):
+            if booked is not None:
+                leg = "reverse" if meeting == "toe" and point.reverse == booked else leg
+                if meeting == "toe" and point.normal == booked:
+                    leg = "normal"
+            elif blades not in ("normal", "reverse"):
                 self._derail(train, path, station, point.name)
             elif meeting != "toe" and blades != leg:
                 self.blades[key] = leg  # forced over by the wheels

@@ -1,8 +1,10 @@
 """A point machine: throws in `throw_time_s`, shows SNR/SRN while moving, loses detection on fault.
 
-Faults: "detection" (the detection contacts open: no indication at all, whatever the blades do)
-and "jammed" (the machine runs but the blades never reach the other position: it keeps showing
-the moving indication). A throw reversed half-way takes as long to come back as it had run.
+Faults: "detection" (the detection contacts open: no indication at all, whatever the blades do),
+"jammed" (the machine runs but the blades never reach the other position: it keeps showing
+the moving indication) and "crossed" (a wrong-side failure, the detection wired the wrong way
+round: blades lying normal are reported reverse and the other way about -- what the whole-system
+search injects to see a train sent where the interlocking did not mean it to go). A throw reversed half-way takes as long to come back as it had run.
 A train trailing the point against its blades forces them over to its leg (`trail`): the
 detection is lost ("trailed", like "detection") until a fault clear repairs the point.
 """
@@ -13,7 +15,7 @@ from dataclasses import dataclass
 
 from ktcs_bench.station.model import Point, PointPosition
 
-FAULTS = ("detection", "jammed")
+FAULTS = ("detection", "jammed", "crossed")
 TRAILED = "trailed"
 """The fault a trailing train leaves (not injected: `trail`)."""
 
@@ -77,9 +79,12 @@ class PointMachine:
         out = {"SNI": 0, "SRN": 0, "SRI": 0, "SNR": 0}
         if self.fault in ("detection", TRAILED):
             return out
-        if self.position == "normal":
+        position = self.position
+        if self.fault == "crossed" and position is not None:
+            position = "reverse" if position == "normal" else "normal"
+        if position == "normal":
             out["SNI"] = 1
-        elif self.position == "reverse":
+        elif position == "reverse":
             out["SRI"] = 1
         elif self.target == "normal":
             out["SRN"] = 1

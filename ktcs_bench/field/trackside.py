@@ -128,7 +128,8 @@ class Trackside:
     # ------------------------------------------------------------------ faults
 
     def fail_point(self, point: str, kind: str, now: float) -> FieldOutput:
-        """Inject a point fault: "detection" (indication lost) or "jammed" (never arrives)."""
+        """Inject a point fault: "detection" (indication lost), "jammed" (never arrives) or
+        "crossed" (detection reports the other end position: wrong-side)."""
         if kind not in point_faults.FAULTS:
             raise ValueError(f"unknown point fault {kind!r} {point_faults.FAULTS}")
         self.points[point].fault = kind

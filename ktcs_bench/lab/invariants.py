@@ -34,7 +34,7 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, TypedDict
+from typing import TYPE_CHECKING, Any, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench import messages as msg
@@ -42,6 +42,9 @@ from ktcs_bench.lab.access import LabAccess
 from ktcs_bench.messages import Message
 from ktcs_bench.station.model import Line, TrackCircuit
 from ktcs_bench.station_codes.stations import station_chart
+
+if TYPE_CHECKING:
+    from ktcs_bench.lab.intervals import IntervalGeometry
 
 # Route states in which a route's locked elements protect a train on them: a route being set is
 # still throwing its points; an idle route holds nothing.
@@ -345,6 +348,29 @@ def _ran_onto(
     return []
 
 
+def off_the_blades(snap: LabSnapshot, geo: Geometry) -> list[Violation]:
+    """Invariant 3, against the rails themselves: a train whose head ran through a point at its
+    toe (facing) must be on the leg the blades lie in -- its head on the other leg's track, with
+    the blades at rest, is a train run through a point that does not lie for it (what trains
+    moved along a booked track, not by the blades, would do)."""
+    out: list[Violation] = []
+    for name, t in sorted(snap.trains.items()):
+        lo, hi = t.extent
+        for number, st in sorted(snap.stations.items()):
+            for p, m in sorted((st.machines or {}).items()):
+                point = geo.line.station(number).point(p)
+                if not (lo < point.position_m < hi) or point.side(t.up) != "toe":
+                    continue
+                if m.moving or m.position not in ("normal", "reverse"):
+                    continue
+                other = point.reverse if m.position == "normal" else point.normal
+                if t.track == other:
+                    out.append(Violation(3, "through_point_not_lying", f"{number}/{p}", snap.time,
+                                         f"train {name} ran through point {p} of station "
+                                         f"{number} lying {m.position} onto track {t.track}"))  # fmt: skip
+    return out
+
+
 RAILS_VIOLATIONS = (
     (re.compile(r"trailed point (\d+) (\S+)"), "trailed_point", "train trailed point {p} of station {st}"),
     (re.compile(r"derailed (\d+) (\S+)"), "derailed", "train derailed at point {p} of station {st}"),
@@ -411,23 +437,33 @@ def views_agree(snap: LabSnapshot, geo: Geometry) -> list[Violation]:
 
 @dataclass
 class SafetyChecker:
-    """Invariants 1-3 over a lab looked at again and again (`feed`), 4 on demand (`settled`).
+    """Invariants 1-3, 5 and 6 (`lab.intervals`) over a lab looked at again and again (`feed`),
+    4 on demand (`settled`).
     Every violation found is kept in `violations` as well as returned."""
 
     line: Line
     geo: Geometry = field(init=False)
+    intervals: IntervalGeometry = field(init=False)
     last: LabSnapshot | None = None
     looks: int = 0
     violations: list[Violation] = field(default_factory=list)
 
     def __post_init__(self) -> None:
+        from ktcs_bench.lab import intervals  # invariants 5 and 6; it imports this module
+
         self.geo = Geometry(self.line)
+        self.intervals = intervals.IntervalGeometry(self.line)
 
     def feed(self, snap: LabSnapshot) -> list[Violation]:
+        from ktcs_bench.lab.intervals import interval_direction, opposing_departures
+
         found = train_separation(snap, self.geo)
         found += danger_points(self.last, snap, self.geo)
         found += point_safety(self.last, snap, self.geo)
         found += rails_events(snap, self.last)
+        found += off_the_blades(snap, self.geo)
+        found += opposing_departures(snap, self.intervals)
+        found += interval_direction(self.last, snap, self.intervals)
         self.last = snap
         self.looks += 1
         self.violations += found

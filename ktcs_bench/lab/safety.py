@@ -2,8 +2,8 @@
 
 A step is a JSON object: one operator command, train action or fault, then `run_s` seconds of the
 lab's clock, looked at every `LOOK_S` (each look a `lab.invariants.snapshot` fed to the
-`SafetyChecker`: invariants 1-3). A `settle` step clears every fault (taps restored and cleared,
-point and track-circuit faults cleared), lets the line run and looks until each CTC view equals
+`SafetyChecker`: invariants 1-3, 5 and 6). A `settle` step clears every fault (taps restored and
+cleared, point and track-circuit faults cleared), lets the line run and looks until each CTC view equals
 its IXL and each IXL's occupancy the rails (invariant 4), or says that they never did.
 
     {"do": "route", "station": 20, "entry": "01", "exit": "11", "action": "set", "run_s": 2}
@@ -13,6 +13,8 @@ its IXL and each IXL's occupancy the rails (invariant 4), or says that they neve
     {"do": "ars", "station": 20, "on": false, "run_s": 2}
     {"do": "link", "link": "st20-atc", "fault": {"cmd": "cut"}, "run_s": 2}
     {"do": "point_fault", "station": 20, "point": "31", "run_s": 2}
+    {"do": "point_fault", "station": 20, "point": "31", "kind": "crossed", "run_s": 2}
+    {"do": "direction", "station": 20, "interval": "1820", "run_s": 2}
     {"do": "tc_fault", "tc": "TC2055", "run_s": 2}
     {"do": "restart", "device": "ixl20", "run_s": 2}
     {"do": "release_eb", "train": "train2001", "run_s": 2}
@@ -50,7 +52,7 @@ log = logging.getLogger("ktcs_bench.lab")
 
 LOOK_S = 1.0  # how often the lab is looked at while a step runs (lab seconds)
 SETTLE_LIMIT_S = 90.0  # how long a settled line may take to agree after its settle time
-DO = ("route", "point", "signal", "mode", "ars", "link", "point_fault", "tc_fault", "restart",
+DO = ("route", "point", "signal", "mode", "ars", "direction", "link", "point_fault", "tc_fault", "restart",
       "release_eb", "wait", "settle")  # fmt: skip
 
 
@@ -68,14 +70,15 @@ async def command(access: LabAccess, step: Mapping[str, Any]) -> dict[str, Any]:
     do = step.get("do")
     device_kinds = access.devices
     ctc = next((n for n, k in device_kinds.items() if k == kinds.CTC), kinds.CTC)
-    if do in ("route", "point", "signal", "mode", "ars"):
+    if do in ("route", "point", "signal", "mode", "ars", "direction"):
         obj = {k: v for k, v in step.items() if k not in ("do", "run_s")}
         return await access.device(ctc, {"cmd": do, **obj})
     if do == "link":
         return await access.link(str(step["link"]), dict(step["fault"]))
     if do == "point_fault":
         side = _device_of(device_kinds, kinds.TRACKSIDE, int(step["station"]), access)
-        return await access.device(side, msg.FailPoint(point=str(step["point"]), kind="detection"))
+        kind = str(step.get("kind", "detection"))
+        return await access.device(side, msg.FailPoint(point=str(step["point"]), kind=kind))
     if do == "tc_fault":
         tc = next(n for n, k in device_kinds.items() if k == kinds.TRACKCIRCUIT)
         kind = str(step.get("kind", "failed_occupied"))
@@ -175,7 +178,8 @@ async def replay_steps(access: LabAccess, replay: Replay, line: Line) -> list[St
 
 
 LASTING = frozenset({"shared_track_circuit", "collision", "train_rear", "point_moved_under_train",
-                     "point_moved_locked"})  # fmt: skip
+                     "point_moved_locked", "through_point_not_lying", "opposing_departures",
+                     "opposing_trains"})  # fmt: skip
 """Violations that are states (they hold look after look until something changes), as opposed
 to moments (a head running past a danger point, onto a point, a point trailed)."""
 
