@@ -13,8 +13,12 @@ The rules, and why they keep at most one holder:
 - The holder gives the permission only when the neighbour asks (PRQ) and the whole interval is
   clear, no departure route of its own into it is locked and no train of its own is in transit;
   it stops holding in the same step that makes its PHI 0, so it is never a holder after saying it
-  is not. A PHI going 1 -> 0 on a live link is only ever a gift: the asker (or an end whose ask
-  timed out while the gift was on its way) becomes the holder when it reads that, never before.
+  is not. A PHI going 1 -> 0 on a live link is a gift only as the answer to an ask: the asker (or
+  an end whose ask timed out at most `ASK_TIMEOUT_S` before, the gift on its way) becomes the
+  holder when it reads that, never before, and only while the neighbour says no departure route
+  of its own is locked and its half is clear (as a giver must). Any other PHI 1 -> 0 is a
+  neighbour that forgot the permission (an IXL restarted and back before this end saw its link
+  fail): nobody is taken to hold it, and the neighbour's codes are read again as a resync.
 - A link in communication error changes nothing hands: the holder keeps holding (and departing),
   the other end may not depart. What the neighbour said before the outage is forgotten, so no
   resync is read as a gift. An ask in flight fails.
@@ -85,6 +89,7 @@ class IntervalEnd:
         self.nobody = False  # resync found neither end holding
         self.peer_held = False  # the neighbour held it when last heard (kept over an outage)
         self.ask_until: float | None = None
+        self.ask_ended: float | None = None  # when the last ask failed (a gift may still come)
         self.running_out = False  # boundary: a departure of ours still in the interval
         self._notes: list[str] = []
         if self.linked:
@@ -135,7 +140,7 @@ class IntervalEnd:
         self.synced = False
         self.nobody = False
         if not up and self.holding is Holding.ASKING:
-            self._end_ask("the neighbour link failed")
+            self._end_ask("the neighbour link failed", now)
 
     def receive(self, function: F, state: int, now: float) -> None:
         """One of the neighbour's codes of this interval (PHI, PRQ, DRL, TTC)."""
@@ -149,10 +154,13 @@ class IntervalEnd:
             return
         if function is F.PHI:
             if before == 1 and state == 0 and self.holding is not Holding.HOLDER:
-                self.holding = Holding.HOLDER
-                self.ask_until = None
-                self.peer_held = self.nobody = False
-                self._notes.append("permission received from the neighbour")
+                if self._answers_an_ask(now):
+                    self.holding = Holding.HOLDER
+                    self.ask_until = self.ask_ended = None
+                    self.peer_held = self.nobody = False
+                    self._notes.append("permission received from the neighbour")
+                else:
+                    self._forgotten(now)
             elif state == 1:
                 self.peer_held, self.nobody = True, False
 
@@ -177,7 +185,7 @@ class IntervalEnd:
         elif self.linked:
             if self.holding is Holding.ASKING and self.ask_until is not None:
                 if now >= self.ask_until:
-                    self._end_ask(f"no permission within {ASK_TIMEOUT_S:g} s")
+                    self._end_ask(f"no permission within {ASK_TIMEOUT_S:g} s", now)
             free = facts.clear and not facts.departure_locked and not facts.in_transit
             if self.holds and self.synced and self.link_up and self.peer.get(F.PRQ) == 1 and free:
                 self.holding = Holding.NOT_HOLDER  # before the PHI 0 that says so goes out
@@ -230,7 +238,30 @@ class IntervalEnd:
             self.nobody = True
             self._notes.append("link resynced: neither end holds the permission")
 
-    def _end_ask(self, why: str) -> None:
+    def _end_ask(self, why: str, now: float) -> None:
         self.holding = Holding.NOT_HOLDER
         self.ask_until = None
+        self.ask_ended = now
         self._notes.append(f"ask failed: {why}")
+
+    def _answers_an_ask(self, now: float) -> bool:
+        """A PHI 1 -> 0 read now is the neighbour giving the permission: this end asked (or its
+        ask failed so lately that the gift was on its way), and the neighbour says what a giver
+        says -- no departure route of its own into the interval locked, its half clear."""
+        asked = self.holding is Holding.ASKING or (
+            self.ask_ended is not None and now - self.ask_ended <= ASK_TIMEOUT_S
+        )
+        quiet = self.peer.get(F.DRL) == 0 and (not self.peer_has_ttc or self.peer.get(F.TTC) == 0)
+        return asked and quiet
+
+    def _forgotten(self, now: float) -> None:
+        """The neighbour stopped holding without giving (a restart it came back from before
+        this end saw its link fail): nobody holds it as far as this end knows, and the
+        neighbour's codes are read again, as a resync, before anything is decided."""
+        if self.holding is Holding.ASKING:
+            self._end_ask("the neighbour let the permission go without giving it", now)
+        self.holding = Holding.NOT_HOLDER
+        self.peer = {F.PHI: 0}
+        self.synced = self.peer_held = self.nobody = False
+        self._notes.append("the neighbour let the permission go without giving it (restarted?): "
+                           "its whole state is read again")  # fmt: skip

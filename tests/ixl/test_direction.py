@@ -120,3 +120,32 @@ def test_a_boundary_interval_runs_our_way_only_while_our_departure_runs_out() ->
     assert edge.direction == "up"  # the train is still in it
     edge.step(CLEAR, 2.0)
     assert edge.direction == "down"
+
+
+def test_a_neighbour_that_lets_go_unasked_forgot_it_and_is_read_again() -> None:
+    """A holder restarted and back before this end saw its link fail says PHI 0: no gift (the
+    search's head-on in 2022). Nobody holds it until the neighbour's whole state is read again
+    and the interval is clear; then the default end takes it."""
+    end = synced(18, phi=1)  # 20 holds 1820 against the default
+    end.step(CLEAR, 0.0)
+    end.receive(F.PHI, 0, 1.0)  # unasked
+    assert not end.holds and end.direction is None and not end.synced
+    assert "without giving it" in " ".join(end.step(CLEAR, 1.0))
+    assert not end.holds  # not before the resync
+    for f, v in ((F.PRQ, 0), (F.DRL, 0), (F.TTC, 1)):  # the rest of its state: its half occupied
+        end.receive(f, v, 1.1)
+    assert end.synced
+    end.step(OCCUPIED, 1.2)
+    assert not end.holds  # a train may be in the interval: nobody departs into it
+    end.step(CLEAR, 2.0)
+    assert end.holds
+
+
+def test_a_gift_while_asking_needs_what_a_giver_says() -> None:
+    """Asking when the holder restarts: its PHI 0 comes with its departure still locked (as last
+    heard), so it is no gift."""
+    end = synced(18, phi=1)
+    end.receive(F.DRL, 1, 0.5)  # 20 locked a departure into 1820
+    assert end.ask(1.0) and end.holding is Holding.ASKING
+    end.receive(F.PHI, 0, 1.5)
+    assert not end.holds and end.holding is Holding.NOT_HOLDER

@@ -232,9 +232,10 @@ class SystemMachine(SearchMachine):
     def track_circuit_failed_occupied(self, tc: str, run_s: float) -> None:
         self.step({"do": "tc_fault", "tc": tc, "run_s": run_s})
 
-    # ATCs only: an IXL restarted while holding an interval's permission hands it to its
-    # neighbour (a known open defect, `test_known_open_a_restarted_holder_is_read_as_a_gift`)
-    @rule(device=st.sampled_from([f"atc{n}" for n in STATIONS]), run_s=st.sampled_from(RUN_S))
+    # IXLs and ATCs: an IXL restarted while holding an interval's permission is not read by its
+    # neighbour as giving it (`test_a_restarted_holder_is_not_read_as_a_gift`)
+    @rule(device=st.sampled_from([f"{k}{n}" for k in ("ixl", "atc") for n in STATIONS]),
+          run_s=st.sampled_from(RUN_S))  # fmt: skip
     def restart(self, device: str, run_s: float) -> None:
         self.step({"do": "restart", "device": device, "run_s": run_s})
 
@@ -347,15 +348,16 @@ def test_a_down_departure_no_longer_codes_the_up_train_standing_on_its_approach(
     assert [str(v) for r in runs for v in r.violations] == []
 
 
-@pytest.mark.xfail(strict=True, reason="known open defect: docs/system_safety.md")
-def test_known_open_a_restarted_holder_is_read_as_a_gift() -> None:
+def test_a_restarted_holder_is_not_read_as_a_gift() -> None:
     """What the search found (seed 40000, 51 steps; cut by hand to its 3 steps that matter):
     train 2002 ran down into interval 2022 from station 22, which held its permission; ixl22
     restarted, and came back before ixl20 saw the link go into communication error. The new ixl22 knows no
     permission and resyncs saying PHI 0; ixl20 had last read PHI 1, and reads any PHI 1 -> 0 on
     a live link as a gift (`IntervalEnd.receive`): it took the permission, locked departure
-    11-91 and sent train 2001 up into the interval against 2002 (invariant 6). Passes -- and
-    this xfail fails -- once a neighbour's restart is not read as a gift."""
+    11-91 and sent train 2001 up into the interval against 2002 (invariant 6). A PHI 1 -> 0 is
+    now a gift only as the answer to an ask, with the giver's departure and half clear; any
+    other is a neighbour that forgot, read again as a resync, and nobody holds the permission
+    until the interval is clear."""
     replay = load_replay(
         Path(__file__).parent / "replays" / "a_restarted_holder_read_as_a_gift.json"
     )
