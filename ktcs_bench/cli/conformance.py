@@ -19,6 +19,8 @@ frames, so it judges the device, not the bench's own link code.
 
   --role atc|trackside --target SERIAL     the suite plays the IXL on the device's Type I line
   --role ixl --target SERIAL [--peer io]   the suite plays the ATC (or trackside I/O)
+  --role ixl --target SERIAL --peer east   the suite plays the neighbouring IXL on the IXL's
+                                           interval link (east or west, SPEC §6.6)
   --role ixl --target listen://HOST:PORT   the suite plays the CTC; point the IXL at HOST:PORT
   --role ctc --target tcp://HOST:PORT      the suite plays an IXL client of the CTC
 
@@ -61,9 +63,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--station", type=positive(int), help="station number (sizes the chart; ctc: our IDENT)"
     )
-    p.add_argument("--peer", choices=kinds.TYPE1_ROLES, default=kinds.ATC,
+    p.add_argument("--peer", choices=(*kinds.TYPE1_ROLES, *kinds.NEIGHBOUR_ROLES),
+                   default=kinds.ATC,
                    type=lambda word: kinds.link_role(word) or word,  # trackside: its role, io
-                   help="--role ixl on a serial line: which of its links this is")  # fmt: skip
+                   help="--role ixl on a serial line: which of its links this is (atc, io, or "
+                   "west/east: its interval link to a neighbouring IXL, the suite playing that "
+                   "IXL)")  # fmt: skip
     p.add_argument("--codes", type=positive(int), help="codes in the device's transmit chart (else from "
                    "--station and the lab's charts)")  # fmt: skip
     p.add_argument("--lab", help="lab file for the charts (default: the reference lab)")

@@ -99,3 +99,24 @@ def test_trackside_subset_and_exit_codes(spawn: Callable[..., Proc], tmp_path: P
     # peer/I-O failure: nothing at that serial path
     missing = cli("conformance", "--role", "atc", "--target", str(tmp_path / "no-such-tty"))
     assert missing.returncode == 3, missing.stdout + missing.stderr
+
+
+@pytest.mark.parametrize(("station", "peer"), [(20, "west"), (18, "east")])
+def test_the_suite_plays_the_neighbouring_ixl_on_an_interval_link(
+    spawn: Callable[..., Proc], station: int, peer: str
+) -> None:
+    """SPEC §6.6: a real IXL's interval link is tested like its ATC link -- the suite plays the
+    neighbouring IXL, every Type I case, the IXL's ALL_INFO sized by its chart to that side."""
+    from ktcs_bench.station.loader import load_line
+    from ktcs_bench.station_codes.stations import station_chart
+
+    ixl = spawn("emulator", "ixl", "--station", str(station), "--link", f"{peer}=pty",
+                "--unpaced")  # fmt: skip
+    run = cli("conformance", "--role", "ixl", "--peer", peer, "--target", ixl.ready["ptys"][peer],
+              "--station", str(station), "--unpaced", "--json")  # fmt: skip
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr
+    report = json.loads(run.stdout)
+    assert report["summary"]["pass"] == len(TYPE1_CASES)
+    codes = len(station_chart(load_line().view(station), f"ixl_to_{peer}").codes)
+    request_all = next(c for c in report["cases"] if c["name"] == "request-all")
+    assert any(f"{codes} statuses" in c for c in request_all["checks"]), request_all["checks"]
