@@ -309,7 +309,6 @@ def test_a_dispatch_on_a_stop_code_does_not_move_the_train() -> None:
         ep.run_to(clock.now, 900.0)  # behind its front
 
 
-
 def test_a_finished_train_cycles_once_a_second_and_an_order_wakes_it_at_once() -> None:
     """Its service over, standing at its last stop, the train cycles once a second (a design
     decision: nothing moves it until an order does); an order brings back the 100 ms cycle at
