@@ -28,6 +28,11 @@ what it is doing (`state`), its arrivals (stop error on the true position) and d
 The rails move it by the point blades (SPEC §6.7) and say so: derailed, it reads no code any more
 (stop here: it comes to a stand and stays); misrouted (off its booked track), it runs on the codes
 of the track it is actually on until it stands, and is held there.
+
+A train whose service is over (finished at its last stop, standing, no order or EB pending:
+`TrainEndpoint.at_rest`) cycles once a second, not every 100 ms -- a design decision (a lab's
+finished trains cost little); an order wakes it at once. Its status's `time_s` is the device's
+clock, not its last cycle's.
 """
 
 from __future__ import annotations

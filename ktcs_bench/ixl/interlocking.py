@@ -180,6 +180,7 @@ class Interlocking:
         if startup_locking:
             for ps in self.points.values():
                 ps.demanded = None
+        self._names = _OutputNames(self)
         self._evaluate(0.0)
         self._sent = {k: self.full_state(k) for k in self.outputs}
         self._events.clear()
@@ -854,78 +855,81 @@ class Interlocking:
     # ------------------------------------------------------------------ output states
 
     def _ctc_state(self) -> dict[str, int]:
-        st = self.st
+        names = self._names
+        loc, ctc, cmr = names.mode
         out = {
-            n.loc(st): int(self.modes.mode is Mode.LOCAL),
-            n.ctc(st): int(self.modes.mode is Mode.CENTER),
-            n.cmr(st): int(self.modes.requested),
+            loc: int(self.modes.mode is Mode.LOCAL),
+            ctc: int(self.modes.mode is Mode.CENTER),
+            cmr: int(self.modes.requested),
         }
         locked = {p for rs in self.routes.values() for p in rs.held_points}
         locked |= self.startup_held & set(self.points)
-        for name in self.points:
+        for name, (sni, srn, sri, snr, sli, sfi) in names.ctc_points.items():
             det = self.detection(name)
-            out[n.sni(st, name)] = int(det == "normal")
-            out[n.srn(st, name)] = int(det == "to_normal")
-            out[n.sri(st, name)] = int(det == "reverse")
-            out[n.snr(st, name)] = int(det == "to_reverse")
-            out[n.sli(st, name)] = int(name in locked)
-            out[n.sfi(st, name)] = int(det == "none")
-        for name, sig in self.signals.items():
-            shown = sig.shown() if self.link_up[kinds.IO] else "R"
-            for a in sig.signal.aspects:
-                out[n.asp(st, name, a)] = int(shown == a)
-            out[n.ssi(st, name)] = int(sig.stop_held)
-            out[n.lfi(st, name)] = int(sig.lamp_failed)
+            out[sni] = int(det == "normal")
+            out[srn] = int(det == "to_normal")
+            out[sri] = int(det == "reverse")
+            out[snr] = int(det == "to_reverse")
+            out[sli] = int(name in locked)
+            out[sfi] = int(det == "none")
+        io_up = self.link_up[kinds.IO]
+        for sig, aspects, ssi, lfi in names.ctc_signals:
+            shown = sig.shown() if io_up else "R"
+            for a, asp in aspects:
+                out[asp] = int(shown == a)
+            out[ssi] = int(sig.stop_held)
+            out[lfi] = int(sig.lamp_failed)
         for tc in self.tc_names:
             out[tc] = int(self.occupied(tc))
-        for rname, rs in self.routes.items():
-            out[n.rsi(st, rname)] = int(rs.status is not RouteStatus.IDLE)
-            out[n.ali(st, rname)] = int(rs.release_at is not None)
+        for rs, rsi, ali in names.ctc_routes:
+            out[rsi] = int(rs.status is not RouteStatus.IDLE)
+            out[ali] = int(rs.release_at is not None)
         self._directions(out)
-        for iv, end in self.ends.items():
-            out[n.phi(iv)] = end.phi
-            out[n.prq(iv)] = end.prq
+        for end, phi, prq in names.permissions:
+            out[phi] = end.phi
+            out[prq] = end.prq
         return out
 
     def _directions(self, out: dict[str, int]) -> None:
         """TDU/TDD follow the permission: the holder's departure direction; both 0 while
         nobody holds it, as far as this IXL knows."""
-        for iv, end in self.ends.items():
+        for end, tdu, tdd in self._names.directions:
             d = end.direction
-            out[n.tdu(iv)] = int(d == "up")
-            out[n.tdd(iv)] = int(d == "down")
+            out[tdu] = int(d == "up")
+            out[tdd] = int(d == "down")
 
     def _neighbour_state(self, interval: str) -> dict[str, int]:
         """What this IXL tells the neighbour of their interval (its IXL->ROLE chart)."""
         end, iv = self.ends[interval], self.intervals[interval]
-        out = {n.phi(interval): end.phi, n.prq(interval): end.prq}
-        out[n.drl(interval)] = int(self._facts(iv).departure_locked)
+        phi, prq, drl = self._names.neighbour[interval]
+        out = {phi: end.phi, prq: end.prq}
+        out[drl] = int(self._facts(iv).departure_locked)
         for ttc in self.codes.totalisers:
             if ttc.interval == interval:
                 out[ttc.name] = int(any(self.occupied(tc) for tc in ttc.track_circuits))
         return out
 
     def _atc_state(self) -> dict[str, int]:
-        st = self.st
-        out = {n.rli(st, r): int(rs.whole) for r, rs in self.routes.items()}
-        for name in self.points:
+        names = self._names
+        out = {rli: int(rs.whole) for rs, rli in names.atc_routes}
+        for name, (sni, sri) in names.atc_points.items():
             det = self.detection(name)
-            out[n.sni(st, name)] = int(det == "normal")
-            out[n.sri(st, name)] = int(det == "reverse")
-        for name, sig in self.signals.items():
-            out[n.sgp(st, name)] = int(sig.proceed and self.link_up[kinds.IO])
+            out[sni] = int(det == "normal")
+            out[sri] = int(det == "reverse")
+        proceed_ok = self.link_up[kinds.IO]
+        for sig, sgp in names.atc_signals:
+            out[sgp] = int(sig.proceed and proceed_ok)
         self._directions(out)
         return out
 
     def _io_state(self) -> dict[str, int]:
-        st = self.st
         out: dict[str, int] = {}
-        for name, ps in self.points.items():
-            out[n.pnc(st, name)] = int(ps.demanded == "normal")
-            out[n.prc(st, name)] = int(ps.demanded == "reverse")
-        for name, sig in self.signals.items():
-            for a in sig.signal.aspects:
-                out[n.sgc(st, name, a)] = int(sig.commanded == a)
+        for ps, pnc, prc in self._names.io_points:
+            out[pnc] = int(ps.demanded == "normal")
+            out[prc] = int(ps.demanded == "reverse")
+        for sig, aspects in self._names.io_signals:
+            for a, sgc in aspects:
+                out[sgc] = int(sig.commanded == a)
         return out
 
     def _event(self, now: float, kind: str, text: str) -> None:
@@ -934,3 +938,38 @@ class Interlocking:
         self.log.append(ev)
         if len(self.log) > self._log_limit:
             del self.log[: len(self.log) - self._log_limit]
+
+
+class _OutputNames:
+    """The code names of an IXL's output states, formatted once with the objects they tell of
+    (the outputs are built at every evaluation: formatting each name there cost more than the
+    interlocking's logic). In the order the states list them."""
+
+    def __init__(self, ixl: Interlocking) -> None:
+        st = ixl.st
+        self.mode = (n.loc(st), n.ctc(st), n.cmr(st))
+        self.ctc_points = {
+            p: (n.sni(st, p), n.srn(st, p), n.sri(st, p), n.snr(st, p), n.sli(st, p), n.sfi(st, p))
+            for p in ixl.points
+        }
+        self.ctc_signals = [
+            (
+                sig,
+                tuple((a, n.asp(st, name, a)) for a in sig.signal.aspects),
+                n.ssi(st, name),
+                n.lfi(st, name),
+            )
+            for name, sig in ixl.signals.items()
+        ]
+        self.ctc_routes = [(rs, n.rsi(st, r), n.ali(st, r)) for r, rs in ixl.routes.items()]
+        self.permissions = [(end, n.phi(iv), n.prq(iv)) for iv, end in ixl.ends.items()]
+        self.directions = [(end, n.tdu(iv), n.tdd(iv)) for iv, end in ixl.ends.items()]
+        self.neighbour = {iv: (n.phi(iv), n.prq(iv), n.drl(iv)) for iv in ixl.neighbours.values()}
+        self.atc_routes = [(rs, n.rli(st, r)) for r, rs in ixl.routes.items()]
+        self.atc_points = {p: (n.sni(st, p), n.sri(st, p)) for p in ixl.points}
+        self.atc_signals = [(sig, n.sgp(st, name)) for name, sig in ixl.signals.items()]
+        self.io_points = [(ps, n.pnc(st, p), n.prc(st, p)) for p, ps in ixl.points.items()]
+        self.io_signals = [
+            (sig, tuple((a, n.sgc(st, name, a)) for a in sig.signal.aspects))
+            for name, sig in ixl.signals.items()
+        ]

@@ -75,6 +75,8 @@ from ktcs_bench.train.t2t import T2TMessage, leader_of, target_from_leader
 from ktcs_bench.train.units import kmh
 
 CYCLE = 0.1
+# a train at rest (`TrainEndpoint.at_rest`) cycles once every this many cycles (once a second)
+REST_CYCLES = 10
 """The onboard cycle, s (seed 000: 100 ms)."""
 MAX_MA = 3000.0
 """cMAX_MA: the longest authority a train asks for, m."""
@@ -290,6 +292,8 @@ class TrainEndpoint:
         self.sense = sense
         self.first, self.cycle = first, cycle
         self.cycles = 0
+        self._slot = -1  # the cycle slot (first + slot * cycle) the last cycle ran in
+        self._rested = False  # the last cycle left it at rest
         p = cfg.params
         self.dynamics = TrainDynamics(p, TrainState(position=cfg.start))
         self.estimator = PositionEstimator(
@@ -353,15 +357,45 @@ class TrainEndpoint:
     # ------------------------------------------------------------------ the cycle
 
     def next_deadline(self) -> float:
-        """When the next cycle is due."""
-        return self.first + self.cycles * self.cycle
+        """When the next cycle is due: the next slot of `cycle`, REST_CYCLES slots on at rest."""
+        return self.first + (self._slot + (REST_CYCLES if self.at_rest else 1)) * self.cycle
 
     def handle_timer(self, now: float) -> CycleOutputs | None:
-        """Run the cycle that is due, with the inputs `sense(now)` reads (None: none was due)."""
-        if now < self.first + self.cycles * self.cycle:
+        """Run the cycle that is due, with the inputs `sense(now)` reads (None: none was due).
+        Its plant steps over the slots since the last cycle; after an order woke a train at rest
+        between its slots, it cycles at once and then on the slots again."""
+        step = REST_CYCLES if self.at_rest else 1
+        due = self._slot + step
+        if now < self.first + due * self.cycle:
             return None
+        if step == 1 and self._rested:
+            # woken from rest between its slots: the slot it is in, the next one after `now`
+            due = max(due, int((now - self.first) / self.cycle + 1e-9))
+        slots, self._slot = due - self._slot if self.cycles > 0 else 1, due
         self.cycles += 1
-        return self.step(now, self.sense(now), self.cycle)
+        out = self.step(now, self.sense(now), slots * self.cycle)
+        self._rested = self.at_rest
+        return out
+
+    @property
+    def at_rest(self) -> bool:
+        """Its service is over and it stands on the ATO's service brake, no order and no EB
+        pending: nothing moves it until an order does (which wakes it: `next_deadline` is then
+        the next slot), so it cycles once a second instead of every `cycle` (a design decision:
+        a lab's finished trains cost little). Never before its first cycle."""
+        stations = self.line.stations
+        return (
+            self.cycles > 0
+            and self.cfg.ato
+            and bool(stations)
+            and self._next_station >= len(stations)
+            and not self.cfg.leaves_line
+            and self.dynamics.state.speed <= 0.0
+            and self._hold is None
+            and self._stop_at is None
+            and not self.supervisor.eb_latched
+            and self.ato_sm.state is AtoState.ACTIVE_OPERATING
+        )
 
     def step(self, now: float, inputs: CycleInputs, dt: float = CYCLE) -> CycleOutputs:
         cfg, p = self.cfg, self.cfg.params

@@ -307,3 +307,37 @@ def test_a_dispatch_on_a_stop_code_does_not_move_the_train() -> None:
     assert ep.service_state(clock.now) == "held"
     with pytest.raises(UsageError, match="cannot run to 900 m"):
         ep.run_to(clock.now, 900.0)  # behind its front
+
+
+def test_a_finished_train_cycles_once_a_second_and_an_order_wakes_it_at_once() -> None:
+    """Its service over, standing at its last stop, the train cycles once a second (a design
+    decision: nothing moves it until an order does); an order brings back the 100 ms cycle at
+    once, then on the cycle's slots."""
+    ep, clock, states, _, _ = start_train("1001", {"18": 100.0, "20": 330.0})
+    cycles: list[float] = []
+    sense = ep.sense
+
+    def sensed(now: float) -> CycleInputs:
+        cycles.append(now)
+        return sense(now)
+
+    ep.sense = sensed
+    clock.run_until(900.0)
+    assert states[-1][1] == "finished" and ep.at_rest
+    rest = [t for t in cycles if t > states[-1][0] + 2.0]
+    assert len(rest) > 10
+    assert {round(b - a, 6) for a, b in zip(rest, rest[1:], strict=False)} == {1.0}
+    position = ep.state.position
+    now = rest[-1] + 1.25  # between its slots, after its next cycle
+    clock.run_until(now)
+    last = cycles[-1]
+    assert last == pytest.approx(rest[-1] + 1.0)
+    ep.hold(now)
+    assert not ep.at_rest
+    assert ep.next_deadline() <= now  # due at once
+    clock.run_until(now + 1.0)
+    woken = [t for t in cycles if t >= now]
+    assert woken[0] == pytest.approx(now)
+    assert {round(b - a, 6) for a, b in zip(woken[1:], woken[2:], strict=False)} == {0.1}
+    assert woken[1] == pytest.approx(last + 0.3)  # back on its slots
+    assert ep.state.position == position  # it stood throughout
