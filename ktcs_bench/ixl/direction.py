@@ -18,7 +18,8 @@ The rules, and why they keep at most one holder:
   holder when it reads that, never before, and only while the neighbour says no departure route
   of its own is locked and its half is clear (as a giver must). Any other PHI 1 -> 0 is a
   neighbour that forgot the permission (an IXL restarted and back before this end saw its link
-  fail): nobody is taken to hold it, and the neighbour's codes are read again as a resync.
+  fail): nobody is taken to hold it, as after a resync that found neither end holding. The
+  decision is made at the next evaluation, on everything the neighbour said by then.
 - A link in communication error changes nothing hands: the holder keeps holding (and departing),
   the other end may not depart. What the neighbour said before the outage is forgotten, so no
   resync is read as a gift. An ask in flight fails.
@@ -90,6 +91,7 @@ class IntervalEnd:
         self.peer_held = False  # the neighbour held it when last heard (kept over an outage)
         self.ask_until: float | None = None
         self.ask_ended: float | None = None  # when the last ask failed (a gift may still come)
+        self.dropped: float | None = None  # when the neighbour's PHI went 1 -> 0, undecided
         self.running_out = False  # boundary: a departure of ours still in the interval
         self._notes: list[str] = []
         if self.linked:
@@ -154,14 +156,9 @@ class IntervalEnd:
             return
         if function is F.PHI:
             if before == 1 and state == 0 and self.holding is not Holding.HOLDER:
-                if self._answers_an_ask(now):
-                    self.holding = Holding.HOLDER
-                    self.ask_until = self.ask_ended = None
-                    self.peer_held = self.nobody = False
-                    self._notes.append("permission received from the neighbour")
-                else:
-                    self._forgotten(now)
+                self.dropped = now  # a gift or not: decided at the next step, on all it said
             elif state == 1:
+                self.dropped = None
                 self.peer_held, self.nobody = True, False
 
     def ask(self, now: float) -> bool:
@@ -183,6 +180,8 @@ class IntervalEnd:
         if self.boundary:
             self._boundary(facts)
         elif self.linked:
+            if self.dropped is not None:
+                self._gift_or_forgotten(facts, self.dropped)
             if self.holding is Holding.ASKING and self.ask_until is not None:
                 if now >= self.ask_until:
                     self._end_ask(f"no permission within {ASK_TIMEOUT_S:g} s", now)
@@ -254,14 +253,30 @@ class IntervalEnd:
         quiet = self.peer.get(F.DRL) == 0 and (not self.peer_has_ttc or self.peer.get(F.TTC) == 0)
         return asked and quiet
 
+    def _gift_or_forgotten(self, facts: Facts, dropped: float) -> None:
+        """The neighbour's PHI went 1 -> 0 at `dropped`: read with everything else it said
+        then (its DRL and TTC may come in the same message, after it), and this end's own
+        picture of the interval, it is a gift or a neighbour that forgot the permission."""
+        self.dropped = None
+        if self.holding is Holding.HOLDER:
+            return
+        if self._answers_an_ask(dropped) and facts.clear and not facts.in_transit:
+            self.holding = Holding.HOLDER
+            self.ask_until = self.ask_ended = None
+            self.peer_held = self.nobody = False
+            self._notes.append("permission received from the neighbour")
+        else:
+            self._forgotten(dropped)
+
     def _forgotten(self, now: float) -> None:
         """The neighbour stopped holding without giving (a restart it came back from before
-        this end saw its link fail): nobody holds it as far as this end knows, and the
-        neighbour's codes are read again, as a resync, before anything is decided."""
+        this end saw its link fail): nobody holds it as far as this end knows, as after a
+        resync that found neither end holding -- the default end takes it once the whole
+        interval is clear."""
         if self.holding is Holding.ASKING:
             self._end_ask("the neighbour let the permission go without giving it", now)
         self.holding = Holding.NOT_HOLDER
-        self.peer = {F.PHI: 0}
-        self.synced = self.peer_held = self.nobody = False
+        self.peer_held = False
+        self.nobody = True
         self._notes.append("the neighbour let the permission go without giving it (restarted?): "
-                           "its whole state is read again")  # fmt: skip
+                           "nobody holds it")  # fmt: skip

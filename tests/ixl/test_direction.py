@@ -71,6 +71,8 @@ def test_the_asker_takes_it_when_it_reads_the_gift_and_not_before() -> None:
     asker.step(CLEAR, 6.0)
     assert asker.holding is Holding.ASKING
     asker.receive(F.PHI, 0, 6.5)  # the holder's PHI goes 1 -> 0: given
+    assert not asker.holds  # read with the rest of its message, at the evaluation
+    asker.step(CLEAR, 6.5)
     assert asker.holds and asker.prq == 0 and asker.direction == "down"
     assert asker.next_deadline() is None
 
@@ -85,6 +87,7 @@ def test_an_ask_without_answer_fails_after_its_time() -> None:
     ]
     assert asker.holding is Holding.NOT_HOLDER and asker.prq == 0
     asker.receive(F.PHI, 0, 4.0)  # the gift was on its way: still a gift
+    asker.step(CLEAR, 4.0)
     assert asker.holds
 
 
@@ -122,30 +125,37 @@ def test_a_boundary_interval_runs_our_way_only_while_our_departure_runs_out() ->
     assert edge.direction == "down"
 
 
-def test_a_neighbour_that_lets_go_unasked_forgot_it_and_is_read_again() -> None:
+def test_a_neighbour_that_lets_go_unasked_forgot_it() -> None:
     """A holder restarted and back before this end saw its link fail says PHI 0: no gift (the
-    search's head-on in 2022). Nobody holds it until the neighbour's whole state is read again
-    and the interval is clear; then the default end takes it."""
+    search's head-on in 2022). Nobody holds it until the interval is clear; then the default
+    end takes it."""
     end = synced(18, phi=1)  # 20 holds 1820 against the default
     end.step(CLEAR, 0.0)
     end.receive(F.PHI, 0, 1.0)  # unasked
-    assert not end.holds and end.direction is None and not end.synced
-    assert "without giving it" in " ".join(end.step(CLEAR, 1.0))
-    assert not end.holds  # not before the resync
-    for f, v in ((F.PRQ, 0), (F.DRL, 0), (F.TTC, 1)):  # the rest of its state: its half occupied
-        end.receive(f, v, 1.1)
-    assert end.synced
-    end.step(OCCUPIED, 1.2)
-    assert not end.holds  # a train may be in the interval: nobody departs into it
+    end.receive(F.TTC, 1, 1.0)  # in the same message: its half occupied
+    assert "without giving it" in " ".join(end.step(OCCUPIED, 1.0))
+    assert not end.holds and end.direction is None  # a train may be in it: nobody departs
     end.step(CLEAR, 2.0)
+    assert end.holds
+
+
+def test_a_gift_is_read_with_the_rest_of_its_message() -> None:
+    """The giver's PHI 0 and its DRL 0 come in one message, PHI first: still a gift."""
+    end = synced(20, phi=1)
+    end.receive(F.DRL, 1, 0.2)
+    assert end.ask(0.5)
+    end.receive(F.PHI, 0, 1.0)
+    end.receive(F.DRL, 0, 1.0)
+    end.step(CLEAR, 1.0)
     assert end.holds
 
 
 def test_a_gift_while_asking_needs_what_a_giver_says() -> None:
     """Asking when the holder restarts: its PHI 0 comes with its departure still locked (as last
     heard), so it is no gift."""
-    end = synced(18, phi=1)
-    end.receive(F.DRL, 1, 0.5)  # 20 locked a departure into 1820
+    end = synced(20, phi=1)  # not the default end of 1820: it does not take what nobody holds
+    end.receive(F.DRL, 1, 0.5)  # 18 locked a departure into 1820
     assert end.ask(1.0) and end.holding is Holding.ASKING
     end.receive(F.PHI, 0, 1.5)
+    end.step(CLEAR, 1.5)
     assert not end.holds and end.holding is Holding.NOT_HOLDER
