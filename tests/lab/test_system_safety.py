@@ -385,7 +385,23 @@ def test_known_open_a_point_thrown_under_a_train_after_ixl_restarts() -> None:
 DEPARTURES = [r for r in ROUTES if r[3] in ("91", "92")]
 
 
-class DepartureMachine(SearchMachine):
+class NarrowSearch(SearchMachine):
+    """The search's operator narrowed to setting routes (each machine says which) and waiting,
+    for the searches shown able to fail."""
+
+    SAVE = False
+
+    def set_route(self, route: tuple[int, str, str, str], run_s: float) -> None:
+        number, _, entry, exit_ = route
+        self.step({"do": "route", "station": number, "entry": entry, "exit": exit_,
+                   "action": "set", "run_s": run_s})  # fmt: skip
+
+    @rule(run_s=st.sampled_from((5.0, 10.0, 20.0)))
+    def wait(self, run_s: float) -> None:
+        self.step({"do": "wait", "run_s": run_s})
+
+
+class DepartureMachine(NarrowSearch):
     """The search's operator narrowed to departure routes and waits (ARS on, the trains running
     their timetable): with the IXLs' direction check switched off, a departure against the
     interval's permission is locked and the search must see a head-on."""
@@ -395,13 +411,7 @@ class DepartureMachine(SearchMachine):
 
     @rule(route=st.sampled_from(DEPARTURES), run_s=st.sampled_from(RUN_S))
     def departure(self, route: tuple[int, str, str, str], run_s: float) -> None:
-        number, _, entry, exit_ = route
-        self.step({"do": "route", "station": number, "entry": entry, "exit": exit_,
-                   "action": "set", "run_s": run_s})  # fmt: skip
-
-    @rule(run_s=st.sampled_from((5.0, 10.0, 20.0)))
-    def wait(self, run_s: float) -> None:
-        self.step({"do": "wait", "run_s": run_s})
+        self.set_route(route, run_s)
 
 
 def _search_fails(machine: type[SearchMachine], steps: int, per_example: int = 40) -> str:
@@ -438,7 +448,7 @@ def test_the_search_finds_a_head_on_when_the_direction_check_is_off(
     assert COUNT["steps"] <= 200, COUNT
 
 
-class RouteMachine(SearchMachine):
+class RouteMachine(NarrowSearch):
     """The search's operator narrowed to setting any route and waiting (ARS on): with trains
     moved along their booked track instead of by the blades, a route into a loop sends a train
     booked on the main track through the point lying for the loop, and the search must see it."""
@@ -448,13 +458,7 @@ class RouteMachine(SearchMachine):
 
     @rule(route=st.sampled_from(ROUTES), run_s=st.sampled_from(RUN_S))
     def route(self, route: tuple[int, str, str, str], run_s: float) -> None:
-        number, _, entry, exit_ = route
-        self.step({"do": "route", "station": number, "entry": entry, "exit": exit_,
-                   "action": "set", "run_s": run_s})  # fmt: skip
-
-    @rule(run_s=st.sampled_from((5.0, 10.0, 20.0)))
-    def wait(self, run_s: float) -> None:
-        self.step({"do": "wait", "run_s": run_s})
+        self.set_route(route, run_s)
 
 
 def test_the_search_finds_a_train_through_a_point_not_lying_for_it_when_trains_ignore_the_blades(
