@@ -33,10 +33,14 @@ on one of them, braking on the most restrictive code. So it starts with every tr
 point of its station locked (no route over them, no point moved): when its first live occupancy
 shows the station and its plain line clear, the lock goes at once; otherwise it goes after the
 longest approach-locking time of the station's routes, as a cancelled route's would -- time for
-any train to have stopped. Nor does it demand any point position until it has read where the
-point lies (it then demands that one): a restarted interlocking that demanded its default would
-throw every reverse point back to normal, under a train or a locked route. A cold start with the
-railway at rest (a lab's start: the trains stand where the lab puts them) has neither.
+any train to have stopped. Nor does it demand any point position of its own accord: each point's
+machine stays where its blades lie (PNC and PRC both off) until a route or an individual control
+demands it, each with its own checks (not locked, its track circuits clear). A restarted
+interlocking that demanded its default would throw every reverse point back to normal; one that
+demanded the position it reads would throw the blades over whenever detection is wrong (the
+wrong-side `crossed` fault: blades lying normal reported reverse) -- either under a train standing
+on the point or a route its predecessor had locked. A cold start with the railway at rest (a
+lab's start: the trains stand where the lab puts them) has neither.
 """
 
 from __future__ import annotations
@@ -619,10 +623,6 @@ class Interlocking:
         if self.modes.handle_timer(now):
             self._event(now, "mode", "center mode granted automatically")
         live = self._reports_live()
-        for name, ps in self.points.items():
-            if ps.demanded is None and (det := self.detection(name)) in ("normal", "reverse"):
-                ps.demanded = "normal" if det == "normal" else "reverse"
-                self._event(now, "point", f"point {name}: demand taken as detected, {det}")
         if self.startup_held and live:
             self._startup_release(now)
         # a permission just received sets its waiting departures before the rules may give it

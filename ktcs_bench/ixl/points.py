@@ -35,8 +35,10 @@ def detection_from_bits(bits: dict[str, int]) -> Detection:
 @dataclass
 class PointState:
     point: Point
-    # None: nothing demanded yet -- a restarted interlocking takes the position the point is
-    # detected in, rather than throwing it to a default under a train (see ixl.interlocking)
+    # None: nothing demanded (PNC and PRC off, the machine stays where it lies) -- a restarted
+    # interlocking, until a route or a control demands the point with its checks: neither its
+    # default nor the detected position, which a wrong-side detection fault makes a throw under
+    # a train (see ixl.interlocking)
     demanded: PointPosition | None = "normal"
     bits: dict[str, int] = field(default_factory=dict)  # last reported by the trackside
 
