@@ -301,9 +301,15 @@ class Interlocking:
         return False
 
     def detection(self, point: str) -> Detection:
+        """Where the point is, as far as it proves anything: lost while the trackside link is
+        down, moving to its call until the trackside has answered that call."""
         if not self.link_up[kinds.IO]:
             return "none"
-        return self.points[point].reported
+        ps = self.points[point]
+        reported = ps.reported
+        if not ps.answered and reported != "none":
+            return "to_normal" if ps.demanded == "normal" else "to_reverse"
+        return reported
 
     def route_status(self, route: str) -> RouteStatus:
         return self.routes[route].status
@@ -538,7 +544,7 @@ class Interlocking:
         if any(self.occupied(tc) for tc in ps.point.track_circuits):
             return Reason.TRACK_OCCUPIED
         if ps.demanded != position:
-            ps.demanded = position
+            ps.call(position)
             self._event(now, "point", f"point {name} commanded {position}")
         return Reason.NONE
 
@@ -562,6 +568,7 @@ class Interlocking:
             return
         if kind in BITS:
             self.points[obj].bits[kind.value] = state
+            self.points[obj].answered = True
         elif kind is F.LFI:
             sig = self.signals[obj]
             if sig.lamp_failed != bool(state):
@@ -791,7 +798,7 @@ class Interlocking:
             if ps.demanded != s.position:
                 in_place = False
                 if not any(self.occupied(tc) for tc in ps.point.track_circuits):
-                    ps.demanded = s.position
+                    ps.call(s.position)
                     self._event(now, "point", f"point {s.point} commanded {s.position}")
             if self.detection(s.point) != s.position:
                 in_place = False

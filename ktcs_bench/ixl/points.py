@@ -2,7 +2,12 @@
 
 The demand is a level (PNC/PRC: "normal wanted" / "reverse wanted"), as a point control relay
 holds its position; the point machine moves whenever its position differs. Detection arrives as
-the four Table 3 bits SNI/SRN/SRI/SNR; none set means detection is lost (point failed).
+the four Table 3 bits SNI/SRN/SRI/SNR; none set means detection is lost (point failed). A call (a
+change of the demand) is answered by the trackside with the point's indications; until that
+answer comes the point counts as moving to the called position, whatever was reported before:
+a report that already showed the called position (a detection fault reporting the blades the
+wrong way round, a restarted interlocking's first call) would otherwise prove a route over blades
+about to move.
 """
 
 from __future__ import annotations
@@ -41,6 +46,14 @@ class PointState:
     # a train (see ixl.interlocking)
     demanded: PointPosition | None = "normal"
     bits: dict[str, int] = field(default_factory=dict)  # last reported by the trackside
+    # False from a change of the demand until the trackside reports the point again (it answers
+    # every call): a report from before the call is no proof of where the call left the blades
+    answered: bool = True
+
+    def call(self, position: PointPosition) -> None:
+        """Demand `position`; the detection proves nothing until the trackside answers."""
+        self.demanded = position
+        self.answered = False
 
     @property
     def reported(self) -> Detection:

@@ -565,6 +565,42 @@ def test_a_restarted_interlocking_never_throws_a_point_detected_wrong_under_a_tr
     assert rig.io.blades()["32"] == "moving"
 
 
+def test_a_call_is_believed_only_once_the_trackside_has_answered_it(line: Line) -> None:
+    """Found by the whole-system search (seed 1244): point 32 of station 18 lay normal, its
+    detection crossed (reported reverse). Route 02-22 called it reverse; another control came
+    in at the same instant, before the trackside had answered, and the IXL took the reverse it
+    had read before its call as proof: the route went set and signal 02 cleared; then the blades
+    moved under the set route. A detection counts only once the trackside has reported the
+    point since the call (it answers every call)."""
+    view = line.view(18)
+    ixl = Interlocking(view, mode=Mode.CENTER)
+    ixl.link_state("io", True, 0.0)
+    ixl.link_state("atc", True, 0.0)
+    clear = {t.name: 0 for t in view.track_circuits} | {n.izc(iv.name): 0 for iv in view.intervals}
+    ixl.receive("atc", clear, 0.0)
+    bits = {f"{b}18{p.name}": 0 for p in view.station.points for b in ("SNI", "SRN", "SRI", "SNR")}
+    ixl.receive("io", bits | {"SNI1831": 1, "SRI1832": 1}, 0.0)  # 32 lies normal, crossed
+    assert ixl.control("RSC181291", 1, 1.0).results[0].accepted
+    assert ixl.detection("32") == "to_reverse"  # called, not yet answered
+    ixl.receive("atc", {"TC1851": 0}, 1.0)  # another input before the answer
+    assert ixl.route_status("1291") is RouteStatus.SETTING and ixl.aspect("12") == "R"
+    ixl.receive("io", {"SNI1832": 0, "SRN1832": 0, "SRI1832": 0, "SNR1832": 1}, 1.02)  # moving
+    assert ixl.route_status("1291") is RouteStatus.SETTING
+    ixl.receive("io", {"SNR1832": 0, "SNI1832": 1}, 5.0)  # arrived reverse, reported normal
+    assert ixl.route_status("1291") is RouteStatus.SETTING and ixl.aspect("12") == "R"
+    # restarted (no demand), the point really lying reverse: the answer, its indications
+    # unchanged, proves the call
+    ixl = Interlocking(view, mode=Mode.CENTER, startup_locking=True)
+    ixl.link_state("io", True, 0.0)
+    ixl.link_state("atc", True, 0.0)
+    ixl.receive("atc", clear, 0.0)
+    ixl.receive("io", bits | {"SNI1831": 1, "SRI1832": 1}, 0.0)
+    assert ixl.control("RSC181291", 1, 1.0).results[0].accepted
+    assert ixl.route_status("1291") is RouteStatus.SETTING
+    ixl.receive("io", {"SNI1832": 0, "SRN1832": 0, "SRI1832": 1, "SNR1832": 0}, 1.02)
+    assert ixl.route_status("1291") is RouteStatus.SET
+
+
 def test_the_start_up_lock_timer_waits_while_occupancy_cannot_be_read(line: Line) -> None:
     """Its time past while the ATC link is down, the start-up lock is no deadline (a driver
     would re-run the timer at the same instant without end); the report that brings the link

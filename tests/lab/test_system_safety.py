@@ -388,6 +388,27 @@ def test_a_restarted_ixl_no_longer_throws_a_point_detected_wrong_under_a_train(s
     assert [str(v) for r in runs for v in r.violations] == []
 
 
+@pytest.mark.parametrize(
+    "saved",
+    [
+        "a_point_called_where_a_crossed_detection_read_it.json",  # as the search saved it
+        "a_point_called_where_a_crossed_detection_read_it_cut.json",  # cut by hand
+    ],
+)
+def test_a_called_point_is_not_proven_by_what_was_read_before_its_call(saved: str) -> None:
+    """What the search found with IXL restarts back in it (seed 1244, 188 steps; cut by hand to
+    5, no restart needed): point 32 of station 18 lay normal with its detection crossed
+    (reported reverse). Route 02-22 called it reverse, and route 22-92 was asked in the same
+    instant, before the trackside had answered the call: the IXL took the reverse it had read
+    before its call as proof, set 02-22 and cleared signal 02 -- then the blades moved under the
+    set route (invariant 3, `point_moved_locked`). The trackside now answers every call with the
+    point's indications, and the IXL believes a detection only once its call is answered."""
+    replay = load_replay(Path(__file__).parent / "replays" / saved)
+    lab = InProcessLab(LAB, seed=replay.seed)
+    runs = lab.run(lambda access: replay_steps(access, replay, LINE))
+    assert [str(v) for r in runs for v in r.violations] == []
+
+
 # ------------------------------------------------------------------------ the search can fail
 
 DEPARTURES = [r for r in ROUTES if r[3] in ("91", "92")]
