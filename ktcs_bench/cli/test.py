@@ -64,6 +64,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     run_p.add_argument("--report", metavar="DIR",
                        help="write an HTML page per procedure, an index and the JSON here")  # fmt: skip
     run_p.add_argument("--json", action="store_true", help="print the results as JSON")
+    run_p.add_argument(
+        "--catalogue", metavar="FILE",
+        help="the requirements catalogue `verifies:` ids are checked against "
+             "(default: the shipped emulators/requirements/ktcs.yaml)",
+    )  # fmt: skip
     run_p.set_defaults(handler=run)
     p.set_defaults(handler=lambda args: (p.print_help(), 2)[1])
 
@@ -193,6 +198,7 @@ def _live_lab(args: argparse.Namespace, procedures: list[Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ktcs_bench.evidence.catalogue import load_catalogue
     from ktcs_bench.procedure.model import load_procedure
     from ktcs_bench.procedure.report import json_text, junit, write_reports
     from ktcs_bench.procedure.runner import unfinished
@@ -204,7 +210,8 @@ def run(args: argparse.Namespace) -> int:
     files = _procedure_files(args.procedures)
     junit_path = _output_file(args.junit, "--junit") if args.junit else None
     report_dir = _output_folder(args.report, "--report") if args.report else None
-    procedures = [load_procedure(path) for path in files]  # every file checked first
+    catalogue = load_catalogue(args.catalogue) if args.catalogue else None
+    procedures = [load_procedure(path, catalogue) for path in files]  # every file checked first
     ids = [p.id for p in procedures]
     twice = sorted({i for i in ids if ids.count(i) > 1})
     if twice:

@@ -8,7 +8,7 @@ from typing import TypedDict
 
 from ktcs_bench.conformance.model import CaseJson, CaseResult, CaseVerdict
 from ktcs_bench.conformance.runner import SuiteResult
-from ktcs_bench.junit import JUnitCase, JUnitSuite
+from ktcs_bench.junit import JUnitCase, JUnitSuite, requirement_properties
 from ktcs_bench.junit import junit_xml as write_junit
 
 _COLOUR = {CaseVerdict.PASS: "\x1b[32m", CaseVerdict.FAIL: "\x1b[31m", CaseVerdict.ERROR: "\x1b[35m",
@@ -45,6 +45,7 @@ def junit_xml(suite: SuiteResult) -> bytes:
                 f"{r.case.title} ({r.case.rule})\n{r.message}" if failed else r.message,
                 _frames_text(r),
                 "ConformanceFailure" if failed else "SuiteError",
+                requirement_properties(r.case.verifies),
             )  # fmt: skip
         )
     name = f"ktcs-bench conformance {suite.role} {suite.protocol}"

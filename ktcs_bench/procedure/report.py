@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, TypedDict
 
 from ktcs_bench.capture import PcapngWriter
-from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml
+from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml, requirement_properties
 from ktcs_bench.procedure.runner import ProcedureResult, StepJson
 
 _COLOUR = {"pass": "\x1b[32m", "fail": "\x1b[31m", "error": "\x1b[35m", "skipped": "\x1b[2m"}
@@ -75,6 +75,7 @@ def junit(results: Sequence[ProcedureResult]) -> bytes:
             p.id, f"procedure.{'.'.join(p.tags[:1]) or 'procedure'}", r.duration, outcome,
             r.message, _details(r), steps,
             "ExpectationFailed" if outcome == "fail" else kind,
+            (*requirement_properties(p.verifies), ("file", str(p.path))),
         ))  # fmt: skip
     total = sum(r.duration for r in results)
     modes = sorted({r.mode for r in results})
