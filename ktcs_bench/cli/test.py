@@ -200,7 +200,7 @@ def _live_lab(args: argparse.Namespace, procedures: list[Any]) -> str:
 def run(args: argparse.Namespace) -> int:
     from ktcs_bench.evidence.catalogue import load_catalogue
     from ktcs_bench.procedure.model import load_procedure
-    from ktcs_bench.procedure.report import json_text, junit, write_reports
+    from ktcs_bench.procedure.report import json_text, junit, write_coverage, write_reports
     from ktcs_bench.procedure.runner import unfinished
 
     if args.live and _names_files(args.live):  # `--live P.yaml` (or a folder): no lab named
@@ -230,8 +230,10 @@ def run(args: argparse.Namespace) -> int:
         interrupted = any(r.interrupted for r in results)
         why = "the run was interrupted" if interrupted else "the lab went away"
         results += [unfinished(p, mode, not_run=why) for p in procedures[len(results) :]]
-        if junit_path is not None:
-            junit_path.write_bytes(junit(results))
+        if junit_path is not None:  # the run's operation coverage beside it, named in it
+            beside = junit_path.with_name(f"{junit_path.stem}.coverage.json")
+            write_coverage(results, beside)
+            junit_path.write_bytes(junit(results, beside.name))
         if report_dir is not None:
             paths = write_reports(results, report_dir)
             if not args.json:

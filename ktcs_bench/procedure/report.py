@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, TypedDict
 
 from ktcs_bench.capture import PcapngWriter
+from ktcs_bench.evidence.coverage import COVERAGE_FILE, FORMAT, merge, procedure_coverage
 from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml, requirement_properties
 from ktcs_bench.procedure.runner import ProcedureResult, StepJson
 
@@ -63,7 +64,9 @@ def _details(result: ProcedureResult) -> str:
             + (f"\nnote: {s.note}" if s.note else ""))  # fmt: skip
 
 
-def junit(results: Sequence[ProcedureResult]) -> bytes:
+def junit(results: Sequence[ProcedureResult], coverage: str = "") -> bytes:
+    """One testcase per procedure, its requirement ids as properties; `coverage`: the file
+    name of the run's operation coverage beside the JUnit file (a suite property)."""
     cases = []
     for r in results:
         p = r.procedure
@@ -79,7 +82,8 @@ def junit(results: Sequence[ProcedureResult]) -> bytes:
         ))  # fmt: skip
     total = sum(r.duration for r in results)
     modes = sorted({r.mode for r in results})
-    suite = JUnitSuite("ktcs-bench procedures", cases, total, {"mode": ", ".join(modes)})
+    props = {"mode": ", ".join(modes), **({"coverage": coverage} if coverage else {})}
+    suite = JUnitSuite("ktcs-bench procedures", cases, total, props)
     return junit_xml("ktcs-bench procedures", [suite])
 
 
@@ -137,10 +141,13 @@ def as_json(result: ProcedureResult) -> ProcedureJson:
     }  # fmt: skip
 
 
-def json_text(results: Sequence[ProcedureResult]) -> str:
+def json_text(results: Sequence[ProcedureResult], coverage: str = "") -> str:
+    """The run as JSON; `coverage`: the file of its operation coverage (written beside it)."""
     counts = {v: sum(1 for r in results if r.verdict == v) for v in COUNTED}
-    return json.dumps({"summary": counts, "procedures": [as_json(r) for r in results]},
-                      ensure_ascii=False, indent=1)  # fmt: skip
+    doc: dict[str, Any] = {"summary": counts, "procedures": [as_json(r) for r in results]}
+    if coverage:
+        doc["coverage"] = coverage
+    return json.dumps(doc, ensure_ascii=False, indent=1)
 
 
 # -- HTML --------------------------------------------------------------------------------------------
@@ -477,5 +484,22 @@ def write_reports(results: Sequence[ProcedureResult], folder: Path) -> list[Path
     paths = [write_html(r, folder, name) for r, name in zip(results, pages, strict=True) if name]
     index = folder / "index.html"
     index.write_text(index_html(results, pages), encoding="utf-8")
-    (folder / "results.json").write_text(json_text(results) + "\n", encoding="utf-8")
+    (folder / "results.json").write_text(json_text(results, COVERAGE_FILE) + "\n",
+                                         encoding="utf-8")  # fmt: skip
+    write_coverage(results, folder / COVERAGE_FILE)
     return [index, *paths]
+
+
+def coverage_doc(results: Sequence[ProcedureResult]) -> dict[str, Any]:
+    """The operation coverage of a run: the whole run's (every procedure's added up) and, under
+    `procedures`, each one's -- a procedure that never got past its setup observed nothing."""
+    ran = [r for r in results if not r.not_run and not r.setup_error]
+    each = {r.procedure.id: procedure_coverage(r).as_json() for r in ran}
+    whole = merge(each.values()) if each else {"format": FORMAT, "observed": [], "stations": {}}
+    return {**whole, "procedures": each}
+
+
+def write_coverage(results: Sequence[ProcedureResult], path: Path) -> Path:
+    path.write_text(json.dumps(coverage_doc(results), indent=1, sort_keys=True) + "\n",
+                    encoding="utf-8")  # fmt: skip
+    return path
