@@ -291,7 +291,9 @@ td,th{border:1px solid #ccc;padding:3px 7px;text-align:left;vertical-align:top}t
 .passed,.pass{color:#fff;background:#2a8a3a}.failed,.fail{color:#fff;background:#c0392b}
 .error{color:#fff;background:#8e44ad}.unchecked,.skip{color:#333;background:#f0d060}
 .v{font-weight:bold;padding:1px 6px;border-radius:3px;white-space:nowrap}
-ul{margin:0;padding-left:1.2em}.src{color:#666;font-size:.9em}code{background:#f5f5f5}
+ul{margin:0;padding-left:1.2em}table.m{width:100%;table-layout:fixed}
+table.m th:nth-child(1){width:10em}table.m th:nth-child(2){width:6.5em}table.m th:nth-child(3){width:38%}
+table.m td{overflow-wrap:anywhere}.src{color:#666;font-size:.9em}code{background:#f5f5f5}
 """
 
 
@@ -348,7 +350,7 @@ def html_page(doc: dict[str, Any], out: Path) -> str:
 <td>{cov["checks"]}</td></tr></table>
 {f"<h2>Ids the results name that the catalogue lacks</h2><ul>{unknown}</ul>" if unknown else ""}
 <h2>Requirements (failing, then unchecked, then passed)</h2>
-<table><tr><th>id</th><th>status</th><th>requirement and source</th><th>checks</th></tr>
+<table class="m"><tr><th>id</th><th>status</th><th>requirement and source</th><th>checks</th></tr>
 {"".join(rows)}</table>
 <h2>Operation coverage: what no run exercised</h2>
 {"".join(ops) or "<p>No run left its operation coverage (coverage.json) beside its results.</p>"}
