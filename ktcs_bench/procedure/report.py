@@ -168,6 +168,64 @@ def _e(text: object) -> str:
     return html.escape(str(text))
 
 
+def _commit() -> str:
+    """The checkout's commit (read from .git, no git command), or "" when not a checkout."""
+    here = Path(__file__).resolve().parents[2] / ".git"
+    try:
+        if here.is_file():  # a worktree: "gitdir: PATH"
+            here = Path(here.read_text(encoding="utf-8").split(":", 1)[1].strip())
+        head = (here / "HEAD").read_text(encoding="utf-8").strip()
+        if not head.startswith("ref: "):
+            return head[:12]
+        ref = head[5:]
+        for folder in (here, Path((here / "commondir").read_text(encoding="utf-8").strip())
+                       if (here / "commondir").is_file() else here):  # fmt: skip
+            base = folder if folder.is_absolute() else here / folder
+            if (base / ref).is_file():
+                return (base / ref).read_text(encoding="utf-8").strip()[:12]
+            packed = base / "packed-refs"
+            if packed.is_file():
+                for line in packed.read_text(encoding="utf-8").splitlines():
+                    if line.endswith(f" {ref}"):
+                        return line.split()[0][:12]
+    except (OSError, IndexError, UnicodeDecodeError):
+        pass
+    return ""
+
+
+def provenance() -> str:
+    """What produced a report: the product's version and commit, the machine and its Python."""
+    import platform
+
+    from ktcs_bench import __version__
+
+    commit = _commit()
+    return (f"ktcs-bench {__version__}" + (f" (commit {commit})" if commit else "")
+            + f" on {platform.node() or 'an unnamed machine'}, {platform.system()} "
+            f"{platform.release()}, Python {platform.python_version()}")  # fmt: skip
+
+
+def _file_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        return f"(not readable: {exc})"
+
+
+def _requirements(p: Any) -> str:
+    """Each id the procedure verifies, with the requirement's sentence from the catalogue."""
+    from ktcs_bench.errors import ConfigError
+    from ktcs_bench.evidence.catalogue import shipped_catalogue
+
+    try:
+        reqs = shipped_catalogue().requirements
+    except ConfigError:
+        reqs = {}
+    items = [f"<li><code>{_e(rid)}</code> {_e(reqs[rid].text) if rid in reqs else ''}</li>"
+             for rid in p.verifies]  # fmt: skip
+    return f"<ul>{''.join(items)}</ul>" if items else "-"
+
+
 def _png_uri(fig: Any) -> str:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
@@ -280,10 +338,12 @@ def _lanes(result: ProcedureResult) -> str:
     numbered below the axis in as many rows as keep the numbers apart."""
     changes: dict[str, list[tuple[float, str]]] = {}
     for t, k, v in result.timeline:
-        if (k.startswith("ctc ") and " signal " in k) or k.startswith("code "):
+        if (k.startswith(("ctc ", "ixl ")) and " signal " in k) or k.startswith("code "):
             changes.setdefault(k, []).append((t, v))
     moved_ = [k for k, series in changes.items() if len({v for _, v in series}) > 1]
-    signals = sorted(k for k in moved_ if k.startswith("ctc "))
+    # each signal as the CTC showed it, then as its interlocking had it (the vital view)
+    signals = sorted((k for k in moved_ if k.startswith(("ctc ", "ixl "))),
+                     key=lambda k: (k.split(" ", 1)[1], k.split()[0]))  # fmt: skip
     codes = sorted((k for k in moved_ if k.startswith("code ")), key=lambda k: k.split()[1])
     shown = signals + codes or sorted(changes)[:6]
     if not shown:
@@ -304,7 +364,8 @@ def _lanes(result: ProcedureResult) -> str:
              f'height="{height}" font-size="11" class="timeline">']  # fmt: skip
     for i, k in enumerate(shown):
         y = i * lane + 4
-        parts.append(f'<text x="2" y="{y + 11}">{_e(k.removeprefix("ctc "))}</text>')
+        label = k.removeprefix("ctc ") if k.startswith("ctc ") else k.replace(" signal ", " ", 1)
+        parts.append(f'<text x="2" y="{y + 11}">{_e(label)}</text>')
         series = changes[k]
         for j, (t, v) in enumerate(series):
             t1 = series[j + 1][0] if j + 1 < len(series) else end
@@ -322,11 +383,12 @@ def _lanes(result: ProcedureResult) -> str:
     parts.append(f'<text class="axis" x="{left + width / 2:.0f}" y="{axis + 30}" '
                  f'text-anchor="middle">time since the start of the procedure (s, on the '
                  f"lab's clock)</text>")  # fmt: skip
-    for s in ran:
+    for s in ran:  # a fault's step in red and solid: what the lab was made to suffer
         x = at(s.start)
-        parts.append(f'<line x1="{x:.1f}" y1="0" x2="{x:.1f}" y2="{axis}" stroke="#555" '
-                     f'stroke-dasharray="2,2"><title>step {s.index} at {s.start:.1f} s: '
-                     f"{_e(s.title)}</title></line>")  # fmt: skip
+        look = ('stroke="#c0392b" stroke-width="2" class="fault"' if s.kind == "fault"
+                else 'stroke="#555" stroke-dasharray="2,2"')  # fmt: skip
+        parts.append(f'<line x1="{x:.1f}" y1="0" x2="{x:.1f}" y2="{axis}" {look}><title>step '
+                     f"{s.index} at {s.start:.1f} s: {_e(s.title)}</title></line>")  # fmt: skip
     if labels:
         parts.append(f'<text x="2" y="{first_row + 10}">steps</text>')
     for x, text, row in labels:
@@ -371,7 +433,7 @@ def html_report(result: ProcedureResult) -> str:
 <style>{CSS}</style></head><body>
 <h1>{_e(p.id)}: {_e(p.title)} <span class="v {result.verdict}">{result.verdict.upper()}</span></h1>
 <table class="meta">
-<tr><td>verifies</td><td>{_e("; ".join(p.verifies) or "-")}</td></tr>
+<tr><td>verifies</td><td>{_requirements(p)}</td></tr>
 <tr><td>tags</td><td>{_e(", ".join(p.tags) or "-")}</td></tr>
 <tr><td>file</td><td><code>{_e(p.path)}</code></td></tr>
 <tr><td>lab</td><td>{_e(p.setup.lab.name)} ({_e(result.mode)})</td></tr>
@@ -379,14 +441,16 @@ def html_report(result: ProcedureResult) -> str:
 of wall time</td></tr>
 <tr><td>result</td><td>{_e(result.message or "every step passed")}</td></tr>
 <tr><td>cleared</td><td>{_e(", ".join(result.cleared) or "nothing to clear")}</td></tr>
+<tr><td>made by</td><td>{_e(provenance())}</td></tr>
 </table>{setup}
 <h2>Steps</h2>
 <table><tr><th>#</th><th>step</th><th>verdict</th><th>at</th><th>took</th><th>what was seen</th></tr>
 {"".join(rows)}</table>
 <h2>Timeline</h2>
-<p>The signals as the CTC showed them (red R, yellow Y, yellow-green YG, green G) and the ATC's
-code on each track circuit whose code changed (red: stop, greener: faster); the dashed lines are
-the steps. Hover for the values.</p>
+<p>The signals as the CTC showed them and, under each, as its interlocking had them
+(<code>ixl ST G</code>; red R, yellow Y, yellow-green YG, green G), and the ATC's code on each
+track circuit whose code changed (red: stop, greener: faster); the dashed lines are the steps, a
+solid red one a fault injected. Hover for the values.</p>
 {_lanes(result)}
 <details><summary>Every change of indications, signals, codes and trains
 ({len(result.timeline)})</summary>
@@ -395,6 +459,11 @@ the steps. Hover for the values.</p>
 {_plots(result)}
 <h2>Captures of the run</h2>
 <ul>{"".join(caps) or "<li>none (no tapped link)</li>"}</ul>
+<h2>The files run</h2>
+<details><summary>the procedure, <code>{_e(p.path.name)}</code></summary>
+<pre>{_e(_file_text(p.path))}</pre></details>
+<details><summary>its lab, <code>{_e(p.setup.lab.file.name)}</code></summary>
+<pre>{_e(_file_text(p.setup.lab.file))}</pre></details>
 </body></html>
 """
 
@@ -466,6 +535,7 @@ passed</title><style>{CSS}</style></head><body>
 <tr id="started"><td>started</td><td>{when}</td></tr>
 <tr id="mode"><td>mode</td><td>{_e(", ".join(modes) or "-")}</td></tr>
 <tr id="lab"><td>lab</td><td>{_e(", ".join(labs) or "-")}</td></tr>
+<tr id="made-by"><td>made by</td><td>{_e(provenance())}</td></tr>
 <tr id="took"><td>took</td><td>{lab_time:.1f} s on the labs' clocks, {wall:.1f} s of wall time</td></tr>
 {f'<tr id="interrupted"><td>stopped</td><td>{_e(stopped)}</td></tr>' if stopped else ""}
 </table>
