@@ -65,6 +65,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                        help="write an HTML page per procedure, an index and the JSON here")  # fmt: skip
     run_p.add_argument("--json", action="store_true", help="print the results as JSON")
     run_p.add_argument(
+        "--keep-going", action="store_true",
+        help="run the steps after a failed expectation too (reported after it): what the lab "
+             "did after an unsafe state is recorded",
+    )  # fmt: skip
+    run_p.add_argument(
         "--catalogue", metavar="FILE",
         help="the requirements catalogue `verifies:` ids are checked against "
              "(default: the shipped emulators/requirements/ktcs.yaml)",
@@ -151,7 +156,7 @@ def _run_virtual(args: argparse.Namespace, procedures: list[Any], stop: _Stop) -
                 lab = lab_class(proc.setup.lab, clock="virtual", out=Path(tmp))
                 try:
                     result = lab.run(lambda access, p=proc: stop.run(run_procedure(
-                        p, access, "virtual")))  # fmt: skip
+                        p, access, "virtual", keep_going=args.keep_going)))  # fmt: skip
                 except VirtualDeadlock as exc:
                     raise PeerError(f"{proc.id}: the lab stalled: {exc}") from None
         if result is None:  # the next one to run is the one interrupted
@@ -176,7 +181,8 @@ async def _run_live(args: argparse.Namespace, procedures: list[Any], stop: _Stop
     results: list[Any] = []
     try:
         for proc in procedures:
-            result = await stop.run(run_procedure(proc, access, f"live {name}"))
+            result = await stop.run(run_procedure(proc, access, f"live {name}",
+                                                  keep_going=args.keep_going))  # fmt: skip
             if result is None:  # the next one to run is the one interrupted
                 result = unfinished(proc, f"live {name}", interrupted="before its setup")
             results.append(result)

@@ -16,6 +16,8 @@ ConfigError naming the file, the step (or key) and what is wrong.
       - ctc: route set 18 S1 S11
       - expect: ctc 18 signal 01 is not R
         within: 10s
+    always:                       # expectations that hold at every sample, steps or not
+      - ixl 20 signal 21 is R
 
 The top level and `setup:` are declared in `shapes` (a key no reader knows is refused with its
 line); the step kinds are in `steps`, the expectation words in `expect`. `verifies:` names
@@ -35,6 +37,7 @@ from ktcs_bench.datafiles import YamlReader, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
 from ktcs_bench.evidence.catalogue import Catalogue, shipped_catalogue
 from ktcs_bench.lab.topology import Lab, load_lab, resolve_lab_path
+from ktcs_bench.procedure.expect import Expectation, parse_expectation
 from ktcs_bench.procedure.names import LabNames, StepError
 from ktcs_bench.procedure.shapes import ProcedureShape, Texts
 from ktcs_bench.procedure.steps import (
@@ -70,11 +73,14 @@ class Procedure:
     setup: Setup
     steps: tuple[Step, ...]
     names: LabNames
+    always: tuple[Expectation, ...] = ()  # hold at every sample of the run
 
     @property
     def devices(self) -> set[str]:
         """Every device the steps address or read."""
         out: set[str] = set(self.setup.restart)
+        for kept in self.always:
+            out.update(kept.devices)
         for s in self.steps:
             exp = getattr(s, "expectation", None)
             out.update(exp.devices if exp is not None else ())
@@ -183,6 +189,16 @@ def load_procedure(path: str | Path, catalogue: Catalogue | None = None) -> Proc
         except StepError as exc:
             kind = next((k for k in raw if k in KINDS), None) if isinstance(raw, dict) else None
             raise r.fail(f"step {i}" + (f" ({kind})" if kind else ""), str(exc)) from None
+    always = []
+    for i, text in enumerate(doc.always):
+        try:
+            exp = parse_expectation(str(text), names)
+        except StepError as exc:
+            raise r.fail(f"always[{i}]", str(exc)) from None
+        if exp.predicate.op in ("occurs", "absent"):
+            raise r.fail(f"always[{i}]", "always: holds of a state, not of an event or a "
+                         "frame (those are looked for after an action)")  # fmt: skip
+        always.append(exp)
     total = sum(_longest(s) for s in steps)
     if total > MAX_DURATION_S:
         raise r.fail(
@@ -199,4 +215,5 @@ def load_procedure(path: str | Path, catalogue: Catalogue | None = None) -> Proc
         setup=Setup(lab, tuple(ghosts), modes, setup_m.ars, tuple(restart)),
         steps=tuple(steps),
         names=names,
+        always=tuple(always),
     )

@@ -47,6 +47,8 @@ def result_text(result: ProcedureResult, colour: bool) -> str:
         if s.verdict != "pass":
             line += f"\n            {s.message}" + (f"; seen: {s.seen}" if s.seen else "")
         lines.append(line)
+    for t, text, seen in result.broken:
+        lines.append(paint("fail", f"      always: {text} broken at {t:.1f} s; seen: {seen}"))
     if result.interrupted or result.not_run:
         lines.append(f"      {result.message}")
     if result.cleared:
@@ -100,6 +102,14 @@ class TrainSampleJson(TypedDict):
     speed_kmh: float
 
 
+class BrokenJson(TypedDict):
+    """An `always:` expectation broken: when first, and what was seen."""
+
+    t_s: float
+    expectation: str
+    seen: str
+
+
 class ProcedureJson(TypedDict):
     """One procedure's run in the JSON report: what it is, its verdict, its steps, what the lab
     did meanwhile (timeline, trains), the frames captured per link and the faults cleared."""
@@ -118,6 +128,8 @@ class ProcedureJson(TypedDict):
     wall_s: float
     interrupted: bool
     steps: list[StepJson]
+    always: list[str]
+    broken: list[BrokenJson]
     timeline: list[TimelineJson]
     trains: dict[str, list[TrainSampleJson]]
     captures: dict[str, int]  # link -> frames captured
@@ -133,6 +145,8 @@ def as_json(result: ProcedureResult) -> ProcedureJson:
         "started": result.started, "duration_s": round(result.duration, 3),
         "wall_s": round(result.wall_s, 3), "interrupted": bool(result.interrupted),
         "steps": [s.as_dict() for s in result.steps],
+        "always": [e.text for e in p.always],
+        "broken": [{"t_s": t, "expectation": x, "seen": seen} for t, x, seen in result.broken],
         "timeline": [{"t_s": t, "what": k, "value": v} for t, k, v in result.timeline],
         "trains": {tid: [{"t_s": t, "head_m": h, "tail_m": tl, "speed_kmh": v}
                          for t, h, tl, v in series] for tid, series in result.trains.items()},
@@ -428,6 +442,16 @@ def html_report(result: ProcedureResult) -> str:
                     f" ({len(records)} records)</li>")  # fmt: skip
     setup = (f'<p class="v error">setup: {_e(result.setup_error)}</p>'
              if result.setup_error else "")  # fmt: skip
+    broken = {text: (t, seen) for t, text, seen in result.broken}
+    always = "".join(
+        f"<tr><td><code>{_e(e.text)}</code></td><td>"
+        + (f'<span class="v fail">broken</span> at {broken[e.text][0]:.1f} s; seen: '
+           f"<code>{_e(broken[e.text][1])}</code>" if e.text in broken
+           else '<span class="v pass">held</span>')
+        + "</td></tr>" for e in p.always)  # fmt: skip
+    always_html = (f"<h2>Always</h2><p>Checked at every sample, alongside the steps.</p><table>"
+                   f"<tr><th>expectation</th><th>verdict</th></tr>{always}</table>"
+                   if always else "")  # fmt: skip
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{_e(p.id)}: {_e(result.verdict)}</title>
 <style>{CSS}</style></head><body>
@@ -443,6 +467,7 @@ of wall time</td></tr>
 <tr><td>cleared</td><td>{_e(", ".join(result.cleared) or "nothing to clear")}</td></tr>
 <tr><td>made by</td><td>{_e(provenance())}</td></tr>
 </table>{setup}
+{always_html}
 <h2>Steps</h2>
 <table><tr><th>#</th><th>step</th><th>verdict</th><th>at</th><th>took</th><th>what was seen</th></tr>
 {"".join(rows)}</table>

@@ -31,7 +31,7 @@ from ktcs_bench.lab.access import LabAccess, LabGone
 from ktcs_bench.procedure.expect import FrameSeen, Observer
 from ktcs_bench.procedure.model import Procedure
 from ktcs_bench.procedure.names import LabNames
-from ktcs_bench.procedure.steps import FaultBook, Ghost, Step
+from ktcs_bench.procedure.steps import FaultBook, Ghost, Step, seen_text
 
 SAMPLE_S = 0.5  # the lab's seconds between two samples (and two checks of an expectation)
 SETUP_S = 60.0  # how long the setup may take to find the lab ready
@@ -96,6 +96,9 @@ class ProcedureResult:
     interrupted: str = ""  # where a SIGINT or SIGTERM stopped it ("in step 3 (wait: 1h)")
     lab_gone: str = ""  # the lab went away during the run (why)
     not_run: str = ""  # why it was not run at all (verdict skipped)
+    broken: list[tuple[float, str, str]] = field(default_factory=list)
+    """`always:` expectations broken: (s since the run began, the expectation, what was seen),
+    each at the first sample it did not hold."""
 
     @property
     def failed_step(self) -> StepResult | None:
@@ -113,6 +116,9 @@ class ProcedureResult:
         if self.setup_error:
             return f"setup: {self.setup_error}"
         s = self.failed_step
+        if self.broken and (s is None or self.broken[0][0] <= s.start + s.duration):
+            t, text, seen = self.broken[0]
+            return f"always: {text} broken at {t:.1f} s; seen: {seen}"
         if s is None:
             return ""
         seen = f"; seen: {s.seen}" if s.seen else ""
@@ -282,8 +288,10 @@ class ProcedureRun:
     """One procedure on one lab: the `steps.Context` its steps run with."""
 
     def __init__(self, procedure: Procedure, access: LabAccess, mode: str,
-                 sample_s: float = SAMPLE_S) -> None:  # fmt: skip
+                 sample_s: float = SAMPLE_S, keep_going: bool = False) -> None:  # fmt: skip
         self.procedure = procedure
+        self.keep_going = keep_going  # the steps after a failed one still run
+        self.watching = False  # the `always:` expectations are checked (after the setup)
         self.access = access
         self.names: LabNames = procedure.names
         self.sample_s = sample_s
@@ -318,7 +326,20 @@ class ProcedureRun:
         self.snapshot = Snapshot(self)
         await self.snapshot.prefetch(self.sampled)
         await self._record(self.snapshot)
+        if self.watching:
+            await self._always(self.snapshot)
         return self.snapshot
+
+    async def _always(self, snap: Snapshot) -> None:
+        """Each `always:` expectation judged on this sample; the first sample one fails on is
+        recorded (once: what follows a broken one is in the timeline)."""
+        done = {text for _t, text, _s in self.result.broken}
+        for exp in self.procedure.always:
+            if exp.text in done:
+                continue
+            ok, seen = await exp.check(snap)
+            if not ok:
+                self.result.broken.append((round(self.elapsed(), 3), exp.text, seen_text(seen)))
 
     async def mark(self) -> None:
         """Before each action: expectations of events and frames look at what came after it."""
@@ -547,10 +568,13 @@ class ProcedureRun:
             except LAB_ERRORS as exc:
                 result.setup_error = f"the lab did not answer: {exc}"
             if not result.setup_error:
+                self.watching = True
+                await self._always(self.snapshot)  # the state the setup left
                 for step, sr in zip(self.procedure.steps, result.steps, strict=True):
                     await self._step(step, sr)
-                    if sr.verdict != "pass":
-                        break
+                    if sr.verdict == "error" or (sr.verdict == "fail" and not self.keep_going):
+                        break  # a step in error leaves nothing certain to go on from
+                self.watching = False
         except LabGone as exc:
             result.lab_gone = str(exc)
         except asyncio.CancelledError:  # interrupted: the faults are cleared all the same, below
@@ -571,7 +595,7 @@ class ProcedureRun:
                 if (result.setup_error or "error" in verdicts or result.interrupted
                         or result.lab_gone):  # fmt: skip
                     result.verdict = "error"
-                elif "fail" in verdicts:
+                elif "fail" in verdicts or result.broken:
                     result.verdict = "fail"
                 else:
                     result.verdict = "pass"
@@ -631,5 +655,7 @@ def _frame_links(step: Step) -> tuple[str, ...]:
 
 
 async def run_procedure(procedure: Procedure, access: LabAccess, mode: str,
-                        sample_s: float = SAMPLE_S) -> ProcedureResult:  # fmt: skip
-    return await ProcedureRun(procedure, access, mode, sample_s).run()
+                        sample_s: float = SAMPLE_S, keep_going: bool = False) -> ProcedureResult:  # fmt: skip
+    """The procedure's run; `keep_going`: the steps after a failed expectation still run (and
+    are reported after it), so the moments after an unsafe state are recorded too."""
+    return await ProcedureRun(procedure, access, mode, sample_s, keep_going).run()
