@@ -24,6 +24,7 @@ class CaseVerdict(enum.Enum):
     FAIL = "fail"
     ERROR = "error"
     SKIP = "skip"
+    NOT_APPLICABLE = "not applicable"  # the device's statement (ICS) says it has no such part
 
 
 class CaseFailed(Exception):

@@ -158,7 +158,8 @@ def _read(path: Path, res: Results) -> bool:
 
 def _verdict(word: str) -> str:
     return {"pass": "pass", "passed": "pass", "fail": "fail", "failed": "fail",
-            "error": "error", "skip": "skip", "skipped": "skip"}.get(word, "error")  # fmt: skip
+            "error": "error", "skip": "skip", "skipped": "skip",
+            "not applicable": "skip"}.get(word, "error")  # fmt: skip
 
 
 def _read_procedures_json(path: Path, doc: dict[str, Any], res: Results) -> None:
