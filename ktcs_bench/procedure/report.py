@@ -20,7 +20,7 @@ from typing import Any, TypedDict
 from ktcs_bench.capture import PcapngWriter
 from ktcs_bench.evidence.coverage import COVERAGE_FILE, FORMAT, merge, procedure_coverage
 from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml, requirement_properties
-from ktcs_bench.procedure.runner import ProcedureResult, StepJson
+from ktcs_bench.procedure.runner import ProcedureResult, StepJson, Supervised
 
 _COLOUR = {"pass": "\x1b[32m", "fail": "\x1b[31m", "error": "\x1b[35m", "skipped": "\x1b[2m"}
 _RESET = "\x1b[0m"
@@ -277,14 +277,27 @@ def _plots(result: ProcedureResult) -> str:
         n = len(running)
         fig, axes = plt.subplots(n, 1, figsize=(10, 3.2 * n), squeeze=False)
         for ax, (tid, series) in zip(axes[:, 0], running.items(), strict=True):
-            rows = [SpeedDistanceRow(train=tid, t_s=t, front_m=h, speed_kmh=v, safe_front_m=None,
-                                     mrsp_kmh=None, ebi_kmh=None, sbi_kmh=None, warning_kmh=None,
-                                     permitted_kmh=None)  # no limits: only the actual speed
-                    for t, h, _tl, v in series]  # fmt: skip
-            plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
+            sup = result.supervision.get(tid, [])
+            if sup:  # a train under ATP: its curves, its code and its emergency brakes
+                rows = [SpeedDistanceRow(
+                    train=tid, t_s=x.t, front_m=x.head, speed_kmh=x.speed_kmh,
+                    safe_front_m=x.head, mrsp_kmh=x.limits.get("mrsp"),
+                    ebi_kmh=x.limits.get("ebi"), sbi_kmh=x.limits.get("sbi"),
+                    warning_kmh=x.limits.get("warning"), permitted_kmh=x.limits.get("permitted"),
+                ) for x in sup]  # fmt: skip
+                plot_speed_distance(ax, rows, f"train {tid}: speed vs distance, as supervised")
+                _codes_and_brakes(ax, sup)
+            else:  # a train the procedure moves itself: no supervision, only the actual speed
+                rows = [SpeedDistanceRow(train=tid, t_s=t, front_m=h, speed_kmh=v,
+                                         safe_front_m=None, mrsp_kmh=None, ebi_kmh=None,
+                                         sbi_kmh=None, warning_kmh=None, permitted_kmh=None)
+                        for t, h, _tl, v in series]  # fmt: skip
+                plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
         fig.tight_layout()
+        supervised = " ".join(t for t in running if result.supervision.get(t))
         out.append(f'<img alt="speed-distance" src="{_png_uri(fig)}" '
-                   f'data-trains="{_e(" ".join(running))}">')  # fmt: skip
+                   f'data-trains="{_e(" ".join(running))}" '
+                   f'data-supervised="{_e(supervised)}">')  # fmt: skip
         plt.close(fig)
     if still:
         out.append(f'<p class="still">Did not move, so no speed-distance plot: '
@@ -297,6 +310,20 @@ def _plots(result: ProcedureResult) -> str:
     out.append(f'<img alt="time-distance" src="{_png_uri(fig)}">')
     plt.close(fig)
     return "\n".join(out)
+
+
+def _codes_and_brakes(ax: Any, sup: Sequence[Supervised]) -> None:
+    """The code under the antenna as a step line, and each emergency brake a red cross."""
+    coded = [x for x in sup if x.code_kmh is not None]
+    if coded:
+        ax.step([x.head for x in coded], [x.code_kmh for x in coded], where="post",
+                color="purple", lw=1.0, ls=":", label="code")  # fmt: skip
+    brakes = [x for prev, x in zip(sup, sup[1:], strict=False)
+              if x.emergency_brakes > prev.emergency_brakes]  # fmt: skip
+    if brakes:
+        ax.plot([x.head for x in brakes], [x.speed_kmh for x in brakes], "rX", ms=9,
+                label="emergency brake")  # fmt: skip
+    ax.legend(loc="upper right", fontsize=8, ncol=4)
 
 
 def _lane_colour(key: str, value: str) -> str:

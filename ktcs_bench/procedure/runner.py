@@ -78,6 +78,20 @@ class StepResult:
                 "start_s": round(self.start, 3), "duration_s": round(self.duration, 3)}  # fmt: skip
 
 
+@dataclass(frozen=True)
+class Supervised:
+    """One sample of a train under ATP: where (head, m), its code's speed, the supervised
+    speeds at its front (`limits`: ebi, sbi, warning, permitted, mrsp, km/h) and how many
+    emergency brakes it has had."""
+
+    t: float
+    head: float
+    speed_kmh: float
+    code_kmh: float | None
+    limits: dict[str, float]
+    emergency_brakes: int
+
+
 @dataclass
 class ProcedureResult:
     procedure: Procedure
@@ -90,6 +104,8 @@ class ProcedureResult:
     wall_s: float = 0.0
     timeline: list[tuple[float, str, str]] = field(default_factory=list)  # (t, what, value)
     trains: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
+    supervision: dict[str, list[Supervised]] = field(default_factory=dict)
+    """A train device's supervision at each sample it ran: its code, curves, emergency brakes."""
     captures: dict[str, list[CaptureRecord]] = field(default_factory=dict)
     link_types: dict[str, str] = field(default_factory=dict)
     cleared: list[str] = field(default_factory=list)
@@ -430,12 +446,27 @@ class ProcedureRun:
                     if g is not None:
                         self._train(train, t, head, tail, g.speed_kmh)
             elif d.kind == kinds.TRAIN and s.get("head") is not None:
-                self._train(str(s.get(kinds.TRAIN, d.name)), t, s["head"], s["tail"],
-                            float(s.get("speed_kmh") or 0.0))  # fmt: skip
+                train = str(s.get(kinds.TRAIN, d.name))
+                self._train(train, t, s["head"], s["tail"], float(s.get("speed_kmh") or 0.0))
+                self._supervised(train, t, s)
         for key, value in values.items():
             if self._last.get(key) != value:
                 self._last[key] = value
                 self.result.timeline.append((t, key, value))
+
+    def _supervised(self, train: str, t: float, s: dict[str, Any]) -> None:
+        limits = s.get("limits_kmh")
+        if not isinstance(limits, dict):
+            return  # not on the line yet, or a device that does not say
+        code = s.get("code")
+        series = self.result.supervision.setdefault(train, [])
+        if not series or series[-1].t != t:
+            series.append(Supervised(
+                t, float(s["head"]), float(s.get("speed_kmh") or 0.0),
+                float(code[0]) if isinstance(code, list) and code else None,
+                {str(k): float(v) for k, v in limits.items()},
+                int(s.get("emergency_brakes") or 0),
+            ))  # fmt: skip
 
     def _train(self, train: str, t: float, head: float, tail: float, kmh: float) -> None:
         series = self.result.trains.setdefault(train, [])

@@ -39,3 +39,15 @@ def test_the_page_says_what_made_it_what_it_verifies_and_shows_faults_and_both_v
     assert lanes[at + 1] == "ixl 22 01"
     assert "tags: [fault, type1, atc, resync]" in page  # the procedure file as run
     assert "<summary>its lab, <code>quiet.yaml</code></summary>" in page
+
+
+def test_a_train_under_atp_is_plotted_with_its_curves_code_and_brakes(tmp_path: Path) -> None:
+    procedure = PROCEDURE.with_name("train_hold_dispatch.yaml")
+    run = subprocess.run(
+        [sys.executable, "-m", "ktcs_bench.cli.main", "--no-colour", "test", "run",
+         str(procedure), "--report", str(tmp_path / "r")],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stdout + run.stderr
+    page = (tmp_path / "r" / "train-hold-dispatch.html").read_text(encoding="utf-8")
+    assert 'data-supervised="T1"' in page  # the train device's EBI/SBI/permitted were sampled
