@@ -130,6 +130,7 @@ class ProcedureJson(TypedDict):
     steps: list[StepJson]
     always: list[str]
     broken: list[BrokenJson]
+    logs: dict[str, list[dict[str, Any]]]  # the CTC's and interlockings' events over the run
     timeline: list[TimelineJson]
     trains: dict[str, list[TrainSampleJson]]
     captures: dict[str, int]  # link -> frames captured
@@ -147,6 +148,7 @@ def as_json(result: ProcedureResult) -> ProcedureJson:
         "steps": [s.as_dict() for s in result.steps],
         "always": [e.text for e in p.always],
         "broken": [{"t_s": t, "expectation": x, "seen": seen} for t, x, seen in result.broken],
+        "logs": result.logs,
         "timeline": [{"t_s": t, "what": k, "value": v} for t, k, v in result.timeline],
         "trains": {tid: [{"t_s": t, "head_m": h, "tail_m": tl, "speed_kmh": v}
                          for t, h, tl, v in series] for tid, series in result.trains.items()},
@@ -310,6 +312,28 @@ def _plots(result: ProcedureResult) -> str:
     out.append(f'<img alt="time-distance" src="{_png_uri(fig)}">')
     plt.close(fig)
     return "\n".join(out)
+
+
+_NOTABLE = re.compile(r"refus|reject|not accepted|fail|lost|error|ARS|by ARS", re.I)
+
+
+def _logs(result: ProcedureResult) -> str:
+    """Each logged device's events over the run -- refusals with their reasons, ARS, faults
+    first in bold -- one collapsed list a device."""
+    if not result.logs:
+        return "<p>No device logged anything during the run.</p>"
+    out = []
+    for device, events in sorted(result.logs.items()):
+        notable = sum(1 for e in events if _NOTABLE.search(str(e.get("text", ""))))
+        rows = "".join(
+            f"<tr><td>{_e(e.get('time', ''))}</td><td>{_e(e.get('kind', ''))}</td><td>"
+            + (f"<b>{_e(e.get('text', ''))}</b>" if _NOTABLE.search(str(e.get("text", "")))
+               else _e(e.get("text", "")))
+            + "</td></tr>" for e in events)  # fmt: skip
+        out.append(f'<details class="log" data-device="{_e(device)}"><summary>{_e(device)}: '
+                   f"{len(events)} events ({notable} refusals, faults or ARS)</summary><table>"
+                   f"<tr><th>time</th><th>kind</th><th>text</th></tr>{rows}</table></details>")  # fmt: skip
+    return "".join(out)
 
 
 def _codes_and_brakes(ax: Any, sup: Sequence[Supervised]) -> None:
@@ -511,6 +535,8 @@ solid red one a fault injected. Hover for the values.</p>
 {_plots(result)}
 <h2>Captures of the run</h2>
 <ul>{"".join(caps) or "<li>none (no tapped link)</li>"}</ul>
+<h2>The devices' logs</h2>
+{_logs(result)}
 <h2>The files run</h2>
 <details><summary>the procedure, <code>{_e(p.path.name)}</code></summary>
 <pre>{_e(_file_text(p.path))}</pre></details>

@@ -112,6 +112,9 @@ class ProcedureResult:
     interrupted: str = ""  # where a SIGINT or SIGTERM stopped it ("in step 3 (wait: 1h)")
     lab_gone: str = ""  # the lab went away during the run (why)
     not_run: str = ""  # why it was not run at all (verdict skipped)
+    logs: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    """The CTC's and the interlockings' event logs over the run (refusals and their reasons,
+    ARS, route and signal events), each device's events in its order."""
     broken: list[tuple[float, str, str]] = field(default_factory=list)
     """`always:` expectations broken: (s since the run began, the expectation, what was seen),
     each at the first sample it did not hold."""
@@ -319,6 +322,7 @@ class ProcedureRun:
         self.event_marks: dict[str, Counter[tuple[Any, ...]]] = {}
         self.action_cursors: dict[str, CaptureCursor] = {}
         self.run_cursors: dict[str, CaptureCursor] = {}
+        self.log_marks: dict[str, Counter[tuple[Any, ...]]] = {}
         self._last: dict[str, str] = {}
         self.event_devices = sorted({d for s in procedure.steps
                                      for d in _expectation_devices(s, "event")})  # fmt: skip
@@ -474,6 +478,38 @@ class ProcedureRun:
             series.append((t, float(head), float(tail), kmh))
 
     # -- the run -------------------------------------------------------------------------------------
+    def _logged(self) -> list[str]:
+        """The devices whose logs the report keeps: the CTC and the interlockings."""
+        lab = self.procedure.setup.lab
+        return [d.name for d in lab.devices.values() if d.kind in (kinds.CTC, kinds.IXL)
+                and d.name in self.access.devices]  # fmt: skip
+
+    async def _log_events(self, device: str) -> list[dict[str, Any]]:
+        try:
+            answer = wire(await self.access.device(device, msg.Events(last=2000)))
+        except LAB_ERRORS:
+            return []
+        events = answer.get("events", [])
+        return [e for e in events if isinstance(e, dict)] if isinstance(events, list) else []
+
+    async def _mark_logs(self) -> None:
+        for device in self._logged():
+            self.log_marks[device] = Counter(_event_key(e) for e in await self._log_events(device))
+
+    async def _collect_logs(self) -> None:
+        """Each logged device's events since the run began (those it had before are marked)."""
+        for device in self._logged():
+            old = Counter(self.log_marks.get(device, Counter()))
+            new = []
+            for e in await self._log_events(device):
+                key = _event_key(e)
+                if old[key] > 0:
+                    old[key] -= 1
+                else:
+                    new.append(e)
+            if new:
+                self.result.logs[device] = new
+
     async def _setup(self) -> None:
         proc, names = self.procedure, self.names
         ctc = names.device_of(kinds.CTC)
@@ -481,6 +517,7 @@ class ProcedureRun:
         if missing:
             raise _SetupError(f"the lab has no {', '.join(missing)} (a lab made from "
                               f"{proc.setup.lab.file.name}?)")  # fmt: skip
+        await self._mark_logs()
         for link in self.access.links:
             path = self.access.captures().get(link)
             if path is not None:
@@ -613,6 +650,13 @@ class ProcedureRun:
             self._interrupted(f"in step {s.index} ({s.title})" if s else "during its setup")
         finally:
             try:
+                if not result.lab_gone:
+                    try:
+                        await self._collect_logs()
+                    except LabGone:
+                        pass  # the logs are evidence, not worth a wind-up missed
+                    except asyncio.CancelledError:
+                        self._interrupted("while reading the devices' logs")
                 try:
                     await self._wind_up()
                 except asyncio.CancelledError:  # interrupted as it wound up: it winds up again

@@ -4,6 +4,7 @@ the CTC's on the timeline, the faults marked on it, and the procedure and lab fi
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -51,3 +52,20 @@ def test_a_train_under_atp_is_plotted_with_its_curves_code_and_brakes(tmp_path: 
     assert run.returncode == 0, run.stdout + run.stderr
     page = (tmp_path / "r" / "train-hold-dispatch.html").read_text(encoding="utf-8")
     assert 'data-supervised="T1"' in page  # the train device's EBI/SBI/permitted were sampled
+
+
+def test_the_devices_logs_show_the_refusals_and_their_reasons(tmp_path: Path) -> None:
+    procedure = PROCEDURE.with_name("route_conflict_refused.yaml")
+    run = subprocess.run(
+        [sys.executable, "-m", "ktcs_bench.cli.main", "--no-colour", "test", "run",
+         str(procedure), "--report", str(tmp_path / "r")],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stdout + run.stderr
+    page = (tmp_path / "r" / "route-conflict-refused.html").read_text(encoding="utf-8")
+    assert re.search(r'<details class="log" data-device="ixl18">', page)
+    assert re.search(r"<b>[^<]*rejected: route conflicts</b>", page)  # the CTC's and the IXL's
+    assert re.search(r"<b>[^<]*rejected: point locked</b>", page)
+    logs = json.loads((tmp_path / "r" / "results.json").read_text(encoding="utf-8"))
+    texts = [e["text"] for e in logs["procedures"][0]["logs"]["ixl18"]]
+    assert any("refused" in t or "rejected" in t for t in texts)
