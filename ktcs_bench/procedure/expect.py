@@ -145,10 +145,19 @@ class Expectation:
     predicate: Predicate
     devices: tuple[str, ...] = ()  # the devices it reads (their events: snapshot at each action)
     links: tuple[str, ...] = ()  # the links whose captures it reads
+    other: Reader | None = None  # a second live value it is compared with (`< train T2 tail`)
+    offset: float = 0.0  # added to the other value (`- 200`)
 
     async def check(self, obs: Observer) -> tuple[bool, Any]:
         seen = await self.read(obs)
-        return self.predicate.test(seen), seen
+        if self.other is None:
+            return self.predicate.test(seen), seen
+        other = _number(await self.other(obs))
+        if other is None:
+            return False, f"{seen} (the value compared with: nothing)"
+        against = other + self.offset
+        ok = Predicate(self.predicate.op, (repr(against),)).test(seen)
+        return ok, f"{seen} (against {against:g})"
 
 
 def _route_status(text: object) -> str:
@@ -466,6 +475,34 @@ PROBES: dict[str, Callable[[LabNames, list[str]], tuple[Reader, list[str], tuple
 }
 
 
+COMPARE = (">", ">=", "<", "<=")
+
+
+def _live_right_side(rest: Sequence[str]) -> bool:
+    """`< train T2 tail - 200`: an order compared with another live value, not a number."""
+    return len(rest) >= 2 and rest[0] in COMPARE and rest[1].lower() in PROBES
+
+
+def _right_side(names: LabNames, words: Sequence[str]) -> tuple[Reader, float, tuple[str, ...]]:
+    """The other value's reader, the offset added to it (`+ N`, `- N` at the end) and the
+    devices it reads."""
+    w = list(words)
+    offset = 0.0
+    if len(w) >= 3 and w[-2] in ("+", "-"):
+        n = _number(w[-1])
+        if n is None:
+            raise StepError(f"{w[-2]} takes a number, not {w[-1]!r}")
+        offset = n if w[-2] == "+" else -n
+        w = w[:-2]
+    head = w[0].lower()
+    if head in ("event", "frame"):
+        raise StepError("a live value is compared with a value, not with an event or a frame")
+    read, left, devices = PROBES[head](names, w[1:])
+    if left:
+        raise StepError(f"after the value compared with: {' '.join(left)!r} (only + N or - N)")
+    return read, offset, devices
+
+
 def parse_expectation(text: str, names: LabNames) -> Expectation:
     """Words -> an Expectation; StepError naming what is wrong."""
     try:
@@ -493,6 +530,10 @@ def parse_expectation(text: str, names: LabNames) -> Expectation:
         predicate = Predicate("absent" if negated else "occurs")
         if head == "frame":
             links = (words[1],)
+    elif _live_right_side(rest):
+        other, offset, more = _right_side(names, rest[1:])
+        return Expectation(text, read, Predicate(rest[0], ("0",)), (*devices, *more), links,
+                           other, offset)  # fmt: skip
     else:
         predicate = parse_predicate(rest)
         if head == "code" and predicate.op in ("is", "is not"):

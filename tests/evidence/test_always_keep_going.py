@@ -84,3 +84,33 @@ def test_always_of_an_event_is_refused_before_anything_runs(tmp_path: Path) -> N
     text = ALWAYS.replace("  - ixl 20 signal 21 is R\n", '  - event ixl18 "route"\n')
     code, _doc, err = run(tmp_path, text)
     assert code == 2 and "always[1]: always: holds of a state, not of an event" in err, err
+
+
+COMPARE = f"""\
+id: compare
+title: two placed trains compared live
+verifies: [SYS-SAFE-02]
+setup:
+  lab: '{QUIET}'
+  trains:
+    - {{id: T1, head: 300, length_m: 40}}
+    - {{id: T2, head: 900, length_m: 40}}
+always:
+  - train T1 head < train T2 tail - 200
+steps:
+  - expect: train T1 head < train T2 tail - 500
+  - expect: train T1 head > train T2 tail
+    within: 1s
+"""
+
+
+def test_an_expectation_compares_two_live_values(tmp_path: Path) -> None:
+    code, doc, err = run(tmp_path, COMPARE)
+    assert code == 1, err
+    steps = doc["steps"]
+    assert steps[0]["verdict"] == "pass" and steps[0]["seen"] == "300.0 (against 360)"
+    assert steps[1]["verdict"] == "fail" and steps[1]["seen"] == "300.0 (against 860)"
+    assert doc["broken"] == []  # 300 < 860 - 200 held throughout
+    bad = COMPARE.replace("train T2 tail - 500", "train T2 tail - lots")
+    code, _doc, err = run(tmp_path, bad)
+    assert code == 2 and "- takes a number, not 'lots'" in err, err
