@@ -147,8 +147,16 @@ class Expectation:
     links: tuple[str, ...] = ()  # the links whose captures it reads
     other: Reader | None = None  # a second live value it is compared with (`< train T2 tail`)
     offset: float = 0.0  # added to the other value (`- 200`)
+    among: tuple[Reader, ...] = ()  # `at most N of A, B is ...`: the values counted
+    bound: tuple[str, int] | None = None  # ("most" | "least", N)
 
     async def check(self, obs: Observer) -> tuple[bool, Any]:
+        if self.bound is not None:
+            seen_all = [await r(obs) for r in self.among]
+            hits = sum(self.predicate.test(v) for v in seen_all)
+            word, n = self.bound
+            ok = hits <= n if word == "most" else hits >= n
+            return ok, f"{hits} of {len(seen_all)} ({', '.join(map(str, seen_all))})"
         seen = await self.read(obs)
         if self.other is None:
             return self.predicate.test(seen), seen
@@ -503,6 +511,44 @@ def _right_side(names: LabNames, words: Sequence[str]) -> tuple[Reader, float, t
     return read, offset, devices
 
 
+def _one_value(names: LabNames, words: list[str]) -> tuple[Reader, tuple[str, ...]]:
+    """A value named alone (`ixl 18 signal 12`), its reader and the devices it reads."""
+    if not words:
+        raise StepError("an empty value in the list")
+    head = words[0].lower()
+    if head in ("signal", "point") and len(words) >= 3:
+        words, head = ["ixl", words[1], head, *words[2:]], "ixl"
+    probe = PROBES.get(head)
+    if probe is None or head in ("event", "frame"):
+        raise StepError(f"{words[0]!r} is no value to count (one of: "
+                        f"{', '.join(p for p in PROBES if p not in ('event', 'frame'))})")  # fmt: skip
+    read, left, devices = probe(names, words[1:])
+    if left:
+        raise StepError(f"after {' '.join(words[: len(words) - len(left)])!r}: {' '.join(left)!r}")
+    return read, devices
+
+
+def _counted(text: str, words: list[str], names: LabNames) -> Expectation:
+    """`at most N of A, B, ... PREDICATE` (or `at least`): how many of the values satisfy it."""
+    if len(words) < 5 or words[3].lower() != "of" or not words[2].isdigit():
+        raise StepError("at most N of VALUE, VALUE ... is V (or at least N of ...)")
+    body = words[4:]
+    at = next((i for i, w in enumerate(body) if w in ("is", ">", ">=", "<", "<=", "contains",
+                                                       "lacks")), None)  # fmt: skip
+    if not at:
+        raise StepError("at most N of VALUE, VALUE ...: say what they are (is V, > N, ...)")
+    reads: list[Reader] = []
+    devices: list[str] = []
+    for part in " ".join(body[:at]).split(","):
+        read, devs = _one_value(names, part.split())
+        reads.append(read)
+        devices += devs
+    predicate = parse_predicate(body[at:])
+    bound = (words[1].lower(), int(words[2]))
+    return Expectation(text, reads[0], predicate, tuple(dict.fromkeys(devices)),
+                       among=tuple(reads), bound=bound)  # fmt: skip
+
+
 def parse_expectation(text: str, names: LabNames) -> Expectation:
     """Words -> an Expectation; StepError naming what is wrong."""
     try:
@@ -511,6 +557,8 @@ def parse_expectation(text: str, names: LabNames) -> Expectation:
         raise StepError(f"cannot read {text!r}: {exc}") from None
     if not words:
         raise StepError("empty expectation")
+    if words[0].lower() == "at" and len(words) > 1 and words[1].lower() in ("most", "least"):
+        return _counted(text, words, names)
     negated = words[0].lower() == "no"
     if negated:
         words = words[1:]

@@ -114,3 +114,32 @@ def test_an_expectation_compares_two_live_values(tmp_path: Path) -> None:
     bad = COMPARE.replace("train T2 tail - 500", "train T2 tail - lots")
     code, _doc, err = run(tmp_path, bad)
     assert code == 2 and "- takes a number, not 'lots'" in err, err
+
+
+COUNTED = f"""\
+id: counted
+title: of two signals at 18 at most one clears, at least one stays at stop
+verifies: [IXL-INV-01]
+setup: {{lab: '{QUIET}'}}
+always:
+  - at most 1 of ixl 18 signal 01, ixl 18 signal 02 is not R
+  - at least 1 of ixl 18 signal 01, ixl 18 signal 02 is R
+steps:
+  - ctc: route set 18 S1 S11
+  - expect: at least 1 of ixl 18 signal 01, ixl 18 signal 02 is Y,YG,G
+    within: 15s
+  - expect: at most 0 of ixl 18 signal 01, ixl 18 signal 02 is not R
+    within: 1s
+"""
+
+
+def test_at_most_and_at_least_count_the_values_that_hold(tmp_path: Path) -> None:
+    code, doc, err = run(tmp_path, COUNTED)
+    assert code == 1, err
+    assert doc["broken"] == []  # one cleared, the other stayed at stop: both always held
+    steps = doc["steps"]
+    assert [s["verdict"] for s in steps] == ["pass", "pass", "fail"]
+    assert steps[2]["seen"].startswith("1 of 2 (")
+    bad = COUNTED.replace("at most 0 of", "at most none of")
+    code, _doc, err = run(tmp_path, bad)
+    assert code == 2 and "at most N of VALUE" in err, err
