@@ -5,6 +5,10 @@ loader, the same runner). Its tags become marks (`pytest -m interlocking`, a hyp
 its requirement ids JUnit properties (`--junitxml`), a failed step the assertion message; a file
 `test run` would refuse is a collection error naming file and place.
 
+Tests written in Python get the same `LabAccess` the procedures use through the `ktcs_lab`
+fixture: `ktcs_lab.run(check, lab)` runs `await check(access)` on a fresh lab in one process on
+the virtual clock, or -- with `--ktcs-live LAB` -- on that running `lab up`.
+
 Registered as a `pytest11` entry point of the package (installed: `pytest emulators/procedures`);
 without the installation, `pytest -p ktcs_bench.procedure.pytest_plugin emulators/procedures`.
 Each item makes its own lab, so pytest-xdist may spread them over workers (`-n 2`).
@@ -12,11 +16,12 @@ Each item makes its own lab, so pytest-xdist may spread them over workers (`-n 2
 
 from __future__ import annotations
 
+import asyncio
 import re
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 
@@ -33,6 +38,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption("--ktcs-catalogue", metavar="FILE", default=None,
                     help="the requirements catalogue procedures' `verifies:` ids are checked "
                          "against (default: the shipped one)")  # fmt: skip
+    group.addoption("--ktcs-live", metavar="LAB", default=None,
+                    help="the ktcs_lab fixture attaches to this running `lab up` instead of "
+                         "making a lab in the test's process")  # fmt: skip
 
 
 def is_procedure_file(path: Path) -> bool:
@@ -113,6 +121,48 @@ class ProcedureItem(pytest.Item):
 
     def reportinfo(self) -> tuple[Path, int, str]:
         return self.path, 0, f"procedure {self.procedure.id}: {self.procedure.title}"
+
+
+T = TypeVar("T")
+
+
+class KtcsLab:
+    """What the `ktcs_lab` fixture gives a test: `run(check, lab)` awaits `check(access)` with
+    a `lab.access.LabAccess` -- in one process on the virtual clock by default (the lab file or
+    shipped name `lab`, files written under the test's tmp_path), on the running lab `live`
+    (`--ktcs-live LAB`) otherwise, where `lab` is not used."""
+
+    def __init__(self, live: str | None, out: Path) -> None:
+        self.live = live
+        self.out = out
+        self.runs = 0
+
+    def run(self, check: Callable[[Any], Awaitable[T]], lab: str = "reference") -> T:
+        if self.live is not None:
+            return asyncio.run(self._live(check))
+        from ktcs_bench.lab.topology import load_lab, resolve_lab_path
+
+        self.runs += 1
+        out = self.out / f"lab{self.runs}"
+        result: T = _in_process()(load_lab(resolve_lab_path(lab)), clock="virtual",
+                                  out=out).run(check)  # fmt: skip
+        return result
+
+    async def _live(self, check: Callable[[Any], Awaitable[T]]) -> T:
+        from ktcs_bench.lab.access_live import LiveLabAccess
+
+        assert self.live is not None
+        access = LiveLabAccess.attach(self.live)
+        try:
+            return await check(access)
+        finally:
+            await access.close()
+
+
+@pytest.fixture
+def ktcs_lab(request: pytest.FixtureRequest, tmp_path: Path) -> KtcsLab:
+    """A lab for a test written in Python, reached as the procedures reach theirs."""
+    return KtcsLab(request.config.getoption("ktcs_live", None), tmp_path)
 
 
 def _in_process() -> Any:

@@ -74,3 +74,34 @@ def test_a_procedure_naming_an_unknown_requirement_is_a_collection_error(tmp_pat
     run = pytest_run(str(folder), cwd=tmp_path)
     assert run.returncode == 2, run.stdout + run.stderr  # pytest: errors during collection
     assert "verifies[0]: 'IXL-INV-77' is not a requirement" in run.stdout
+
+
+FIXTURE_TEST = f"""\
+from ktcs_bench import messages as msg
+
+
+def test_a_route_through_the_lab_access(ktcs_lab) -> None:
+    async def check(access):
+        for _ in range(120):  # up to 60 s of lab time for the CTC to see station 18 synced
+            s = (await access.device("ctc", msg.Status()))["status"]["stations"]["18"]
+            if s["link"] == "up" and s["synced"]:
+                break
+            await access.sleep(0.5)
+        answer = await access.device("ctc", msg.Route(station=18, entry="01", exit="11"))
+        assert answer["ok"], answer
+        for _ in range(60):
+            await access.sleep(0.5)
+            routes = (await access.device("ixl18", msg.Status()))["status"]["routes"]
+            if "0111" in routes:
+                return access.now()
+        raise AssertionError(f"route 0111 not set: {{routes}}")
+
+    assert ktcs_lab.run(check, "{QUIET}") > 0
+"""
+
+
+def test_a_python_test_reaches_a_lab_with_the_ktcs_lab_fixture(tmp_path: Path) -> None:
+    (tmp_path / "test_lab.py").write_text(FIXTURE_TEST, encoding="utf-8")
+    run = pytest_run("-q", str(tmp_path / "test_lab.py"), cwd=tmp_path)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "1 passed" in run.stdout
