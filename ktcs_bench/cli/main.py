@@ -38,6 +38,7 @@ examples:
   ktcs-bench conformance --role atc --target /dev/ttyUSB0
   ktcs-bench scenario run emulators/scenarios/seed001_follower.yaml
   ktcs-bench test run emulators/procedures/*.yaml --junit junit.xml --report out/
+  ktcs-bench trace junit.xml out/ --out trace/        # requirements -> checks -> verdicts
   ktcs-bench dissector --install                     # Wireshark shows ktcs1/ktcs2 in captures
 
 colour: on a terminal, unless NO_COLOR is set; --colour / --no-colour (any command) decide.
