@@ -520,6 +520,7 @@ def test_an_interlocking_that_restarts_with_its_line_clear_is_free_at_once(line:
     assert any("start-up locking released (the station is clear)" in e.text for e in rig.events)
 
 
+@pytest.mark.requirement("IXL-INV-02")
 def test_a_restarted_interlocking_demands_no_point_until_a_route_or_a_control_does(
     line: Line,
 ) -> None:
@@ -551,6 +552,7 @@ def test_a_restarted_interlocking_demands_no_point_until_a_route_or_a_control_do
     assert cold.full_state("io")["PNC2031"] == 1
 
 
+@pytest.mark.requirement("IXL-INV-02")
 def test_a_restarted_interlocking_never_throws_a_point_detected_wrong_under_a_train(
     line: Line,
 ) -> None:
@@ -575,6 +577,7 @@ def test_a_restarted_interlocking_never_throws_a_point_detected_wrong_under_a_tr
     assert rig.io.blades()["32"] == "moving"
 
 
+@pytest.mark.requirement("IXL-INV-03")
 def test_a_call_is_believed_only_once_the_trackside_has_answered_it(line: Line) -> None:
     """Found by the whole-system search (seed 1244): point 32 of station 18 lay normal, its
     detection crossed (reported reverse). Route 02-22 called it reverse; another control came
