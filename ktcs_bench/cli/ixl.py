@@ -20,7 +20,7 @@ examples:
   ktcs-bench ixl table --out /tmp/tables            # the reference line's control tables
   ktcs-bench ixl table /tmp/line10/line.yaml --out /tmp/t10
   ktcs-bench ixl verify                             # data checks, then every reachable state
-  ktcs-bench ixl verify --json --bound depth=6,requests=1
+  ktcs-bench ixl verify --json --bound 'requests=2,trains=1'
   ktcs-bench ixl verify --data-only /tmp/line10/line.yaml
 
 LINE is a line file (default: the shipped reference line, emulators/lines/reference.yaml).
@@ -53,14 +53,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     verify.add_argument("--json", action="store_true", help="one JSON document on stdout")
     verify.add_argument(
         "--bound", default="", metavar="K=V,...",
-        help="the exploration's bound, e.g. depth=8,requests=2,trains=1,faults=1 "
-        "(default: the bound the reference line verifies in within a minute)",
+        help="the exploration's bound: campaigns separated by ';', each key=value,... of depth, "
+        "requests, points, modes, trains, faults, env, states (default: the campaigns the "
+        "reference line verifies in within a minute, printed)",
     )  # fmt: skip
     verify.add_argument("--station", type=int, action="append", metavar="N",
                         help="explore only this station (repeatable)")  # fmt: skip
     verify.add_argument("--data-only", action="store_true", help="the data checks alone")
-    verify.add_argument("--procedures", type=Path, metavar="DIR",
-                        help="write each violation as a procedure file here")  # fmt: skip
     verify.set_defaults(handler=_verify)
 
 
@@ -93,7 +92,7 @@ def _verify(args: argparse.Namespace) -> int:
     line = _load(args.line)
     result = run_verify(
         line, bound_text=args.bound, stations=args.station, data_only=args.data_only,
-        procedures=args.procedures, out=None if args.json else sys.stdout,
+        out=None if args.json else sys.stdout,
     )  # fmt: skip
     if args.json:
         print(json.dumps(result, indent=1))

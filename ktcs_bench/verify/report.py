@@ -1,14 +1,20 @@
-"""`ixl verify` as a whole: the data checks, then the exploration of each station, printed as it
-goes and gathered into the JSON document the command prints (`run_verify`)."""
+"""`ixl verify` as a whole: the data checks, then the exploration of each station under each
+campaign of the bound, printed as it goes and gathered into the JSON document the command prints
+(`run_verify`)."""
 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from typing import Any, TextIO
 
+from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
 from ktcs_bench.verify.data import check_line
+from ktcs_bench.verify.explore import Bound, Violation, explore_station
+
+
+def describe(step: tuple[str, ...]) -> str:
+    return " ".join(step)
 
 
 def run_verify(
@@ -17,26 +23,70 @@ def run_verify(
     bound_text: str = "",
     stations: list[int] | None = None,
     data_only: bool = False,
-    procedures: Path | None = None,
     out: TextIO | None = None,
 ) -> dict[str, Any]:
     """Everything `ixl verify` reports: keys states, transitions, bound, seconds, stations,
     findings, violations. `out`: where to print the human account as it goes (None: silent)."""
     started = time.monotonic()
+    campaigns = Bound.parse_all(bound_text)
+    chosen = sorted(line.stations) if not stations else sorted(set(stations))
+    for number in chosen:
+        if number not in line.stations:
+            raise UsageError(f"no station {number} on line {line.name} "
+                             f"({', '.join(map(str, sorted(line.stations)))})")  # fmt: skip
     findings = check_line(line)
-    if out is not None:
-        print(f"line {line.name}: data against the geometry, {len(line.stations)} station(s): "
-              f"{len(findings) or 'no'} finding(s)", file=out)  # fmt: skip
-        for f in findings:
-            print(f"  FINDING {f}", file=out)
+
+    def say(text: str) -> None:
+        if out is not None:
+            print(text, file=out, flush=True)
+
+    say(f"line {line.name}: the data against the geometry, {len(line.stations)} station(s): "
+        f"{len(findings) or 'no'} finding(s)")  # fmt: skip
+    for f in findings:
+        say(f"  FINDING {f}")
     result: dict[str, Any] = {
         "states": 0,
         "transitions": 0,
-        "bound": None,
+        "bound": [c.text() for c in campaigns],
         "seconds": 0.0,
         "stations": {},
         "findings": [f.as_dict() for f in findings],
         "violations": [],
     }
+    if not data_only:
+        say("every reachable state of the interlocking core, station by station, within the "
+            "bound (one search per campaign):")  # fmt: skip
+        for c in campaigns:
+            say(f"  campaign {c.text()}")
+    violations: list[Violation] = []
+    for number in [] if data_only else chosen:
+        totals = {"states": 0, "transitions": 0, "seconds": 0.0, "complete": True}
+        for c in campaigns:
+            r = explore_station(line, number, c)
+            totals["states"] += r.states
+            totals["transitions"] += r.transitions
+            totals["seconds"] += r.seconds
+            totals["complete"] = bool(totals["complete"]) and r.complete
+            violations += r.violations
+            for v in r.violations:
+                say(f"  VIOLATION station {number} ({c.text()}): {'; '.join(v.what)}")
+                say(f"    shortest input sequence ({len(v.steps)} steps):")
+                for i, step in enumerate(v.steps, 1):
+                    say(f"      {i:3d}. {describe(step)}")
+        rate = totals["states"] / totals["seconds"] if totals["seconds"] else 0.0
+        say(f"  station {number}: {totals['states']} states, {totals['transitions']} transitions, "
+            f"{totals['seconds']:.1f} s ({rate:.0f} states/s)"
+            f"{'' if totals['complete'] else ', STOPPED SHORT at the state cap'}")  # fmt: skip
+        result["states"] += totals["states"]
+        result["transitions"] += totals["transitions"]
+        result["stations"][str(number)] = {
+            **totals, "seconds": round(float(totals["seconds"]), 3),
+            "states_per_second": round(rate),
+        }  # fmt: skip
+    result["violations"] = [v.as_dict() for v in violations]
     result["seconds"] = round(time.monotonic() - started, 3)
+    if not data_only:
+        say(f"{result['states']} states, {result['transitions']} transitions in "
+            f"{result['seconds']:.1f} s: {len(violations) or 'no'} violation(s) of SPEC §6.2 "
+            "invariants 1-6 and §6.7")  # fmt: skip
     return result
