@@ -144,8 +144,10 @@ def explore_station(
         result.depth_reached = max(result.depth_reached, len(path))
         if len(path) >= bound.depth:
             continue
-        for step in list(copier.load(data).steps(spawns)):
-            nxt = copier.load(data)
+        parent = copier.load(data)
+        steps = list(parent.steps(spawns))
+        for i, step in enumerate(steps):
+            nxt = parent if i == len(steps) - 1 else copier.load(data)
             nxt.apply(step)
             nxt.forget_logs()
             result.transitions += 1

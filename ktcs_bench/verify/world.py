@@ -188,11 +188,6 @@ class World:
             for link, up in self.links.items():
                 if up:
                     yield ("link_down", link)
-            for env in self.env.values():
-                if env.link_up:
-                    yield ("neighbour_link_down", env.interval)
-                if env.holds and env.link_up:
-                    yield ("neighbour_forgets", env.interval)
         if self.failed or any(pm.fault for pm in self.io.points.values()):
             yield ("repair",)
         for link, up in self.links.items():
@@ -210,6 +205,9 @@ class World:
             yield ("neighbour_reads", iv)
         if self.budget.env <= 0:
             return
+        yield ("neighbour_link_down", iv)
+        if env.holds:
+            yield ("neighbour_forgets", iv)
         phi = env.seen.get(n.phi(iv), 0)
         if not env.holds and not env.asking and phi == 1:
             yield ("neighbour_asks", iv)
@@ -299,20 +297,25 @@ class World:
             rig.set_link(args[0], up)
         else:
             self._apply_env(kind, self.env[args[0]])
+        if b.env <= 0:
+            # a neighbour that may no longer act reads what it is told at once: its reading
+            # changes nothing for this IXL (only an asker takes anything from it)
+            for env in self.env.values():
+                if env.link_up and not env.asking and self.rig.to_neighbour[env.role]:
+                    self._env_read(env)
 
     def _apply_env(self, kind: str, env: EnvEnd) -> None:
         iv = env.interval
         if kind == "neighbour_link_up":
             self._env_link(env, True)
             return
-        if kind == "neighbour_link_down":
-            self.budget.faults -= 1
-            self._env_link(env, False)
-            return
         if kind == "neighbour_reads":
             self._env_read(env)
             return
-        self.budget.env -= kind not in ("neighbour_forgets",)
+        self.budget.env -= 1
+        if kind == "neighbour_link_down":
+            self._env_link(env, False)
+            return
         send: dict[str, int] = {}
         if kind == "neighbour_asks":
             env.asking = True
@@ -327,7 +330,6 @@ class World:
             env.holds, env.nobody = True, False
             send[n.phi(iv)] = 1
         elif kind == "neighbour_forgets":
-            self.budget.faults -= 1
             env.holds = env.drl = env.asking = False
             send.update({n.phi(iv): 0, n.drl(iv): 0, n.prq(iv): 0})
         elif kind == "neighbour_departure_locked":
