@@ -60,6 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     verify.add_argument("--station", type=int, action="append", metavar="N",
                         help="explore only this station (repeatable)")  # fmt: skip
     verify.add_argument("--data-only", action="store_true", help="the data checks alone")
+    verify.add_argument("--procedures", type=Path, metavar="DIR",
+                        help="write each violation as a procedure for `test run` (reference "
+                        "line)")  # fmt: skip
     verify.set_defaults(handler=_verify)
 
 
@@ -92,7 +95,7 @@ def _verify(args: argparse.Namespace) -> int:
     line = _load(args.line)
     result = run_verify(
         line, bound_text=args.bound, stations=args.station, data_only=args.data_only,
-        out=None if args.json else sys.stdout,
+        procedures=args.procedures, out=None if args.json else sys.stdout,
     )  # fmt: skip
     if args.json:
         print(json.dumps(result, indent=1))

@@ -5,12 +5,20 @@ campaign of the bound, printed as it goes and gathered into the JSON document th
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Any, TextIO
 
 from ktcs_bench.errors import UsageError
+from ktcs_bench.station.loader import default_line_path
 from ktcs_bench.station.model import Line
 from ktcs_bench.verify.data import check_line
 from ktcs_bench.verify.explore import Bound, Violation, explore_station
+from ktcs_bench.verify.procedure import write_procedure
+
+
+def _reference(line: Line) -> bool:
+    """The line is the shipped reference line (the procedures' quiet lab runs it)."""
+    return Path(line.file).resolve() == default_line_path().resolve()
 
 
 def describe(step: tuple[str, ...]) -> str:
@@ -23,10 +31,13 @@ def run_verify(
     bound_text: str = "",
     stations: list[int] | None = None,
     data_only: bool = False,
+    procedures: Path | None = None,
     out: TextIO | None = None,
 ) -> dict[str, Any]:
     """Everything `ixl verify` reports: keys states, transitions, bound, seconds, stations,
-    findings, violations. `out`: where to print the human account as it goes (None: silent)."""
+    findings, violations. `procedures`: a folder to write each violation into as a procedure for
+    `test run` on the reference lab (the reference line only). `out`: where to print the human
+    account as it goes (None: silent)."""
     started = time.monotonic()
     campaigns = Bound.parse_all(bound_text)
     chosen = sorted(line.stations) if not stations else sorted(set(stations))
@@ -73,6 +84,11 @@ def run_verify(
                 say(f"    shortest input sequence ({len(v.steps)} steps):")
                 for i, step in enumerate(v.steps, 1):
                     say(f"      {i:3d}. {describe(step)}")
+                if procedures is not None and _reference(line):
+                    path = write_procedure(line, c, v, procedures, len(violations))
+                    say(f"    written as a procedure: {path} (ktcs-bench test run {path})")
+                elif procedures is not None:
+                    say("    (no procedure written: the procedures' lab runs the reference line)")
         rate = totals["states"] / totals["seconds"] if totals["seconds"] else 0.0
         say(f"  station {number}: {totals['states']} states, {totals['transitions']} transitions, "
             f"{totals['seconds']:.1f} s ({rate:.0f} states/s)"

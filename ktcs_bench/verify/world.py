@@ -20,7 +20,7 @@ from typing import Any
 from ktcs_bench import kinds
 from ktcs_bench.field.trackside import Trackside
 from ktcs_bench.ixl import Interlocking, RouteStatus
-from ktcs_bench.ixl.interlocking import IxlOutput
+from ktcs_bench.ixl.interlocking import ControlResult, IxlOutput
 from ktcs_bench.ixl.rig import StationRig
 from ktcs_bench.station.geometry import (
     GeometryError,
@@ -249,26 +249,29 @@ class World:
 
     # ------------------------------------------------------------------ applying an input
 
-    def apply(self, step: Step) -> None:
+    def apply(self, step: Step) -> ControlResult | None:
+        """Feed one input; the interlocking's answer when it was a control answered at once."""
         kind, args = step[0], step[1:]
         rig, st, now = self.rig, self.st, self.now
         b = self.budget
+        answer: ControlResult | None = None
         if kind == "timer":
             due = rig.next_deadline()
             assert due is not None
             rig.handle_timer(max(due, now))
         elif kind == "route":
             b.requests -= 1
-            rig.request(n.rsc(st, args[0]))
+            answer = rig.request(n.rsc(st, args[0]))
         elif kind == "cancel":
-            rig.request(n.rcc(st, args[0]))
+            answer = rig.request(n.rcc(st, args[0]))
         elif kind == "point":
             b.points -= 1
-            rig.request(n.src(st, args[0]) if args[1] == "reverse" else n.snc(st, args[0]))
+            code = n.src(st, args[0]) if args[1] == "reverse" else n.snc(st, args[0])
+            answer = rig.request(code)
         elif kind == "mode":
             b.modes -= 1
             if args[0] == "center":
-                rig.request(n.cmq(st))
+                answer = rig.request(n.cmq(st))
             else:
                 rig.take(self.ixl.local(args[0], now))
         elif kind == "train":
@@ -303,6 +306,7 @@ class World:
             for env in self.env.values():
                 if env.link_up and not env.asking and self.rig.to_neighbour[env.role]:
                     self._env_read(env)
+        return answer
 
     def _apply_env(self, kind: str, env: EnvEnd) -> None:
         iv = env.interval
