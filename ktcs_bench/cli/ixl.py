@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
+from ktcs_bench.cli._common import positive
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
 
@@ -60,6 +62,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     verify.add_argument("--station", type=int, action="append", metavar="N",
                         help="explore only this station (repeatable)")  # fmt: skip
     verify.add_argument("--data-only", action="store_true", help="the data checks alone")
+    verify.add_argument(
+        "--jobs", type=positive(int), default=min(2, os.cpu_count() or 1), metavar="N",
+        help="searches side by side in N processes (default: 2, or 1 on one core)",
+    )  # fmt: skip
     verify.add_argument("--procedures", type=Path, metavar="DIR",
                         help="write each violation as a procedure for `test run` (reference "
                         "line)")  # fmt: skip
@@ -95,7 +101,7 @@ def _verify(args: argparse.Namespace) -> int:
     line = _load(args.line)
     result = run_verify(
         line, bound_text=args.bound, stations=args.station, data_only=args.data_only,
-        procedures=args.procedures, out=None if args.json else sys.stdout,
+        procedures=args.procedures, jobs=args.jobs, out=None if args.json else sys.stdout,
     )  # fmt: skip
     if args.json:
         print(json.dumps(result, indent=1))

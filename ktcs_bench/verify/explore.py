@@ -10,6 +10,7 @@ stations.
 from __future__ import annotations
 
 import hashlib
+import marshal
 import time
 from collections import deque
 from dataclasses import asdict, dataclass, field, fields
@@ -116,6 +117,11 @@ def digest(data: bytes) -> bytes:
     return hashlib.blake2b(data, digest_size=16).digest()
 
 
+def _key(world: World, static: frozenset[int]) -> bytes:
+    """The canonical state as a short digest (kept per state: small, and cheap to compare)."""
+    return digest(marshal.dumps(world.key(static), 2))  # version 2: no shared references
+
+
 def start(line: Line, number: int, bound: Bound) -> World:
     world = World(line.view(number), LineGeometry(line), bound.budget())
     world.forget_logs()
@@ -137,7 +143,7 @@ def explore_station(
     if bad:
         result.violations.append(Violation(number, bad, []))
         return result
-    seen = {root.key(static) if canonical else digest(copier.dump(root))}
+    seen = {_key(root, static) if canonical else digest(copier.dump(root))}
     frontier: deque[tuple[bytes, tuple[Step, ...]]] = deque([(copier.dump(root), ())])
     while frontier:
         data, path = frontier.popleft()
@@ -158,7 +164,7 @@ def explore_station(
                     frontier.clear()
                     break
                 continue
-            key = nxt.key(static) if canonical else digest(copier.dump(nxt))
+            key = _key(nxt, static) if canonical else digest(copier.dump(nxt))
             if key in seen:
                 continue
             dumped = copier.dump(nxt)

@@ -4,7 +4,10 @@ campaign of the bound, printed as it goes and gathered into the JSON document th
 
 from __future__ import annotations
 
+import multiprocessing
 import time
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -12,13 +15,29 @@ from ktcs_bench.errors import UsageError
 from ktcs_bench.station.loader import default_line_path
 from ktcs_bench.station.model import Line
 from ktcs_bench.verify.data import check_line
-from ktcs_bench.verify.explore import Bound, Violation, explore_station
+from ktcs_bench.verify.explore import Bound, StationResult, Violation, explore_station
 from ktcs_bench.verify.procedure import write_procedure
 
 
 def _reference(line: Line) -> bool:
     """The line is the shipped reference line (the procedures' quiet lab runs it)."""
     return Path(line.file).resolve() == default_line_path().resolve()
+
+
+def _search(task: tuple[Line, int, Bound]) -> StationResult:
+    line, number, bound = task
+    return explore_station(line, number, bound)
+
+
+def _searches(tasks: list[tuple[Line, int, Bound]], jobs: int) -> Iterator[StationResult]:
+    """The searches' results in the tasks' order, run here or in `jobs` worker processes."""
+    if jobs <= 1 or len(tasks) <= 1:
+        yield from map(_search, tasks)
+        return
+    methods = multiprocessing.get_all_start_methods()
+    context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        yield from pool.map(_search, tasks)
 
 
 def describe(step: tuple[str, ...]) -> str:
@@ -32,11 +51,13 @@ def run_verify(
     stations: list[int] | None = None,
     data_only: bool = False,
     procedures: Path | None = None,
+    jobs: int = 1,
     out: TextIO | None = None,
 ) -> dict[str, Any]:
     """Everything `ixl verify` reports: keys states, transitions, bound, seconds, stations,
     findings, violations. `procedures`: a folder to write each violation into as a procedure for
-    `test run` on the reference lab (the reference line only). `out`: where to print the human
+    `test run` on the reference lab (the reference line only). `jobs`: searches run side by side
+    in so many processes (each search is independent: a station under one campaign). `out`: where to print the human
     account as it goes (None: silent)."""
     started = time.monotonic()
     campaigns = Bound.parse_all(bound_text)
@@ -70,10 +91,12 @@ def run_verify(
         for c in campaigns:
             say(f"  campaign {c.text()}")
     violations: list[Violation] = []
+    tasks = [] if data_only else [(line, number, c) for number in chosen for c in campaigns]
+    searched = iter(_searches(tasks, jobs))
     for number in [] if data_only else chosen:
         totals = {"states": 0, "transitions": 0, "seconds": 0.0, "complete": True}
         for c in campaigns:
-            r = explore_station(line, number, c)
+            r = next(searched)
             totals["states"] += r.states
             totals["transitions"] += r.transitions
             totals["seconds"] += r.seconds

@@ -691,39 +691,48 @@ _SKIP = frozenset({
     "view", "codes", "_names", "_controls", "_inputs", "_command_names", "_sent", "ctc", "atc",
     "on_ctc", "_points_in", "_departures", "intervals", "outputs", "tc_names", "neighbours",
     "tc_sources", "startup_release_s", "_expected", "peer_has_ttc", "now", "_paths",
+    # the trackside's relays and the rig's occupancy follow the trains and failures (in the key);
+    # the trackside's demands and lamp commands are the interlocking's outputs
+    "occupancy", "relays", "_demand", "_sgc",
 })  # fmt: skip
 PAST_S = 1000.0
 """A time further back than every timer of the station data is only "past"."""
 
 
-_PLAIN = (bool, int, str, type(None))
+_EXACT = frozenset({bool, int, str, type(None)})
 
 
 def _canon(obj: Any, now: float, static: frozenset[int]) -> Any:
-    """A hashable, order-free picture of `obj`: times relative to `now`, station data by id."""
-    if isinstance(obj, _PLAIN):
+    """A hashable, order-free picture of `obj` made of plain values (marshal takes it): times
+    relative to `now`, enums by value, station data by id."""
+    t = type(obj)
+    if t in _EXACT:
         return obj
-    if isinstance(obj, float):
-        rel = round(obj - now, 6)
+    if t is float:
+        rel = round(obj - now, 6) + 0.0  # no -0.0: equal times hash alike
         return "past" if rel < -PAST_S else rel
     if isinstance(obj, Enum):
         return obj.value
-    if isinstance(obj, dict):
-        if all(isinstance(v, _PLAIN) for v in obj.values()):
-            return tuple(sorted(obj.items(), key=_first))
-        return tuple(sorted(((k, _canon(v, now, static)) for k, v in obj.items()), key=_first))
-    if isinstance(obj, (set, frozenset)):
+    if t is dict:
+        items = [
+            (k if type(k) is str else _canon(k, now, static),
+             v if type(v) in _EXACT else _canon(v, now, static))
+            for k, v in obj.items()
+        ]  # fmt: skip
+        return tuple(sorted(items, key=_first))
+    if t is set or t is frozenset:
+        values = [v if type(v) in _EXACT else _canon(v, now, static) for v in obj]
         try:
-            return tuple(sorted(obj))
+            return tuple(sorted(values))
         except TypeError:
-            return tuple(sorted((_canon(v, now, static) for v in obj), key=repr))
-    if isinstance(obj, (list, tuple)):
-        return tuple([_canon(v, now, static) for v in obj])
+            return tuple(sorted(values, key=repr))
+    if t is list or t is tuple:
+        return tuple([v if type(v) in _EXACT else _canon(v, now, static) for v in obj])
     if id(obj) in static:
         return id(obj)
     names = getattr(obj, "__dict__", None)
     if names is None:
-        names = {s: getattr(obj, s) for s in _slots(type(obj))}
+        names = {s: getattr(obj, s) for s in _slots(t)}
     return tuple([_canon(v, now, static) for k, v in names.items() if k not in _SKIP])
 
 

@@ -79,3 +79,15 @@ def test_verify_reports_data_defects_and_core_violations_naming_the_route(
     assert set(result) == {"states", "transitions", "bound", "seconds", "stations", "findings",
                            "violations"}  # fmt: skip
     assert result["stations"]["20"]["states"] >= 1
+
+
+def test_searches_in_worker_processes_give_what_one_process_gives() -> None:
+    alone = run_verify(reference(), bound_text="requests=1;trains=1", stations=[18, 22])
+    side_by_side = run_verify(
+        reference(), bound_text="requests=1;trains=1", stations=[18, 22], jobs=2
+    )
+    for key in ("states", "transitions", "findings", "violations"):
+        assert alone[key] == side_by_side[key], key
+    assert [s["states"] for s in alone["stations"].values()] == [
+        s["states"] for s in side_by_side["stations"].values()
+    ]
