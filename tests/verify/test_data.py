@@ -11,6 +11,7 @@ from ktcs_bench.lab.generate import write_line
 from ktcs_bench.station import load_line
 from ktcs_bench.station.model import PointSetting
 from ktcs_bench.verify.data import Finding, check_line
+from ktcs_bench.verify.report import run_verify
 from ktcs_bench.verify.table import COLUMNS, index_html, station_csv, write_tables
 from tests.verify.seeds import reference, with_route, without_conflict
 
@@ -21,8 +22,13 @@ def found(findings: list[Finding], route: str, element: str, kind: str) -> bool:
 
 def test_shipped_and_generated_lines_are_clean(tmp_path: Path) -> None:
     assert check_line(reference()) == []
-    write_line(4, tmp_path)
-    assert check_line(load_line(tmp_path / "line.yaml")) == []
+    write_line(4, tmp_path / "line")
+    generated = load_line(tmp_path / "line" / "line.yaml")
+    assert check_line(generated) == []
+    written = write_tables(generated, tmp_path / "tables")
+    assert sorted(p.name for p in written) == ["12.csv", "14.csv", "16.csv", "18.csv", "index.html"]
+    result = run_verify(generated, bound_text="requests=1", stations=[14])
+    assert result["states"] > 10 and not result["findings"] and not result["violations"]
 
 
 def test_a_track_circuit_dropped_from_a_route_is_found() -> None:
