@@ -31,7 +31,7 @@ from ktcs_bench.station.geometry import (
     walk_route,
     walked_track_circuits,
 )
-from ktcs_bench.station.model import Direction, Interval, StationView, TrackCircuit, opposite
+from ktcs_bench.station.model import Direction, Interval, StationView, TrackCircuit
 from ktcs_bench.station_codes import names as n
 from ktcs_bench.station_codes.names import Function as F
 from ktcs_bench.station_codes.stations import neighbour_intervals
@@ -174,7 +174,7 @@ class World:
                 yield ("point", p, "reverse" if pm.target == "normal" else "normal")
         if b.modes > 0:
             yield from (("mode", "take"), ("mode", "center"), ("mode", "grant"))
-        if b.trains > 0 and len(self.trains) < 8:
+        if b.trains > 0:
             for tc, track, direction in spawns:
                 if self._spawn_ok(tc, direction):
                     yield ("train", tc, track or "-", direction)
@@ -806,6 +806,3 @@ def spawn_places(view: StationView) -> list[tuple[str, Track, Direction]]:
                 toward = iv.toward(view.number)
                 out.append((half[0] if toward == "up" else half[-1], None, toward))
     return out
-
-
-__all__ = ["Budget", "Copier", "Step", "World", "opposite", "spawn_places"]
