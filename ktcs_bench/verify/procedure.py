@@ -51,6 +51,8 @@ def procedure_steps(line: Line, bound: Bound, violation: Violation) -> list[dict
             entry = {"ctc": f"route {verb} {st} {r.entry} {r.exit}"}
         elif kind == "point":
             entry = {"ctc": f"point {args[1]} {st} {args[0]}"}
+        elif kind == "signal":
+            entry = {"ctc": f"signal {args[1]} {st} {args[0]}"}
         elif kind == "mode":
             entry = {"ctc": f"mode center {st}"} if args[0] == "center" else {
                 "local": f"{st} {args[0]}"}  # fmt: skip

@@ -109,6 +109,7 @@ class World:
         self.budget = budget
         self.trains: list[Train] = []
         self.failed: set[str] = set()
+        self.held_stop: set[str] = set()  # signals the operator holds at stop (accepted)
         self.links = {kinds.ATC: True, kinds.IO: True}
         self.violations: list[str] = []
         self._paths: dict[str, set[str]] = {}
@@ -174,6 +175,8 @@ class World:
                 yield ("point", p, "reverse" if pm.target == "normal" else "normal")
         if b.modes > 0:
             yield from (("mode", "take"), ("mode", "center"), ("mode", "grant"))
+            for sig in self.ixl.signals:
+                yield ("signal", sig, "release" if sig in self.held_stop else "stop")
         if b.trains > 0:
             for tc, track, direction in spawns:
                 if self._spawn_ok(tc, direction):
@@ -268,6 +271,11 @@ class World:
             b.points -= 1
             code = n.src(st, args[0]) if args[1] == "reverse" else n.snc(st, args[0])
             answer = rig.request(code)
+        elif kind == "signal":
+            b.modes -= 1
+            answer = rig.request(n.ssc(st, args[0]), int(args[1] == "stop"))
+            if answer is not None and answer.accepted:
+                (self.held_stop.add if args[1] == "stop" else self.held_stop.discard)(args[0])
         elif kind == "mode":
             b.modes -= 1
             if args[0] == "center":
@@ -614,6 +622,8 @@ class World:
     def _unsafe_proceed(self, signal: str) -> str | None:
         if not (self.links[kinds.ATC] and self.links[kinds.IO]):
             return "a link down"
+        if signal in self.held_stop:
+            return "the operator holding it at stop"
         set_routes = [rs for rs in self.ixl.routes.values()
                       if rs.route.entry == signal and rs.status is RouteStatus.SET]  # fmt: skip
         if len(set_routes) != 1:
@@ -668,6 +678,7 @@ class World:
             _canon(self.rig, now, static),
             tuple((t.tc, t.track, t.direction, t.at_m) for t in self.trains),
             tuple(sorted(self.failed)),
+            tuple(sorted(self.held_stop)),
             tuple(sorted(self.links.items())),
             tuple(
                 (
