@@ -28,6 +28,28 @@ from ktcs_bench.verify.explore import Bound, Violation, start
 QUIET_LAB = ("procedures", "labs", "quiet.yaml")
 
 
+REQUIREMENTS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("§6.2 (1)", ("IXL-INV-01",)),
+    ("§6.2 (2)", ("IXL-INV-02",)),
+    ("§6.2 (3, 4)", ("IXL-INV-03", "IXL-INV-04")),
+    ("§6.2 (5)", ("IXL-INV-05",)),
+    ("§6.6", ("IXL-INV-05",)),
+    ("§6.2 (6)", ("IXL-INV-06",)),
+    ("§6.7", ("SYS-SAFE-03",)),
+)
+"""The requirements catalogue's ids (emulators/requirements) each invariant the search checks is."""
+
+
+def requirements(what: list[str]) -> list[str]:
+    """The catalogue ids of the invariants a violation broke, for the procedure's `verifies:`."""
+    out: list[str] = []
+    for text in what:
+        for clause, ids in REQUIREMENTS:
+            if clause in text:
+                out += [i for i in ids if i not in out]
+    return out
+
+
 def procedure_steps(line: Line, bound: Bound, violation: Violation) -> list[dict[str, Any]]:
     """The violation's inputs replayed on a fresh core, each as a procedure step."""
     world = start(line, violation.station, bound)
@@ -114,7 +136,7 @@ def write_procedure(
     doc = {
         "id": f"verify-{violation.station}-{index}",
         "title": f"ixl verify: {'; '.join(violation.what)}",
-        "verifies": ["SPEC §13 (a counterexample of the exhaustive search, replayed)"],
+        "verifies": requirements(violation.what),
         "tags": ["verify", "counterexample", f"station{violation.station}"],
         "setup": {"lab": os.path.relpath(lab, out_dir.resolve())},
         "steps": procedure_steps(line, bound, violation),

@@ -31,7 +31,9 @@ def test_the_written_procedure_replays_the_violation_in_the_lab(
     bound = Bound(requests=1, faults=1)
     [violation] = explore_station(reference(), 18, bound).violations
     path = write_procedure(reference(), bound, violation, tmp_path / "procs", 1)
-    steps = [s.text for s in load_procedure(path).steps]
+    procedure = load_procedure(path)
+    assert procedure.verifies == ("IXL-INV-03", "IXL-INV-04")
+    steps = [s.text for s in procedure.steps]
     assert steps == ["route set 18 01 11", "tc TC1855 failed_occupied", "2s",
                      "ixl 18 signal 01 is R"]  # fmt: skip
     assert _run(path, tmp_path / "defective") == "fail"
