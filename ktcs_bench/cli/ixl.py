@@ -13,6 +13,7 @@ import os
 import sys
 from pathlib import Path
 
+from ktcs_bench import kinds
 from ktcs_bench.cli._common import positive
 from ktcs_bench.errors import UsageError
 from ktcs_bench.station.model import Line
@@ -31,7 +32,7 @@ LINE is a line file (default: the shipped reference line, emulators/lines/refere
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
-        "ixl",
+        kinds.IXL,
         help="the interlocking's control tables and its exhaustive verification",
         description="Control tables derived from the station data, and the verification of the "
         "station data against the point geometry and of every reachable state of the "

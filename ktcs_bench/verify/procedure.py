@@ -22,6 +22,7 @@ from typing import Any
 import yaml
 
 from ktcs_bench.datafiles import data_dir
+from ktcs_bench.procedure.steps import CTC_STEP, TRAIN_STEP
 from ktcs_bench.station.model import Line
 from ktcs_bench.verify.explore import Bound, Violation, start
 
@@ -70,26 +71,26 @@ def procedure_steps(line: Line, bound: Bound, violation: Violation) -> list[dict
         elif kind in ("route", "cancel"):
             r = station.route(args[0])
             verb = "set" if kind == "route" else "cancel"
-            entry = {"ctc": f"route {verb} {st} {r.entry} {r.exit}"}
+            entry = {CTC_STEP: f"route {verb} {st} {r.entry} {r.exit}"}
         elif kind == "point":
-            entry = {"ctc": f"point {args[1]} {st} {args[0]}"}
+            entry = {CTC_STEP: f"point {args[1]} {st} {args[0]}"}
         elif kind == "signal":
-            entry = {"ctc": f"signal {args[1]} {st} {args[0]}"}
+            entry = {CTC_STEP: f"signal {args[1]} {st} {args[0]}"}
         elif kind == "mode":
-            entry = {"ctc": f"mode center {st}"} if args[0] == "center" else {
+            entry = {CTC_STEP: f"mode center {st}"} if args[0] == "center" else {
                 "local": f"{st} {args[0]}"}  # fmt: skip
-        elif kind == "train":
+        elif kind == "enter":
             train = world.trains[-1]
             names[id(train)] = f"V{len(names) + 1}"
             track = "" if args[1] == "-" else f" track {args[1]}"
-            entry = {"train": f"{names[id(train)]} place {args[0]}{track} {args[2]}"}
+            entry = {TRAIN_STEP: f"{names[id(train)]} place {args[0]}{track} {args[2]}"}
         elif kind == "move":
             train = trains_before[int(args[0])]
             name = names.setdefault(id(train), f"V{len(names) + 1}")
             if train in world.trains:
-                entry = {"train": f"{name} run to {train.tc}"}
+                entry = {TRAIN_STEP: f"{name} run to {train.tc}"}
             else:
-                entry = {"train": f"{name} remove", "note": "it runs off the station's rails"}
+                entry = {TRAIN_STEP: f"{name} remove", "note": "it runs off the station's rails"}
         elif kind == "detection_lost":
             entry = {"fault": f"point {st} {args[0]} detection"}
         elif kind == "tc_failed":
@@ -106,12 +107,12 @@ def procedure_steps(line: Line, bound: Bound, violation: Violation) -> list[dict
         elif kind == "neighbour_asks":
             iv = world.interval(args[0])
             other = iv.east if iv.west == st else iv.west
-            entry = {"ctc": f"direction {other} {args[0]}"}
+            entry = {CTC_STEP: f"direction {other} {args[0]}"}
         else:
             entry = {"wait": "0.5s", "note": f"the neighbour across {args[0]}: "
                      f"{kind.removeprefix('neighbour_').replace('_', ' ')} (its own IXL decides "
                      "in the lab; not driven)"}  # fmt: skip
-        if answer is not None and not answer.accepted and "ctc" in entry:
+        if answer is not None and not answer.accepted and CTC_STEP in entry:
             entry["refused"] = answer.reason.text
         out.append(entry)
     what = "; ".join(violation.what)

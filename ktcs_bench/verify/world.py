@@ -180,7 +180,7 @@ class World:
         if b.trains > 0:
             for tc, track, direction in spawns:
                 if self._spawn_ok(tc, direction):
-                    yield ("train", tc, track or "-", direction)
+                    yield ("enter", tc, track or "-", direction)
         if b.faults > 0:
             for p, pm in self.io.points.items():
                 if pm.fault is None:
@@ -282,7 +282,7 @@ class World:
                 answer = rig.request(n.cmq(st))
             else:
                 rig.take(self.ixl.local(args[0], now))
-        elif kind == "train":
+        elif kind == "enter":  # a train comes onto the station's rails
             b.trains -= 1
             tc, track, direction = args[0], None if args[1] == "-" else args[1], args[2]
             self._add_train(tc, track, direction, "station")  # type: ignore[arg-type]
@@ -699,7 +699,7 @@ class World:
 # names of attributes that are logs, links to the world, or derived from the rest of the state
 _SKIP = frozenset({
     "log", "_events", "_results", "events", "results", "_log_limit", "world", "point_codes",
-    "view", "codes", "_names", "_controls", "_inputs", "_command_names", "_sent", "ctc", "atc",
+    "view", "codes", "_names", "_controls", "_inputs", "_command_names", "_sent", kinds.CTC, kinds.ATC,  # the rig's pictures of what it told them
     "on_ctc", "_points_in", "_departures", "intervals", "outputs", "tc_names", "neighbours",
     "tc_sources", "startup_release_s", "_expected", "peer_has_ttc", "now", "_paths",
     # the trackside's relays and the rig's occupancy follow the trains and failures (in the key);
