@@ -100,6 +100,11 @@ class StreamDecoder:
         self._probe_for = -1  # absolute offset of the pending candidate the probe state is for
         self._probe_next = 0  # absolute offset from which candidates are not yet classified
         self._probe_wait: list[tuple[int, int]] = []  # (candidate, absolute end) incomplete
+        # absolute offset at which the pending candidate completes, while everything after its
+        # STX is classified and no inner candidate waits (0: not known). Until then bytes with
+        # no STX in them change nothing but the buffer: `feed` takes them without a pass (a
+        # frame arriving in pieces on a line is decoded once, when its last piece comes)
+        self._need = 0
 
     # -- public API --------------------------------------------------------------------------
     @property
@@ -112,12 +117,32 @@ class StreamDecoder:
         return len(self._buf)
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[Record]:
-        self._buf += data
+        buf = self._buf
+        n0 = len(buf)
+        buf += data
+        n = len(buf)
+        stx = self._stx
+        if self._need:  # a frame's next piece: what `_process` would conclude, without a pass
+            if self._base + n < self._need and buf.find(stx, n0) < 0:
+                self._probe_next = self._base + n
+                return []
+        elif not n0 and n >= self._hsize and buf[0] == stx and buf.find(stx, 1) < 0:
+            # a frame's first piece on an empty buffer, its header whole, no other STX: pending
+            length = self._header.unpack_from(buf, 1)[self._i_len]
+            data_len = length - self._fixed
+            total = self._hsize + data_len + self._trailer
+            if 0 <= data_len and length <= self._max_len and total > n:
+                base = self._base
+                self._pending = True
+                self._probe_for, self._probe_next, self._probe_wait = base, base + n, []
+                self._need = base + total
+                return []
         return self._process(final=False)
 
     def close(self) -> list[Record]:
         """End of input: report what is left (a truncated frame, trailing garbage)."""
         out = self._process(final=False)
+        self._need = 0
         j = self._pending_at()
         buf = self._buf
         if j is not None:
@@ -132,6 +157,7 @@ class StreamDecoder:
 
     def abandon(self) -> list[Record]:
         """Give up on the pending frame (ΔR expired): report it truncated, resume after its STX."""
+        self._need = 0
         j = self._pending_at()
         if j is None:
             return []
@@ -277,6 +303,7 @@ class StreamDecoder:
     def _process(self, final: bool) -> list[Record]:
         """Decode what the buffer holds. The loop body is the fast path -- a complete frame whose
         checks pass, at the read position; everything else goes to `_resolve`."""
+        self._need = 0
         out: list[Record] = []
         append = out.append
         buf = self._buf
@@ -357,6 +384,8 @@ class StreamDecoder:
             if n - j < total:
                 q = self._probe(buf, j, n)
                 if q is None:
+                    if not self._probe_wait and self._probe_next == base + n:
+                        self._need = base + j + total  # see `feed`
                     return j, g, True
                 return q, (j if g < 0 else g), False
             packet, calc, error = self._check(buf, j, total, data_len)
