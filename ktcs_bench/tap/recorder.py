@@ -37,10 +37,21 @@ class Recorder:
         return d
 
     def feed(self, direction: str, data: bytes, now: float) -> list[CaptureRecord]:
-        d = self._get(direction)
+        d = self._dirs.get(direction) or self._get(direction)
         d.last = now
         d.total += len(data)
         return [CaptureRecord(now, direction, r.raw) for r in d.decoder.feed(data)]
+
+    def passed(self, direction: str, data: bytes, now: float) -> list[CaptureRecord]:
+        """`feed`, then `handle_timer` -- in one step, for bytes passing the tap: a direction
+        idle long enough with a partial frame is flushed behind them (`direction` itself, fed
+        now, is not idle)."""
+        out = self.feed(direction, data, now)
+        for name, d in self._dirs.items():
+            if name != direction and d.decoder.buffered and now >= d.last + self.idle_flush:
+                out += self.handle_timer(now)
+                break
+        return out
 
     def handle_timer(self, now: float) -> list[CaptureRecord]:
         """A direction idle for `idle_flush` with a partial frame: that frame, as it stands."""
