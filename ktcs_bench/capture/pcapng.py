@@ -140,6 +140,8 @@ class PcapngEncoder:
         self._options: dict[tuple[int, str], bytes] = {}
         # a Type I direction once its interface is described: (interface, options of its packets)
         self._serial: dict[str, tuple[int, bytes]] = {}
+        # a Type II direction: (source, destination, the other direction), until an endpoint moves
+        self._routes: dict[str, tuple[tuple[str, int], tuple[str, int], str]] = {}
 
     def set_endpoint(self, name: str, host: str, port: int) -> None:
         """The real address of a Type II endpoint, for the packets that follow. An address the
@@ -151,6 +153,7 @@ class PcapngEncoder:
         v4 = ip if isinstance(ip, ipaddress.IPv4Address) else ip.ipv4_mapped
         if v4 is not None and 0 <= port <= 0xFFFF:
             self._endpoints[name] = (str(v4), port)
+            self._routes.clear()
 
     def start(self) -> bytes:
         self._started = True
@@ -186,10 +189,14 @@ class PcapngEncoder:
             interface = self._interfaces[direction]
             self._serial[direction] = (interface, self._options_of(flags, direction))
             return out + self._packet(interface, time, record.data, flags, direction)
-        pair = split_direction(direction) or (direction, reverse_direction(direction))
-        src, dst = self._endpoint(pair[0]), self._endpoint(pair[1])
+        route = self._routes.get(direction)
+        if route is None:
+            pair = split_direction(direction) or (direction, reverse_direction(direction))
+            route = (self._endpoint(pair[0]), self._endpoint(pair[1]), reverse_direction(direction))
+            self._routes[direction] = route
+        src, dst, back = route
         seq = self._tcp.next_seq.get(direction, ISN)
-        ack = self._tcp.next_seq.get(reverse_direction(direction), ISN)
+        ack = self._tcp.next_seq.get(back, ISN)
         self._tcp.next_seq[direction] = seq + len(record.data)
         self._tcp.ident += 1
         packet = ipv4_tcp_packet(src, dst, seq, ack, record.data, self._tcp.ident)

@@ -126,6 +126,10 @@ class StreamDecoder:
             if self._base + n < self._need and buf.find(stx, n0) < 0:
                 self._probe_next = self._base + n
                 return []
+            if self._base + n == self._need and not self._held:
+                last = self._last_piece()  # its last piece, the frame alone in the buffer
+                if last is not None:
+                    return last
         elif not n0 and n >= self._hsize and buf[0] == stx and buf.find(stx, 1) < 0:
             # a frame's first piece on an empty buffer, its header whole, no other STX: pending
             length = self._header.unpack_from(buf, 1)[self._i_len]
@@ -173,6 +177,29 @@ class StreamDecoder:
         return out
 
     # -- internals ---------------------------------------------------------------------------
+    def _last_piece(self) -> list[Record] | None:
+        """The buffer holds exactly the pending frame, now whole: if its checks pass, it is the
+        one record `_process` would give (its fast path, at offset 0), and the buffer empties;
+        None (nothing changed) if not."""
+        buf = self._buf
+        (stx, hs, unpack, i_len, i_seq, i_op, i_sub, fixed, max_len, trailer, crc_fn, crc_init,
+         crc_table, crc_xor, crc_from, crc_to, tail_unpack, tail_ok) = self._hot  # fmt: skip
+        h = unpack(buf, 1)
+        at = hs + h[i_len] - fixed
+        with memoryview(buf) as mv:
+            calc = crc_xor ^ crc_fn(mv[crc_from : at if crc_to is None else crc_to], crc_init,
+                                    crc_table)  # fmt: skip
+        tail = tail_unpack(buf, at)
+        if tail[0] != calc or tail[1:] != tail_ok:
+            return None
+        n = len(buf)
+        frame = Frame(self._base, bytes(buf), h[i_seq], h[i_op],
+                      None if i_sub is None else h[i_sub], hs, at, calc, calc, None)  # fmt: skip
+        self._need = 0
+        self._pending = False
+        self._consume(n)
+        return [frame]
+
     def _pending_at(self) -> int | None:
         return self._held if self._pending else None
 
