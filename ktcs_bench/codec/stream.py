@@ -181,24 +181,22 @@ class StreamDecoder:
         """The buffer holds exactly the pending frame, now whole: if its checks pass, it is the
         one record `_process` would give (its fast path, at offset 0), and the buffer empties;
         None (nothing changed) if not."""
-        buf = self._buf
         (stx, hs, unpack, i_len, i_seq, i_op, i_sub, fixed, max_len, trailer, crc_fn, crc_init,
          crc_table, crc_xor, crc_from, crc_to, tail_unpack, tail_ok) = self._hot  # fmt: skip
-        h = unpack(buf, 1)
+        raw = bytes(self._buf)
+        h = unpack(raw, 1)
         at = hs + h[i_len] - fixed
-        with memoryview(buf) as mv:
-            calc = crc_xor ^ crc_fn(mv[crc_from : at if crc_to is None else crc_to], crc_init,
-                                    crc_table)  # fmt: skip
-        tail = tail_unpack(buf, at)
+        calc = crc_xor ^ crc_fn(raw[crc_from : at if crc_to is None else crc_to], crc_init,
+                                crc_table)  # fmt: skip
+        tail = tail_unpack(raw, at)
         if tail[0] != calc or tail[1:] != tail_ok:
             return None
-        n = len(buf)
-        frame = Frame(self._base, bytes(buf), h[i_seq], h[i_op],
-                      None if i_sub is None else h[i_sub], hs, at, calc, calc, None)  # fmt: skip
         self._need = 0
         self._pending = False
-        self._consume(n)
-        return [frame]
+        self._consume(len(raw))
+        return [tuple.__new__(Frame, (self._base - len(raw), raw, h[i_seq], h[i_op],
+                                      None if i_sub is None else h[i_sub], hs, at, calc, calc,
+                                      None))]  # fmt: skip -- built in C, as `_process` does
 
     def _pending_at(self) -> int | None:
         return self._held if self._pending else None

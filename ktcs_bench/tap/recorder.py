@@ -49,7 +49,12 @@ class Recorder:
         """`feed`, then `handle_timer` -- in one step, for bytes passing the tap: a direction
         idle long enough with a partial frame is flushed behind them (`direction` itself, fed
         now, is not idle)."""
-        out = self.feed(direction, data, now)
+        d = self._dirs.get(direction) or self._get(direction)  # `feed`, inline
+        d.last = now
+        d.total += len(data)
+        records = d.decoder.feed(data)
+        d.buffered = d.decoder.buffered > 0
+        out = [CaptureRecord(now, direction, r.raw) for r in records] if records else []
         for name, d in self._dirs.items():
             if name != direction and d.buffered and now >= d.last + self.idle_flush:
                 out += self.handle_timer(now)
