@@ -11,6 +11,8 @@ from collections.abc import Iterator
 import pytest
 from hypothesis import HealthCheck, settings
 
+from ktcs_bench.evidence.pytest_marks import mark_requirements
+
 settings.register_profile(
     "default", deadline=None, suppress_health_check=[HealthCheck.too_slow], print_blob=True
 )
@@ -40,3 +42,8 @@ def leak_check() -> Iterator[None]:
         if os.path.exists(f"/proc/self/fd/{fd}")
     }
     assert not leaked and not extra_threads, f"leaked fds {leaked}, threads {extra_threads}"
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """`@pytest.mark.requirement` ids: checked against the catalogue, written to JUnit."""
+    mark_requirements(items)

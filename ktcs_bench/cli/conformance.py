@@ -55,6 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="the device under test",
     )
     p.add_argument("--target", help="the device's endpoint (see above)")
+    p.add_argument("--ics", metavar="FILE",
+                   help="the device's conformance statement (YAML: role, optional opcodes, link "
+                   "test, largest frame, timings): the cases it rules out are reported not "
+                   "applicable; its role and timings are the defaults (emulators/ics/)")  # fmt: skip
     p.add_argument("--profile", help="framing profile (default ktcs-type1 / ktcs-type2; type2-tls "
                    "= ktcs-type2 inside TLS, needs --tls-cert/--tls-key/--tls-ca)")  # fmt: skip
     p.add_argument("--case", action="append", default=[], metavar="NAME", help="run only these")
@@ -168,6 +172,7 @@ def _list_faults() -> None:
 def run(args: argparse.Namespace) -> int:
     from ktcs_bench.codec.profile import get_profile
     from ktcs_bench.conformance import report
+    from ktcs_bench.conformance.ics import load_ics
     from ktcs_bench.conformance.model import CaseResult
     from ktcs_bench.conformance.runner import SuiteResult, protocol_of, run_suite
     from ktcs_bench.conformance.timing import SuiteTiming
@@ -176,11 +181,24 @@ def run(args: argparse.Namespace) -> int:
     if args.list or args.list_faults:
         _list() if args.list else _list_faults()
         return 0
+    ics = load_ics(args.ics) if args.ics else None
+    if ics is not None:
+        if args.role and args.role != ics.role:
+            raise UsageError(f"--role {args.role}: the statement {args.ics} is for role {ics.role}")
+        args.role = ics.role
+        args.profile = args.profile or ics.profile
+        for key in ("delta_r", "ack_timeout", "t_max", "retry_count", "longest_frame"):
+            if getattr(args, key) is None:
+                setattr(args, key, getattr(ics.timings, key))
+        if args.heartbeat_period is None:
+            args.heartbeat_period = ics.timings.heartbeat_period or ics.timings.link_test_period
     if not args.role or not args.target:
         raise UsageError("conformance needs --role and --target (or --list)")
     protocol = protocol_of(args.role, parse_endpoint(args.target))
     name = args.profile or ("ktcs-type1" if protocol == "type1" else "ktcs-type2")
     profile = get_profile("ktcs-type2" if name == "type2-tls" else name)
+    if ics is not None:
+        profile = ics.sized(profile)
     tls = _tls(args, server=args.role == kinds.IXL) if protocol == "type2" else None
     station = args.station
     if station is None and args.role == kinds.CTC:
@@ -209,7 +227,8 @@ def run(args: argparse.Namespace) -> int:
 
     suite = run_suite(args.role, args.target, profile, timing, cases=args.case, station=station,
                       codes=_codes(args, protocol), tls=tls, auto=args.timings == "auto",
-                      server_hostname=args.tls_server_name, on_result=progress)  # fmt: skip
+                      server_hostname=args.tls_server_name, on_result=progress,
+                      not_applicable=None if ics is None else ics.not_applicable)  # fmt: skip
     if args.junit:
         try:
             Path(args.junit).write_bytes(report.junit_xml(suite))

@@ -300,13 +300,17 @@ def _simulate(args: argparse.Namespace) -> int:
             print(f"ktcs-bench: the lab stalled: {exc}", file=sys.stderr)
             return 3
     summary = json.loads((Path(args.out) / "summary.json").read_text(encoding="utf-8"))
+    from ktcs_bench.evidence.coverage import write_events_coverage  # what the run exercised
+
+    write_events_coverage(Path(args.out), lab.topology)
     if args.json:
         print(json.dumps(summary))
     else:
         print(f"lab {summary['lab']}: {summary['virtual_s']:g} s of virtual time in "
               f"{summary['wall_s']:g} s ({summary['speed_up']}x real time), "
               f"{len(summary['violations'])} violation(s) of the lab invariants; "
-              f"{args.out}/events.jsonl, {args.out}/captures/, {args.out}/summary.json")  # fmt: skip
+              f"{args.out}/events.jsonl, {args.out}/captures/, {args.out}/summary.json, "
+              f"{args.out}/coverage.json")  # fmt: skip
         for name, train in summary["trains"].items():
             print(f"  {name}: {json.dumps(train)}")
     for name, why in summary["crashed"].items():

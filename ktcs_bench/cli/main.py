@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 
 from ktcs_bench import __version__
@@ -36,6 +38,7 @@ examples:
   ktcs-bench conformance --role atc --target /dev/ttyUSB0
   ktcs-bench scenario run emulators/scenarios/seed001_follower.yaml
   ktcs-bench test run emulators/procedures/*.yaml --junit junit.xml --report out/
+  ktcs-bench trace junit.xml out/ --out trace/        # requirements -> checks -> verdicts
   ktcs-bench dissector --install                     # Wireshark shows ktcs1/ktcs2 in captures
 
 colour: on a terminal, unless NO_COLOR is set; --colour / --no-colour (any command) decide.
@@ -118,6 +121,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return EXIT_USAGE
     args.colour = use_colour(sys.stdout, args.colour)  # decided once, for every command
+    if threading.current_thread() is threading.main_thread():
+        # Ctrl-C is KeyboardInterrupt (exit 130) even when started as a shell's background job,
+        # which inherits SIGINT ignored: the commands with their own handlers react to it anyway
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         return int(handler(args))
     except KeyboardInterrupt:

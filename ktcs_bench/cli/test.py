@@ -64,6 +64,16 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     run_p.add_argument("--report", metavar="DIR",
                        help="write an HTML page per procedure, an index and the JSON here")  # fmt: skip
     run_p.add_argument("--json", action="store_true", help="print the results as JSON")
+    run_p.add_argument(
+        "--keep-going", action="store_true",
+        help="run the steps after a failed expectation too (reported after it): what the lab "
+             "did after an unsafe state is recorded",
+    )  # fmt: skip
+    run_p.add_argument(
+        "--catalogue", metavar="FILE",
+        help="the requirements catalogue `verifies:` ids are checked against "
+             "(default: the shipped emulators/requirements/ktcs.yaml)",
+    )  # fmt: skip
     run_p.set_defaults(handler=run)
     p.set_defaults(handler=lambda args: (p.print_help(), 2)[1])
 
@@ -146,7 +156,7 @@ def _run_virtual(args: argparse.Namespace, procedures: list[Any], stop: _Stop) -
                 lab = lab_class(proc.setup.lab, clock="virtual", out=Path(tmp))
                 try:
                     result = lab.run(lambda access, p=proc: stop.run(run_procedure(
-                        p, access, "virtual")))  # fmt: skip
+                        p, access, "virtual", keep_going=args.keep_going)))  # fmt: skip
                 except VirtualDeadlock as exc:
                     raise PeerError(f"{proc.id}: the lab stalled: {exc}") from None
         if result is None:  # the next one to run is the one interrupted
@@ -171,7 +181,8 @@ async def _run_live(args: argparse.Namespace, procedures: list[Any], stop: _Stop
     results: list[Any] = []
     try:
         for proc in procedures:
-            result = await stop.run(run_procedure(proc, access, f"live {name}"))
+            result = await stop.run(run_procedure(proc, access, f"live {name}",
+                                                  keep_going=args.keep_going))  # fmt: skip
             if result is None:  # the next one to run is the one interrupted
                 result = unfinished(proc, f"live {name}", interrupted="before its setup")
             results.append(result)
@@ -193,8 +204,9 @@ def _live_lab(args: argparse.Namespace, procedures: list[Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ktcs_bench.evidence.catalogue import load_catalogue
     from ktcs_bench.procedure.model import load_procedure
-    from ktcs_bench.procedure.report import json_text, junit, write_reports
+    from ktcs_bench.procedure.report import json_text, junit, write_coverage, write_reports
     from ktcs_bench.procedure.runner import unfinished
 
     if args.live and _names_files(args.live):  # `--live P.yaml` (or a folder): no lab named
@@ -204,7 +216,8 @@ def run(args: argparse.Namespace) -> int:
     files = _procedure_files(args.procedures)
     junit_path = _output_file(args.junit, "--junit") if args.junit else None
     report_dir = _output_folder(args.report, "--report") if args.report else None
-    procedures = [load_procedure(path) for path in files]  # every file checked first
+    catalogue = load_catalogue(args.catalogue) if args.catalogue else None
+    procedures = [load_procedure(path, catalogue) for path in files]  # every file checked first
     ids = [p.id for p in procedures]
     twice = sorted({i for i in ids if ids.count(i) > 1})
     if twice:
@@ -223,8 +236,10 @@ def run(args: argparse.Namespace) -> int:
         interrupted = any(r.interrupted for r in results)
         why = "the run was interrupted" if interrupted else "the lab went away"
         results += [unfinished(p, mode, not_run=why) for p in procedures[len(results) :]]
-        if junit_path is not None:
-            junit_path.write_bytes(junit(results))
+        if junit_path is not None:  # the run's operation coverage beside it, named in it
+            beside = junit_path.with_name(f"{junit_path.stem}.coverage.json")
+            write_coverage(results, beside)
+            junit_path.write_bytes(junit(results, beside.name))
         if report_dir is not None:
             paths = write_reports(results, report_dir)
             if not args.json:

@@ -24,6 +24,7 @@ class CaseVerdict(enum.Enum):
     FAIL = "fail"
     ERROR = "error"
     SKIP = "skip"
+    NOT_APPLICABLE = "not applicable"  # the device's statement (ICS) says it has no such part
 
 
 class CaseFailed(Exception):
@@ -91,6 +92,7 @@ class Case:
     rule: str  # the SPEC section and rule it checks
     run: CaseFunction
     roles: tuple[str, ...] = kinds.CONFORMANCE_KINDS
+    verifies: tuple[str, ...] = ()  # requirement ids of the catalogue (`evidence.catalogue`)
 
 
 class CaseJson(TypedDict):
@@ -100,6 +102,7 @@ class CaseJson(TypedDict):
     name: str
     title: str
     rule: str
+    verifies: list[str]
     verdict: str
     message: str
     duration: float
@@ -121,6 +124,7 @@ class CaseResult:
             "name": self.case.name,
             "title": self.case.title,
             "rule": self.case.rule,
+            "verifies": list(self.case.verifies),
             "verdict": self.verdict.value,
             "message": self.message,
             "duration": round(self.duration, 4),

@@ -8,13 +8,13 @@ from typing import TypedDict
 
 from ktcs_bench.conformance.model import CaseJson, CaseResult, CaseVerdict
 from ktcs_bench.conformance.runner import SuiteResult
-from ktcs_bench.junit import JUnitCase, JUnitSuite
+from ktcs_bench.junit import JUnitCase, JUnitSuite, requirement_properties
 from ktcs_bench.junit import junit_xml as write_junit
 
 _COLOUR = {CaseVerdict.PASS: "\x1b[32m", CaseVerdict.FAIL: "\x1b[31m", CaseVerdict.ERROR: "\x1b[35m",
-           CaseVerdict.SKIP: "\x1b[33m"}  # fmt: skip
+           CaseVerdict.SKIP: "\x1b[33m", CaseVerdict.NOT_APPLICABLE: "\x1b[33m"}  # fmt: skip
 _OUTCOME = {CaseVerdict.PASS: "pass", CaseVerdict.FAIL: "fail", CaseVerdict.ERROR: "error",
-            CaseVerdict.SKIP: "skip"}  # fmt: skip
+            CaseVerdict.SKIP: "skip", CaseVerdict.NOT_APPLICABLE: "skip"}  # fmt: skip
 _RESET = "\x1b[0m"
 _BOLD = "\x1b[1m"
 
@@ -45,6 +45,7 @@ def junit_xml(suite: SuiteResult) -> bytes:
                 f"{r.case.title} ({r.case.rule})\n{r.message}" if failed else r.message,
                 _frames_text(r),
                 "ConformanceFailure" if failed else "SuiteError",
+                requirement_properties(r.case.verifies),
             )  # fmt: skip
         )
     name = f"ktcs-bench conformance {suite.role} {suite.protocol}"
@@ -89,7 +90,7 @@ def json_text(suite: SuiteResult, evidence: bool = True) -> str:
 
 def case_line(result: CaseResult, colour: bool) -> str:
     v = result.verdict
-    mark = v.value.upper().ljust(5)
+    mark = ("N/A" if v is CaseVerdict.NOT_APPLICABLE else v.value.upper()).ljust(5)
     if colour:
         mark = f"{_COLOUR[v]}{_BOLD}{mark}{_RESET}"
     text = f"{mark} {result.case.name:28s} {result.duration:6.2f} s  {result.case.title}"

@@ -172,9 +172,12 @@ def run_suite(
     server_hostname: str | None = None,
     auto: bool = False,
     on_result: Callable[[SuiteResult, CaseResult], None] | None = None,
+    not_applicable: Callable[[Case], str | None] | None = None,
 ) -> SuiteResult:
     """Run the selected cases (all that apply when none are named) in order; with `auto`,
-    measure the device's timers first and judge it by them."""
+    measure the device's timers first and judge it by them. `not_applicable` (a device's
+    statement, `ics.Ics.not_applicable`) names why a case does not apply: it is reported so,
+    never run and never passed."""
     endpoint = parse_endpoint(target)
     protocol = protocol_of(role, endpoint)
     if profile.protocol != protocol:
@@ -201,6 +204,14 @@ def run_suite(
                 raise UsageError(f"cannot listen on {target}: {exc}") from exc
         steps = [MEASURE[protocol], *chosen] if auto else chosen
         for case in steps:
+            why = not_applicable(case) if not_applicable is not None else None
+            if why is not None:
+                result = CaseResult(case, CaseVerdict.NOT_APPLICABLE, f"not applicable: {why}", 0.0,
+                                    Evidence())  # fmt: skip
+                suite.results.append(result)
+                if on_result is not None:
+                    on_result(suite, result)
+                continue
             result = _run_case(case, role, suite, station, codes, wire1, opener)
             if result.heard == 0 and result.verdict in (CaseVerdict.FAIL, CaseVerdict.ERROR):
                 result = _silent_device(suite, result)

@@ -411,7 +411,17 @@ class TrainDevice(Device):
             "derailed": self.derailed,
             "misrouted_onto": self.actual_track,
             "target_point": None if self.last is None else at(self.last.target_point),
+            "limits_kmh": self._limits_kmh(),
         }
+
+    def _limits_kmh(self) -> dict[str, float] | None:
+        """The supervised speeds at the front -- EBI, SBI, warning, permitted, MRSP -- km/h,
+        finite ones only: the curves a report draws beside the actual speed (None: off the
+        line, nothing supervised yet)."""
+        if not self.on_line or self.last is None:
+            return None
+        speeds = self.endpoint.limit_speeds()
+        return {k: round(v * 3.6, 1) for k, v in speeds.items() if k != "ebd" and math.isfinite(v)}
 
     def _chainage(self, s: float | None) -> float | None:
         """A place the onboard names (None or infinite: none) as chainage, for people."""

@@ -145,10 +145,27 @@ class Expectation:
     predicate: Predicate
     devices: tuple[str, ...] = ()  # the devices it reads (their events: snapshot at each action)
     links: tuple[str, ...] = ()  # the links whose captures it reads
+    other: Reader | None = None  # a second live value it is compared with (`< train T2 tail`)
+    offset: float = 0.0  # added to the other value (`- 200`)
+    among: tuple[Reader, ...] = ()  # `at most N of A, B is ...`: the values counted
+    bound: tuple[str, int] | None = None  # ("most" | "least", N)
 
     async def check(self, obs: Observer) -> tuple[bool, Any]:
+        if self.bound is not None:
+            seen_all = [await r(obs) for r in self.among]
+            hits = sum(self.predicate.test(v) for v in seen_all)
+            word, n = self.bound
+            ok = hits <= n if word == "most" else hits >= n
+            return ok, f"{hits} of {len(seen_all)} ({', '.join(map(str, seen_all))})"
         seen = await self.read(obs)
-        return self.predicate.test(seen), seen
+        if self.other is None:
+            return self.predicate.test(seen), seen
+        other = _number(await self.other(obs))
+        if other is None:
+            return False, f"{seen} (the value compared with: nothing)"
+        against = other + self.offset
+        ok = Predicate(self.predicate.op, (repr(against),)).test(seen)
+        return ok, f"{seen} (against {against:g})"
 
 
 def _route_status(text: object) -> str:
@@ -466,6 +483,72 @@ PROBES: dict[str, Callable[[LabNames, list[str]], tuple[Reader, list[str], tuple
 }
 
 
+COMPARE = (">", ">=", "<", "<=")
+
+
+def _live_right_side(rest: Sequence[str]) -> bool:
+    """`< train T2 tail - 200`: an order compared with another live value, not a number."""
+    return len(rest) >= 2 and rest[0] in COMPARE and rest[1].lower() in PROBES
+
+
+def _right_side(names: LabNames, words: Sequence[str]) -> tuple[Reader, float, tuple[str, ...]]:
+    """The other value's reader, the offset added to it (`+ N`, `- N` at the end) and the
+    devices it reads."""
+    w = list(words)
+    offset = 0.0
+    if len(w) >= 3 and w[-2] in ("+", "-"):
+        n = _number(w[-1])
+        if n is None:
+            raise StepError(f"{w[-2]} takes a number, not {w[-1]!r}")
+        offset = n if w[-2] == "+" else -n
+        w = w[:-2]
+    head = w[0].lower()
+    if head in ("event", "frame"):
+        raise StepError("a live value is compared with a value, not with an event or a frame")
+    read, left, devices = PROBES[head](names, w[1:])
+    if left:
+        raise StepError(f"after the value compared with: {' '.join(left)!r} (only + N or - N)")
+    return read, offset, devices
+
+
+def _one_value(names: LabNames, words: list[str]) -> tuple[Reader, tuple[str, ...]]:
+    """A value named alone (`ixl 18 signal 12`), its reader and the devices it reads."""
+    if not words:
+        raise StepError("an empty value in the list")
+    head = words[0].lower()
+    if head in ("signal", "point") and len(words) >= 3:
+        words, head = ["ixl", words[1], head, *words[2:]], "ixl"
+    probe = PROBES.get(head)
+    if probe is None or head in ("event", "frame"):
+        raise StepError(f"{words[0]!r} is no value to count (one of: "
+                        f"{', '.join(p for p in PROBES if p not in ('event', 'frame'))})")  # fmt: skip
+    read, left, devices = probe(names, words[1:])
+    if left:
+        raise StepError(f"after {' '.join(words[: len(words) - len(left)])!r}: {' '.join(left)!r}")
+    return read, devices
+
+
+def _counted(text: str, words: list[str], names: LabNames) -> Expectation:
+    """`at most N of A, B, ... PREDICATE` (or `at least`): how many of the values satisfy it."""
+    if len(words) < 5 or words[3].lower() != "of" or not words[2].isdigit():
+        raise StepError("at most N of VALUE, VALUE ... is V (or at least N of ...)")
+    body = words[4:]
+    at = next((i for i, w in enumerate(body) if w in ("is", ">", ">=", "<", "<=", "contains",
+                                                       "lacks")), None)  # fmt: skip
+    if not at:
+        raise StepError("at most N of VALUE, VALUE ...: say what they are (is V, > N, ...)")
+    reads: list[Reader] = []
+    devices: list[str] = []
+    for part in " ".join(body[:at]).split(","):
+        read, devs = _one_value(names, part.split())
+        reads.append(read)
+        devices += devs
+    predicate = parse_predicate(body[at:])
+    bound = (words[1].lower(), int(words[2]))
+    return Expectation(text, reads[0], predicate, tuple(dict.fromkeys(devices)),
+                       among=tuple(reads), bound=bound)  # fmt: skip
+
+
 def parse_expectation(text: str, names: LabNames) -> Expectation:
     """Words -> an Expectation; StepError naming what is wrong."""
     try:
@@ -474,6 +557,8 @@ def parse_expectation(text: str, names: LabNames) -> Expectation:
         raise StepError(f"cannot read {text!r}: {exc}") from None
     if not words:
         raise StepError("empty expectation")
+    if words[0].lower() == "at" and len(words) > 1 and words[1].lower() in ("most", "least"):
+        return _counted(text, words, names)
     negated = words[0].lower() == "no"
     if negated:
         words = words[1:]
@@ -493,6 +578,10 @@ def parse_expectation(text: str, names: LabNames) -> Expectation:
         predicate = Predicate("absent" if negated else "occurs")
         if head == "frame":
             links = (words[1],)
+    elif _live_right_side(rest):
+        other, offset, more = _right_side(names, rest[1:])
+        return Expectation(text, read, Predicate(rest[0], ("0",)), (*devices, *more), links,
+                           other, offset)  # fmt: skip
     else:
         predicate = parse_predicate(rest)
         if head == "code" and predicate.op in ("is", "is not"):

@@ -3,7 +3,7 @@ ConfigError naming the file, the step (or key) and what is wrong.
 
     id: route-set-0111
     title: A route set at the CTC clears its signal and steps the codes
-    verifies: ["SPEC §6.2 route setting", "seed 004 §3"]
+    verifies: [IXL-ROUTE-01, CTC-VIEW-01]   # requirement ids of the catalogue
     tags: [route, ctc]
     setup:
       lab: reference              # a lab of emulators/labs/, or a lab file beside this one
@@ -16,9 +16,12 @@ ConfigError naming the file, the step (or key) and what is wrong.
       - ctc: route set 18 S1 S11
       - expect: ctc 18 signal 01 is not R
         within: 10s
+    always:                       # expectations that hold at every sample, steps or not
+      - ixl 20 signal 21 is R
 
 The top level and `setup:` are declared in `shapes` (a key no reader knows is refused with its
-line); the step kinds are in `steps`, the expectation words in `expect`.
+line); the step kinds are in `steps`, the expectation words in `expect`. `verifies:` names
+requirement ids of the catalogue (`evidence.catalogue`); an id it does not hold is refused.
 """
 
 from __future__ import annotations
@@ -32,7 +35,9 @@ from ktcs_bench import kinds
 from ktcs_bench.argtypes import say_seconds
 from ktcs_bench.datafiles import YamlReader, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
+from ktcs_bench.evidence.catalogue import Catalogue, shipped_catalogue
 from ktcs_bench.lab.topology import Lab, load_lab, resolve_lab_path
+from ktcs_bench.procedure.expect import Expectation, parse_expectation
 from ktcs_bench.procedure.names import LabNames, StepError
 from ktcs_bench.procedure.shapes import ProcedureShape, Texts
 from ktcs_bench.procedure.steps import (
@@ -44,7 +49,7 @@ from ktcs_bench.procedure.steps import (
     WaitStep,
     parse_step,
 )
-from ktcs_bench.schema import READER, convert, finite
+from ktcs_bench.schema import READER, convert, finite, located
 
 MODES = ("center", "local")
 
@@ -68,11 +73,14 @@ class Procedure:
     setup: Setup
     steps: tuple[Step, ...]
     names: LabNames
+    always: tuple[Expectation, ...] = ()  # hold at every sample of the run
 
     @property
     def devices(self) -> set[str]:
         """Every device the steps address or read."""
         out: set[str] = set(self.setup.restart)
+        for kept in self.always:
+            out.update(kept.devices)
         for s in self.steps:
             exp = getattr(s, "expectation", None)
             out.update(exp.devices if exp is not None else ())
@@ -111,11 +119,27 @@ def _lab(r: YamlReader, path: Path, word: str) -> Lab:
         raise r.fail("setup.lab", str(exc)) from None
 
 
-def load_procedure(path: str | Path) -> Procedure:
+def _verifies(doc: ProcedureShape, p: Path, catalogue: Catalogue | None) -> tuple[str, ...]:
+    """The requirement ids `verifies:` names, each one in the catalogue."""
+    ids = _texts(doc.verifies)
+    cat = catalogue if catalogue is not None else shipped_catalogue()
+    for i, rid in enumerate(ids):
+        if rid not in cat:
+            place = f"verifies[{i}]" if isinstance(doc.verifies, tuple) else "verifies"
+            raise located(p, place, f"{excerpt(rid)} is not a requirement of the catalogue "
+                          f"{cat.path} (an id such as {next(iter(cat.requirements))}; free "
+                          "text belongs in title: or a step's note:)")  # fmt: skip
+    return ids
+
+
+def load_procedure(path: str | Path, catalogue: Catalogue | None = None) -> Procedure:
+    """The procedure at `path`, checked whole before anything runs; its `verifies:` ids against
+    `catalogue` (None: the shipped one)."""
     p = Path(path)
     r = YamlReader(p)
     doc = convert(load_mapping(p, "procedure"), ProcedureShape, p, style=READER)
     finite(doc, p, style=READER)
+    verifies = _verifies(doc, p, catalogue)
     setup_m = doc.setup
     lab = _lab(r, p, str(setup_m.lab))
     try:
@@ -165,6 +189,16 @@ def load_procedure(path: str | Path) -> Procedure:
         except StepError as exc:
             kind = next((k for k in raw if k in KINDS), None) if isinstance(raw, dict) else None
             raise r.fail(f"step {i}" + (f" ({kind})" if kind else ""), str(exc)) from None
+    always = []
+    for i, text in enumerate(doc.always):
+        try:
+            exp = parse_expectation(str(text), names)
+        except StepError as exc:
+            raise r.fail(f"always[{i}]", str(exc)) from None
+        if exp.predicate.op in ("occurs", "absent"):
+            raise r.fail(f"always[{i}]", "always: holds of a state, not of an event or a "
+                         "frame (those are looked for after an action)")  # fmt: skip
+        always.append(exp)
     total = sum(_longest(s) for s in steps)
     if total > MAX_DURATION_S:
         raise r.fail(
@@ -176,9 +210,10 @@ def load_procedure(path: str | Path) -> Procedure:
         path=p,
         id=p.stem if doc.id is msgspec.UNSET else str(doc.id),
         title=p.stem if doc.title is msgspec.UNSET else str(doc.title),
-        verifies=_texts(doc.verifies),
+        verifies=verifies,
         tags=_texts(doc.tags),
         setup=Setup(lab, tuple(ghosts), modes, setup_m.ars, tuple(restart)),
         steps=tuple(steps),
         names=names,
+        always=tuple(always),
     )

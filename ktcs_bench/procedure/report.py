@@ -18,8 +18,9 @@ from pathlib import Path
 from typing import Any, TypedDict
 
 from ktcs_bench.capture import PcapngWriter
-from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml
-from ktcs_bench.procedure.runner import ProcedureResult, StepJson
+from ktcs_bench.evidence.coverage import COVERAGE_FILE, FORMAT, merge, procedure_coverage
+from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml, requirement_properties
+from ktcs_bench.procedure.runner import ProcedureResult, StepJson, Supervised
 
 _COLOUR = {"pass": "\x1b[32m", "fail": "\x1b[31m", "error": "\x1b[35m", "skipped": "\x1b[2m"}
 _RESET = "\x1b[0m"
@@ -46,6 +47,8 @@ def result_text(result: ProcedureResult, colour: bool) -> str:
         if s.verdict != "pass":
             line += f"\n            {s.message}" + (f"; seen: {s.seen}" if s.seen else "")
         lines.append(line)
+    for t, text, seen in result.broken:
+        lines.append(paint("fail", f"      always: {text} broken at {t:.1f} s; seen: {seen}"))
     if result.interrupted or result.not_run:
         lines.append(f"      {result.message}")
     if result.cleared:
@@ -63,7 +66,9 @@ def _details(result: ProcedureResult) -> str:
             + (f"\nnote: {s.note}" if s.note else ""))  # fmt: skip
 
 
-def junit(results: Sequence[ProcedureResult]) -> bytes:
+def junit(results: Sequence[ProcedureResult], coverage: str = "") -> bytes:
+    """One testcase per procedure, its requirement ids as properties; `coverage`: the file
+    name of the run's operation coverage beside the JUnit file (a suite property)."""
     cases = []
     for r in results:
         p = r.procedure
@@ -75,10 +80,12 @@ def junit(results: Sequence[ProcedureResult]) -> bytes:
             p.id, f"procedure.{'.'.join(p.tags[:1]) or 'procedure'}", r.duration, outcome,
             r.message, _details(r), steps,
             "ExpectationFailed" if outcome == "fail" else kind,
+            (*requirement_properties(p.verifies), ("file", str(p.path))),
         ))  # fmt: skip
     total = sum(r.duration for r in results)
     modes = sorted({r.mode for r in results})
-    suite = JUnitSuite("ktcs-bench procedures", cases, total, {"mode": ", ".join(modes)})
+    props = {"mode": ", ".join(modes), **({"coverage": coverage} if coverage else {})}
+    suite = JUnitSuite("ktcs-bench procedures", cases, total, props)
     return junit_xml("ktcs-bench procedures", [suite])
 
 
@@ -93,6 +100,14 @@ class TrainSampleJson(TypedDict):
     head_m: float
     tail_m: float
     speed_kmh: float
+
+
+class BrokenJson(TypedDict):
+    """An `always:` expectation broken: when first, and what was seen."""
+
+    t_s: float
+    expectation: str
+    seen: str
 
 
 class ProcedureJson(TypedDict):
@@ -113,6 +128,9 @@ class ProcedureJson(TypedDict):
     wall_s: float
     interrupted: bool
     steps: list[StepJson]
+    always: list[str]
+    broken: list[BrokenJson]
+    logs: dict[str, list[dict[str, Any]]]  # the CTC's and interlockings' events over the run
     timeline: list[TimelineJson]
     trains: dict[str, list[TrainSampleJson]]
     captures: dict[str, int]  # link -> frames captured
@@ -128,6 +146,9 @@ def as_json(result: ProcedureResult) -> ProcedureJson:
         "started": result.started, "duration_s": round(result.duration, 3),
         "wall_s": round(result.wall_s, 3), "interrupted": bool(result.interrupted),
         "steps": [s.as_dict() for s in result.steps],
+        "always": [e.text for e in p.always],
+        "broken": [{"t_s": t, "expectation": x, "seen": seen} for t, x, seen in result.broken],
+        "logs": result.logs,
         "timeline": [{"t_s": t, "what": k, "value": v} for t, k, v in result.timeline],
         "trains": {tid: [{"t_s": t, "head_m": h, "tail_m": tl, "speed_kmh": v}
                          for t, h, tl, v in series] for tid, series in result.trains.items()},
@@ -136,10 +157,13 @@ def as_json(result: ProcedureResult) -> ProcedureJson:
     }  # fmt: skip
 
 
-def json_text(results: Sequence[ProcedureResult]) -> str:
+def json_text(results: Sequence[ProcedureResult], coverage: str = "") -> str:
+    """The run as JSON; `coverage`: the file of its operation coverage (written beside it)."""
     counts = {v: sum(1 for r in results if r.verdict == v) for v in COUNTED}
-    return json.dumps({"summary": counts, "procedures": [as_json(r) for r in results]},
-                      ensure_ascii=False, indent=1)  # fmt: skip
+    doc: dict[str, Any] = {"summary": counts, "procedures": [as_json(r) for r in results]}
+    if coverage:
+        doc["coverage"] = coverage
+    return json.dumps(doc, ensure_ascii=False, indent=1)
 
 
 # -- HTML --------------------------------------------------------------------------------------------
@@ -158,6 +182,64 @@ ASPECT_COLOURS = {"R": "#d22", "Y": "#e8b100", "YG": "#9c3", "G": "#2a2", "unkno
 
 def _e(text: object) -> str:
     return html.escape(str(text))
+
+
+def _commit() -> str:
+    """The checkout's commit (read from .git, no git command), or "" when not a checkout."""
+    here = Path(__file__).resolve().parents[2] / ".git"
+    try:
+        if here.is_file():  # a worktree: "gitdir: PATH"
+            here = Path(here.read_text(encoding="utf-8").split(":", 1)[1].strip())
+        head = (here / "HEAD").read_text(encoding="utf-8").strip()
+        if not head.startswith("ref: "):
+            return head[:12]
+        ref = head[5:]
+        for folder in (here, Path((here / "commondir").read_text(encoding="utf-8").strip())
+                       if (here / "commondir").is_file() else here):  # fmt: skip
+            base = folder if folder.is_absolute() else here / folder
+            if (base / ref).is_file():
+                return (base / ref).read_text(encoding="utf-8").strip()[:12]
+            packed = base / "packed-refs"
+            if packed.is_file():
+                for line in packed.read_text(encoding="utf-8").splitlines():
+                    if line.endswith(f" {ref}"):
+                        return line.split()[0][:12]
+    except (OSError, IndexError, UnicodeDecodeError):
+        pass
+    return ""
+
+
+def provenance() -> str:
+    """What produced a report: the product's version and commit, the machine and its Python."""
+    import platform
+
+    from ktcs_bench import __version__
+
+    commit = _commit()
+    return (f"ktcs-bench {__version__}" + (f" (commit {commit})" if commit else "")
+            + f" on {platform.node() or 'an unnamed machine'}, {platform.system()} "
+            f"{platform.release()}, Python {platform.python_version()}")  # fmt: skip
+
+
+def _file_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        return f"(not readable: {exc})"
+
+
+def _requirements(p: Any) -> str:
+    """Each id the procedure verifies, with the requirement's sentence from the catalogue."""
+    from ktcs_bench.errors import ConfigError
+    from ktcs_bench.evidence.catalogue import shipped_catalogue
+
+    try:
+        reqs = shipped_catalogue().requirements
+    except ConfigError:
+        reqs = {}
+    items = [f"<li><code>{_e(rid)}</code> {_e(reqs[rid].text) if rid in reqs else ''}</li>"
+             for rid in p.verifies]  # fmt: skip
+    return f"<ul>{''.join(items)}</ul>" if items else "-"
 
 
 def _png_uri(fig: Any) -> str:
@@ -197,14 +279,27 @@ def _plots(result: ProcedureResult) -> str:
         n = len(running)
         fig, axes = plt.subplots(n, 1, figsize=(10, 3.2 * n), squeeze=False)
         for ax, (tid, series) in zip(axes[:, 0], running.items(), strict=True):
-            rows = [SpeedDistanceRow(train=tid, t_s=t, front_m=h, speed_kmh=v, safe_front_m=None,
-                                     mrsp_kmh=None, ebi_kmh=None, sbi_kmh=None, warning_kmh=None,
-                                     permitted_kmh=None)  # no limits: only the actual speed
-                    for t, h, _tl, v in series]  # fmt: skip
-            plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
+            sup = result.supervision.get(tid, [])
+            if sup:  # a train under ATP: its curves, its code and its emergency brakes
+                rows = [SpeedDistanceRow(
+                    train=tid, t_s=x.t, front_m=x.head, speed_kmh=x.speed_kmh,
+                    safe_front_m=x.head, mrsp_kmh=x.limits.get("mrsp"),
+                    ebi_kmh=x.limits.get("ebi"), sbi_kmh=x.limits.get("sbi"),
+                    warning_kmh=x.limits.get("warning"), permitted_kmh=x.limits.get("permitted"),
+                ) for x in sup]  # fmt: skip
+                plot_speed_distance(ax, rows, f"train {tid}: speed vs distance, as supervised")
+                _codes_and_brakes(ax, sup)
+            else:  # a train the procedure moves itself: no supervision, only the actual speed
+                rows = [SpeedDistanceRow(train=tid, t_s=t, front_m=h, speed_kmh=v,
+                                         safe_front_m=None, mrsp_kmh=None, ebi_kmh=None,
+                                         sbi_kmh=None, warning_kmh=None, permitted_kmh=None)
+                        for t, h, _tl, v in series]  # fmt: skip
+                plot_speed_distance(ax, rows, f"train {tid}: speed vs distance")
         fig.tight_layout()
+        supervised = " ".join(t for t in running if result.supervision.get(t))
         out.append(f'<img alt="speed-distance" src="{_png_uri(fig)}" '
-                   f'data-trains="{_e(" ".join(running))}">')  # fmt: skip
+                   f'data-trains="{_e(" ".join(running))}" '
+                   f'data-supervised="{_e(supervised)}">')  # fmt: skip
         plt.close(fig)
     if still:
         out.append(f'<p class="still">Did not move, so no speed-distance plot: '
@@ -217,6 +312,42 @@ def _plots(result: ProcedureResult) -> str:
     out.append(f'<img alt="time-distance" src="{_png_uri(fig)}">')
     plt.close(fig)
     return "\n".join(out)
+
+
+_NOTABLE = re.compile(r"refus|reject|not accepted|fail|lost|error|ARS|by ARS", re.I)
+
+
+def _logs(result: ProcedureResult) -> str:
+    """Each logged device's events over the run -- refusals with their reasons, ARS, faults
+    first in bold -- one collapsed list a device."""
+    if not result.logs:
+        return "<p>No device logged anything during the run.</p>"
+    out = []
+    for device, events in sorted(result.logs.items()):
+        notable = sum(1 for e in events if _NOTABLE.search(str(e.get("text", ""))))
+        rows = "".join(
+            f"<tr><td>{_e(e.get('time', ''))}</td><td>{_e(e.get('kind', ''))}</td><td>"
+            + (f"<b>{_e(e.get('text', ''))}</b>" if _NOTABLE.search(str(e.get("text", "")))
+               else _e(e.get("text", "")))
+            + "</td></tr>" for e in events)  # fmt: skip
+        out.append(f'<details class="log" data-device="{_e(device)}"><summary>{_e(device)}: '
+                   f"{len(events)} events ({notable} refusals, faults or ARS)</summary><table>"
+                   f"<tr><th>time</th><th>kind</th><th>text</th></tr>{rows}</table></details>")  # fmt: skip
+    return "".join(out)
+
+
+def _codes_and_brakes(ax: Any, sup: Sequence[Supervised]) -> None:
+    """The code under the antenna as a step line, and each emergency brake a red cross."""
+    coded = [x for x in sup if x.code_kmh is not None]
+    if coded:
+        ax.step([x.head for x in coded], [x.code_kmh for x in coded], where="post",
+                color="purple", lw=1.0, ls=":", label="code")  # fmt: skip
+    brakes = [x for prev, x in zip(sup, sup[1:], strict=False)
+              if x.emergency_brakes > prev.emergency_brakes]  # fmt: skip
+    if brakes:
+        ax.plot([x.head for x in brakes], [x.speed_kmh for x in brakes], "rX", ms=9,
+                label="emergency brake")  # fmt: skip
+    ax.legend(loc="upper right", fontsize=8, ncol=4)
 
 
 def _lane_colour(key: str, value: str) -> str:
@@ -272,10 +403,12 @@ def _lanes(result: ProcedureResult) -> str:
     numbered below the axis in as many rows as keep the numbers apart."""
     changes: dict[str, list[tuple[float, str]]] = {}
     for t, k, v in result.timeline:
-        if (k.startswith("ctc ") and " signal " in k) or k.startswith("code "):
+        if (k.startswith(("ctc ", "ixl ")) and " signal " in k) or k.startswith("code "):
             changes.setdefault(k, []).append((t, v))
     moved_ = [k for k, series in changes.items() if len({v for _, v in series}) > 1]
-    signals = sorted(k for k in moved_ if k.startswith("ctc "))
+    # each signal as the CTC showed it, then as its interlocking had it (the vital view)
+    signals = sorted((k for k in moved_ if k.startswith(("ctc ", "ixl "))),
+                     key=lambda k: (k.split(" ", 1)[1], k.split()[0]))  # fmt: skip
     codes = sorted((k for k in moved_ if k.startswith("code ")), key=lambda k: k.split()[1])
     shown = signals + codes or sorted(changes)[:6]
     if not shown:
@@ -296,7 +429,8 @@ def _lanes(result: ProcedureResult) -> str:
              f'height="{height}" font-size="11" class="timeline">']  # fmt: skip
     for i, k in enumerate(shown):
         y = i * lane + 4
-        parts.append(f'<text x="2" y="{y + 11}">{_e(k.removeprefix("ctc "))}</text>')
+        label = k.removeprefix("ctc ") if k.startswith("ctc ") else k.replace(" signal ", " ", 1)
+        parts.append(f'<text x="2" y="{y + 11}">{_e(label)}</text>')
         series = changes[k]
         for j, (t, v) in enumerate(series):
             t1 = series[j + 1][0] if j + 1 < len(series) else end
@@ -314,11 +448,12 @@ def _lanes(result: ProcedureResult) -> str:
     parts.append(f'<text class="axis" x="{left + width / 2:.0f}" y="{axis + 30}" '
                  f'text-anchor="middle">time since the start of the procedure (s, on the '
                  f"lab's clock)</text>")  # fmt: skip
-    for s in ran:
+    for s in ran:  # a fault's step in red and solid: what the lab was made to suffer
         x = at(s.start)
-        parts.append(f'<line x1="{x:.1f}" y1="0" x2="{x:.1f}" y2="{axis}" stroke="#555" '
-                     f'stroke-dasharray="2,2"><title>step {s.index} at {s.start:.1f} s: '
-                     f"{_e(s.title)}</title></line>")  # fmt: skip
+        look = ('stroke="#c0392b" stroke-width="2" class="fault"' if s.kind == "fault"
+                else 'stroke="#555" stroke-dasharray="2,2"')  # fmt: skip
+        parts.append(f'<line x1="{x:.1f}" y1="0" x2="{x:.1f}" y2="{axis}" {look}><title>step '
+                     f"{s.index} at {s.start:.1f} s: {_e(s.title)}</title></line>")  # fmt: skip
     if labels:
         parts.append(f'<text x="2" y="{first_row + 10}">steps</text>')
     for x, text, row in labels:
@@ -358,12 +493,22 @@ def html_report(result: ProcedureResult) -> str:
                     f" ({len(records)} records)</li>")  # fmt: skip
     setup = (f'<p class="v error">setup: {_e(result.setup_error)}</p>'
              if result.setup_error else "")  # fmt: skip
+    broken = {text: (t, seen) for t, text, seen in result.broken}
+    always = "".join(
+        f"<tr><td><code>{_e(e.text)}</code></td><td>"
+        + (f'<span class="v fail">broken</span> at {broken[e.text][0]:.1f} s; seen: '
+           f"<code>{_e(broken[e.text][1])}</code>" if e.text in broken
+           else '<span class="v pass">held</span>')
+        + "</td></tr>" for e in p.always)  # fmt: skip
+    always_html = (f"<h2>Always</h2><p>Checked at every sample, alongside the steps.</p><table>"
+                   f"<tr><th>expectation</th><th>verdict</th></tr>{always}</table>"
+                   if always else "")  # fmt: skip
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{_e(p.id)}: {_e(result.verdict)}</title>
 <style>{CSS}</style></head><body>
 <h1>{_e(p.id)}: {_e(p.title)} <span class="v {result.verdict}">{result.verdict.upper()}</span></h1>
 <table class="meta">
-<tr><td>verifies</td><td>{_e("; ".join(p.verifies) or "-")}</td></tr>
+<tr><td>verifies</td><td>{_requirements(p)}</td></tr>
 <tr><td>tags</td><td>{_e(", ".join(p.tags) or "-")}</td></tr>
 <tr><td>file</td><td><code>{_e(p.path)}</code></td></tr>
 <tr><td>lab</td><td>{_e(p.setup.lab.name)} ({_e(result.mode)})</td></tr>
@@ -371,14 +516,17 @@ def html_report(result: ProcedureResult) -> str:
 of wall time</td></tr>
 <tr><td>result</td><td>{_e(result.message or "every step passed")}</td></tr>
 <tr><td>cleared</td><td>{_e(", ".join(result.cleared) or "nothing to clear")}</td></tr>
+<tr><td>made by</td><td>{_e(provenance())}</td></tr>
 </table>{setup}
+{always_html}
 <h2>Steps</h2>
 <table><tr><th>#</th><th>step</th><th>verdict</th><th>at</th><th>took</th><th>what was seen</th></tr>
 {"".join(rows)}</table>
 <h2>Timeline</h2>
-<p>The signals as the CTC showed them (red R, yellow Y, yellow-green YG, green G) and the ATC's
-code on each track circuit whose code changed (red: stop, greener: faster); the dashed lines are
-the steps. Hover for the values.</p>
+<p>The signals as the CTC showed them and, under each, as its interlocking had them
+(<code>ixl ST G</code>; red R, yellow Y, yellow-green YG, green G), and the ATC's code on each
+track circuit whose code changed (red: stop, greener: faster); the dashed lines are the steps, a
+solid red one a fault injected. Hover for the values.</p>
 {_lanes(result)}
 <details><summary>Every change of indications, signals, codes and trains
 ({len(result.timeline)})</summary>
@@ -387,6 +535,13 @@ the steps. Hover for the values.</p>
 {_plots(result)}
 <h2>Captures of the run</h2>
 <ul>{"".join(caps) or "<li>none (no tapped link)</li>"}</ul>
+<h2>The devices' logs</h2>
+{_logs(result)}
+<h2>The files run</h2>
+<details><summary>the procedure, <code>{_e(p.path.name)}</code></summary>
+<pre>{_e(_file_text(p.path))}</pre></details>
+<details><summary>its lab, <code>{_e(p.setup.lab.file.name)}</code></summary>
+<pre>{_e(_file_text(p.setup.lab.file))}</pre></details>
 </body></html>
 """
 
@@ -458,6 +613,7 @@ passed</title><style>{CSS}</style></head><body>
 <tr id="started"><td>started</td><td>{when}</td></tr>
 <tr id="mode"><td>mode</td><td>{_e(", ".join(modes) or "-")}</td></tr>
 <tr id="lab"><td>lab</td><td>{_e(", ".join(labs) or "-")}</td></tr>
+<tr id="made-by"><td>made by</td><td>{_e(provenance())}</td></tr>
 <tr id="took"><td>took</td><td>{lab_time:.1f} s on the labs' clocks, {wall:.1f} s of wall time</td></tr>
 {f'<tr id="interrupted"><td>stopped</td><td>{_e(stopped)}</td></tr>' if stopped else ""}
 </table>
@@ -476,5 +632,22 @@ def write_reports(results: Sequence[ProcedureResult], folder: Path) -> list[Path
     paths = [write_html(r, folder, name) for r, name in zip(results, pages, strict=True) if name]
     index = folder / "index.html"
     index.write_text(index_html(results, pages), encoding="utf-8")
-    (folder / "results.json").write_text(json_text(results) + "\n", encoding="utf-8")
+    (folder / "results.json").write_text(json_text(results, COVERAGE_FILE) + "\n",
+                                         encoding="utf-8")  # fmt: skip
+    write_coverage(results, folder / COVERAGE_FILE)
     return [index, *paths]
+
+
+def coverage_doc(results: Sequence[ProcedureResult]) -> dict[str, Any]:
+    """The operation coverage of a run: the whole run's (every procedure's added up) and, under
+    `procedures`, each one's -- a procedure that never got past its setup observed nothing."""
+    ran = [r for r in results if not r.not_run and not r.setup_error]
+    each = {r.procedure.id: procedure_coverage(r).as_json() for r in ran}
+    whole = merge(each.values()) if each else {"format": FORMAT, "observed": [], "stations": {}}
+    return {**whole, "procedures": each}
+
+
+def write_coverage(results: Sequence[ProcedureResult], path: Path) -> Path:
+    path.write_text(json.dumps(coverage_doc(results), indent=1, sort_keys=True) + "\n",
+                    encoding="utf-8")  # fmt: skip
+    return path

@@ -31,7 +31,7 @@ from ktcs_bench.lab.access import LabAccess, LabGone
 from ktcs_bench.procedure.expect import FrameSeen, Observer
 from ktcs_bench.procedure.model import Procedure
 from ktcs_bench.procedure.names import LabNames
-from ktcs_bench.procedure.steps import FaultBook, Ghost, Step
+from ktcs_bench.procedure.steps import FaultBook, Ghost, Step, seen_text
 
 SAMPLE_S = 0.5  # the lab's seconds between two samples (and two checks of an expectation)
 SETUP_S = 60.0  # how long the setup may take to find the lab ready
@@ -78,6 +78,20 @@ class StepResult:
                 "start_s": round(self.start, 3), "duration_s": round(self.duration, 3)}  # fmt: skip
 
 
+@dataclass(frozen=True)
+class Supervised:
+    """One sample of a train under ATP: where (head, m), its code's speed, the supervised
+    speeds at its front (`limits`: ebi, sbi, warning, permitted, mrsp, km/h) and how many
+    emergency brakes it has had."""
+
+    t: float
+    head: float
+    speed_kmh: float
+    code_kmh: float | None
+    limits: dict[str, float]
+    emergency_brakes: int
+
+
 @dataclass
 class ProcedureResult:
     procedure: Procedure
@@ -90,12 +104,20 @@ class ProcedureResult:
     wall_s: float = 0.0
     timeline: list[tuple[float, str, str]] = field(default_factory=list)  # (t, what, value)
     trains: dict[str, list[tuple[float, float, float, float]]] = field(default_factory=dict)
+    supervision: dict[str, list[Supervised]] = field(default_factory=dict)
+    """A train device's supervision at each sample it ran: its code, curves, emergency brakes."""
     captures: dict[str, list[CaptureRecord]] = field(default_factory=dict)
     link_types: dict[str, str] = field(default_factory=dict)
     cleared: list[str] = field(default_factory=list)
     interrupted: str = ""  # where a SIGINT or SIGTERM stopped it ("in step 3 (wait: 1h)")
     lab_gone: str = ""  # the lab went away during the run (why)
     not_run: str = ""  # why it was not run at all (verdict skipped)
+    logs: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    """The CTC's and the interlockings' event logs over the run (refusals and their reasons,
+    ARS, route and signal events), each device's events in its order."""
+    broken: list[tuple[float, str, str]] = field(default_factory=list)
+    """`always:` expectations broken: (s since the run began, the expectation, what was seen),
+    each at the first sample it did not hold."""
 
     @property
     def failed_step(self) -> StepResult | None:
@@ -113,6 +135,9 @@ class ProcedureResult:
         if self.setup_error:
             return f"setup: {self.setup_error}"
         s = self.failed_step
+        if self.broken and (s is None or self.broken[0][0] <= s.start + s.duration):
+            t, text, seen = self.broken[0]
+            return f"always: {text} broken at {t:.1f} s; seen: {seen}"
         if s is None:
             return ""
         seen = f"; seen: {s.seen}" if s.seen else ""
@@ -282,8 +307,10 @@ class ProcedureRun:
     """One procedure on one lab: the `steps.Context` its steps run with."""
 
     def __init__(self, procedure: Procedure, access: LabAccess, mode: str,
-                 sample_s: float = SAMPLE_S) -> None:  # fmt: skip
+                 sample_s: float = SAMPLE_S, keep_going: bool = False) -> None:  # fmt: skip
         self.procedure = procedure
+        self.keep_going = keep_going  # the steps after a failed one still run
+        self.watching = False  # the `always:` expectations are checked (after the setup)
         self.access = access
         self.names: LabNames = procedure.names
         self.sample_s = sample_s
@@ -295,6 +322,7 @@ class ProcedureRun:
         self.event_marks: dict[str, Counter[tuple[Any, ...]]] = {}
         self.action_cursors: dict[str, CaptureCursor] = {}
         self.run_cursors: dict[str, CaptureCursor] = {}
+        self.log_marks: dict[str, Counter[tuple[Any, ...]]] = {}
         self._last: dict[str, str] = {}
         self.event_devices = sorted({d for s in procedure.steps
                                      for d in _expectation_devices(s, "event")})  # fmt: skip
@@ -318,7 +346,20 @@ class ProcedureRun:
         self.snapshot = Snapshot(self)
         await self.snapshot.prefetch(self.sampled)
         await self._record(self.snapshot)
+        if self.watching:
+            await self._always(self.snapshot)
         return self.snapshot
+
+    async def _always(self, snap: Snapshot) -> None:
+        """Each `always:` expectation judged on this sample; the first sample one fails on is
+        recorded (once: what follows a broken one is in the timeline)."""
+        done = {text for _t, text, _s in self.result.broken}
+        for exp in self.procedure.always:
+            if exp.text in done:
+                continue
+            ok, seen = await exp.check(snap)
+            if not ok:
+                self.result.broken.append((round(self.elapsed(), 3), exp.text, seen_text(seen)))
 
     async def mark(self) -> None:
         """Before each action: expectations of events and frames look at what came after it."""
@@ -409,12 +450,27 @@ class ProcedureRun:
                     if g is not None:
                         self._train(train, t, head, tail, g.speed_kmh)
             elif d.kind == kinds.TRAIN and s.get("head") is not None:
-                self._train(str(s.get(kinds.TRAIN, d.name)), t, s["head"], s["tail"],
-                            float(s.get("speed_kmh") or 0.0))  # fmt: skip
+                train = str(s.get(kinds.TRAIN, d.name))
+                self._train(train, t, s["head"], s["tail"], float(s.get("speed_kmh") or 0.0))
+                self._supervised(train, t, s)
         for key, value in values.items():
             if self._last.get(key) != value:
                 self._last[key] = value
                 self.result.timeline.append((t, key, value))
+
+    def _supervised(self, train: str, t: float, s: dict[str, Any]) -> None:
+        limits = s.get("limits_kmh")
+        if not isinstance(limits, dict):
+            return  # not on the line yet, or a device that does not say
+        code = s.get("code")
+        series = self.result.supervision.setdefault(train, [])
+        if not series or series[-1].t != t:
+            series.append(Supervised(
+                t, float(s["head"]), float(s.get("speed_kmh") or 0.0),
+                float(code[0]) if isinstance(code, list) and code else None,
+                {str(k): float(v) for k, v in limits.items()},
+                int(s.get("emergency_brakes") or 0),
+            ))  # fmt: skip
 
     def _train(self, train: str, t: float, head: float, tail: float, kmh: float) -> None:
         series = self.result.trains.setdefault(train, [])
@@ -422,6 +478,38 @@ class ProcedureRun:
             series.append((t, float(head), float(tail), kmh))
 
     # -- the run -------------------------------------------------------------------------------------
+    def _logged(self) -> list[str]:
+        """The devices whose logs the report keeps: the CTC and the interlockings."""
+        lab = self.procedure.setup.lab
+        return [d.name for d in lab.devices.values() if d.kind in (kinds.CTC, kinds.IXL)
+                and d.name in self.access.devices]  # fmt: skip
+
+    async def _log_events(self, device: str) -> list[dict[str, Any]]:
+        try:
+            answer = wire(await self.access.device(device, msg.Events(last=2000)))
+        except LAB_ERRORS:
+            return []
+        events = answer.get("events", [])
+        return [e for e in events if isinstance(e, dict)] if isinstance(events, list) else []
+
+    async def _mark_logs(self) -> None:
+        for device in self._logged():
+            self.log_marks[device] = Counter(_event_key(e) for e in await self._log_events(device))
+
+    async def _collect_logs(self) -> None:
+        """Each logged device's events since the run began (those it had before are marked)."""
+        for device in self._logged():
+            old = Counter(self.log_marks.get(device, Counter()))
+            new = []
+            for e in await self._log_events(device):
+                key = _event_key(e)
+                if old[key] > 0:
+                    old[key] -= 1
+                else:
+                    new.append(e)
+            if new:
+                self.result.logs[device] = new
+
     async def _setup(self) -> None:
         proc, names = self.procedure, self.names
         ctc = names.device_of(kinds.CTC)
@@ -429,6 +517,7 @@ class ProcedureRun:
         if missing:
             raise _SetupError(f"the lab has no {', '.join(missing)} (a lab made from "
                               f"{proc.setup.lab.file.name}?)")  # fmt: skip
+        await self._mark_logs()
         for link in self.access.links:
             path = self.access.captures().get(link)
             if path is not None:
@@ -547,10 +636,13 @@ class ProcedureRun:
             except LAB_ERRORS as exc:
                 result.setup_error = f"the lab did not answer: {exc}"
             if not result.setup_error:
+                self.watching = True
+                await self._always(self.snapshot)  # the state the setup left
                 for step, sr in zip(self.procedure.steps, result.steps, strict=True):
                     await self._step(step, sr)
-                    if sr.verdict != "pass":
-                        break
+                    if sr.verdict == "error" or (sr.verdict == "fail" and not self.keep_going):
+                        break  # a step in error leaves nothing certain to go on from
+                self.watching = False
         except LabGone as exc:
             result.lab_gone = str(exc)
         except asyncio.CancelledError:  # interrupted: the faults are cleared all the same, below
@@ -558,6 +650,13 @@ class ProcedureRun:
             self._interrupted(f"in step {s.index} ({s.title})" if s else "during its setup")
         finally:
             try:
+                if not result.lab_gone:
+                    try:
+                        await self._collect_logs()
+                    except LabGone:
+                        pass  # the logs are evidence, not worth a wind-up missed
+                    except asyncio.CancelledError:
+                        self._interrupted("while reading the devices' logs")
                 try:
                     await self._wind_up()
                 except asyncio.CancelledError:  # interrupted as it wound up: it winds up again
@@ -571,7 +670,7 @@ class ProcedureRun:
                 if (result.setup_error or "error" in verdicts or result.interrupted
                         or result.lab_gone):  # fmt: skip
                     result.verdict = "error"
-                elif "fail" in verdicts:
+                elif "fail" in verdicts or result.broken:
                     result.verdict = "fail"
                 else:
                     result.verdict = "pass"
@@ -631,5 +730,7 @@ def _frame_links(step: Step) -> tuple[str, ...]:
 
 
 async def run_procedure(procedure: Procedure, access: LabAccess, mode: str,
-                        sample_s: float = SAMPLE_S) -> ProcedureResult:  # fmt: skip
-    return await ProcedureRun(procedure, access, mode, sample_s).run()
+                        sample_s: float = SAMPLE_S, keep_going: bool = False) -> ProcedureResult:  # fmt: skip
+    """The procedure's run; `keep_going`: the steps after a failed expectation still run (and
+    are reported after it), so the moments after an unsafe state are recorded too."""
+    return await ProcedureRun(procedure, access, mode, sample_s, keep_going).run()

@@ -44,5 +44,6 @@ class ProcedureShape(Shape):
     title: Text | msgspec.UnsetType = msgspec.UNSET  # unset: the file's name
     verifies: Texts = ()
     tags: Texts = ()
+    always: tuple[Text, ...] = ()  # expectations that hold at every sample of the run
     setup: SetupShape = msgspec.field(default_factory=SetupShape)
     steps: list[Any] | None = None  # at least one: checked in code

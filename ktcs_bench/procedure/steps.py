@@ -316,7 +316,7 @@ class WaitStep(Step):
         return Outcome("pass")
 
 
-def _seen_text(seen: Any) -> str:
+def seen_text(seen: Any) -> str:
     if isinstance(seen, list) and seen and isinstance(seen[0], dict):
         return "; ".join(f"{e.get('kind')}: {e.get('text')}" for e in seen[:3])
     if isinstance(seen, list) and seen and hasattr(seen[0], "op"):
@@ -346,16 +346,16 @@ class ExpectStep(Step):
                 if not ok:
                     at = ctx.elapsed() - start
                     return Outcome("fail", f"did not hold: after {at:.1f} s of {self.holds:g} s",
-                                   _seen_text(seen))  # fmt: skip
+                                   seen_text(seen))  # fmt: skip
                 if ctx.elapsed() - start >= self.holds:
-                    return Outcome("pass", f"held {self.holds:g} s", _seen_text(seen))
+                    return Outcome("pass", f"held {self.holds:g} s", seen_text(seen))
                 obs = await ctx.tick()
         while True:  # true at some moment within the limit
             ok, seen = await exp.check(obs)
             if ok:
-                return Outcome("pass", f"after {ctx.elapsed() - start:.1f} s", _seen_text(seen))
+                return Outcome("pass", f"after {ctx.elapsed() - start:.1f} s", seen_text(seen))
             if ctx.elapsed() - start >= self.within:
-                return Outcome("fail", f"not within {self.within:g} s", _seen_text(seen))
+                return Outcome("fail", f"not within {self.within:g} s", seen_text(seen))
             obs = await ctx.tick()
 
 

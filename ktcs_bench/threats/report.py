@@ -6,6 +6,19 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from typing import TypedDict
 
+from ktcs_bench.junit import REQUIREMENT
+
+REQUIREMENTS: dict[str, tuple[str, ...]] = {
+    "repetition": ("EN50159-REPEAT-01", "T1-ARQ-04"),
+    "deletion": ("EN50159-DELETE-01", "T1-ARQ-02", "T1-ARQ-03"),
+    "insertion": ("EN50159-INSERT-01",),
+    "resequencing": ("EN50159-RESEQ-01", "T2-DUMP-02"),
+    "corruption": ("EN50159-CORRUPT-01", "T1-CRC-01", "T1-CRC-02"),
+    "delay": ("EN50159-DELAY-01", "T2-HB-01"),
+    "masquerade": ("EN50159-MASQ-01", "T2-ADMIT-01", "T2-ADMIT-02"),
+}
+"""The requirement ids of the catalogue each threat of the campaign verifies."""
+
 _GREEN, _RED, _YELLOW, _BOLD, _RESET = "\x1b[32m", "\x1b[31m", "\x1b[33m", "\x1b[1m", "\x1b[0m"
 
 
@@ -20,6 +33,7 @@ class ThreatResultJson(TypedDict):
     outcome: str
     safe: bool | None
     ran: bool
+    verifies: list[str]
     evidence: list[str]
 
 
@@ -39,13 +53,19 @@ class ThreatResult:
     ran: bool = True
 
     @property
+    def verifies(self) -> tuple[str, ...]:
+        """The requirement ids this threat's result is evidence for."""
+        return REQUIREMENTS.get(self.threat, ())
+
+    @property
     def passed(self) -> bool:
         return not self.ran or (self.caught and self.safe is not False)
 
     def as_dict(self) -> ThreatResultJson:
         return {"threat": self.threat, "link": self.link, "injection": self.injection,
                 "defence": self.defence, "caught": self.caught, "outcome": self.outcome,
-                "safe": self.safe, "ran": self.ran, "evidence": self.evidence}  # fmt: skip
+                "safe": self.safe, "ran": self.ran, "verifies": list(self.verifies),
+                "evidence": self.evidence}  # fmt: skip
 
 
 def not_run(threat: str, why: str) -> ThreatResult:
@@ -110,6 +130,10 @@ def junit_xml(results: list[ThreatResult], properties: dict[str, str]) -> bytes:
         ET.SubElement(props, "property", name=key, value=value)
     for r in results:
         tc = ET.SubElement(ts, "testcase", name=r.threat, classname="threats.en50159")
+        if r.verifies:
+            tprops = ET.SubElement(tc, "properties")
+            for rid in r.verifies:
+                ET.SubElement(tprops, "property", name=REQUIREMENT, value=rid)
         if not r.ran:
             ET.SubElement(tc, "skipped", message=r.outcome)
             continue

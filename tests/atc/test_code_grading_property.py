@@ -261,6 +261,7 @@ OLD_RULE_FAILURES = (
 no build-up, only the next circuit's limit) coded with a step the train could not brake for."""
 
 
+@pytest.mark.requirement("ATC-CODE-01")
 @settings(max_examples=20, derandomize=True, deadline=None)
 @given(cases())
 @example(OLD_RULE_FAILURES[0])

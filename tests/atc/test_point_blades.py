@@ -43,6 +43,7 @@ def kinds(events: list[RailEvent]) -> list[str]:
     return [e.kind for e in events]
 
 
+@pytest.mark.requirement("TC-RAILS-01")
 def test_facing_normal_runs_onto_the_main_track(line: Line) -> None:
     model = TrackCircuitModel(line)
     run(model, "T1", 400, 900)
@@ -51,6 +52,7 @@ def test_facing_normal_runs_onto_the_main_track(line: Line) -> None:
     assert model.take_events() == []
 
 
+@pytest.mark.requirement("TC-RAILS-01")
 def test_facing_reverse_runs_into_the_loop_whatever_track_it_was_put_on(line: Line) -> None:
     model = TrackCircuitModel(line)
     model.set_blades(18, {"31": "reverse"})
@@ -73,6 +75,7 @@ def test_a_train_straddling_a_point_occupies_both_sides_on_its_own_track(line: L
     assert model.take_events() == []
 
 
+@pytest.mark.requirement("TC-RAILS-02")
 def test_trailing_against_the_blades_trails_the_point(line: Line) -> None:
     model = TrackCircuitModel(line)
     model.move(TrainPosition("T2", 800, 840, "2"))  # a down train on the loop, 31 lies normal
@@ -100,6 +103,7 @@ def test_a_down_train_on_the_loop_trails_a_point_set_for_it(line: Line) -> None:
     assert model.track_of("T2") is None  # the plain line
 
 
+@pytest.mark.requirement("TC-RAILS-03")
 def test_blades_moving_under_a_train_derail_it(line: Line) -> None:
     model = TrackCircuitModel(line)
     run(model, "T1", 400, 580)  # astride point 31 (normal)
@@ -111,6 +115,7 @@ def test_blades_moving_under_a_train_derail_it(line: Line) -> None:
     assert model.take_events() == []  # once
 
 
+@pytest.mark.requirement("TC-RAILS-03")
 def test_a_train_meeting_moving_blades_facing_is_derailed(line: Line) -> None:
     model = TrackCircuitModel(line)
     model.set_blades(18, {"31": "moving"})

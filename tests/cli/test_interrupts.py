@@ -158,3 +158,37 @@ def test_a_lab_in_one_process_that_falls_behind_its_clock_says_so_once(tmp_path:
     text = log.read_text()
     assert text.count(BEHIND_WARNING) == 1, text[-3000:]
     assert f"at {MAX_SPEED:g}x real time" in text
+
+
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as a shell's background job starts its children
+
+
+def test_ctrl_c_ends_a_command_started_with_sigint_ignored() -> None:
+    """`decode` waiting on its stdin, started as a background job is (SIGINT inherited ignored):
+    Ctrl-C still ends it with exit 130, as it ends the commands that install their own handlers
+    (the threat campaign relies on the same KeyboardInterrupt to clear its faults)."""
+    proc = subprocess.Popen(
+        [*CLI, "decode", "--json"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, preexec_fn=_ignore_sigint,
+    )  # fmt: skip
+    try:
+        assert proc.stdin is not None and proc.stdout is not None
+        proc.stdin.write("02 04 00\n")  # a partial frame: it reads on, waiting for the rest
+        proc.stdin.flush()
+        wait_until("the command running", lambda: _sigint_armed(proc.pid), timeout=60)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=ENDS)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, err
+
+
+def _sigint_armed(pid: int) -> bool:
+    """The process catches SIGINT now (bit 2 of SigCgt in /proc/PID/status): its handler is in."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigCgt:"):
+            return bool(int(line.split()[1], 16) & (1 << (signal.SIGINT - 1)))
+    return False

@@ -1,5 +1,6 @@
 """Bad input: random bytes, truncations and bit flips only ever give typed records, never raise."""
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -29,12 +30,14 @@ def _check(profile, stream: bytes) -> None:  # type: ignore[no-untyped-def]
     assert b"".join(r.raw for r in records) == stream
 
 
+@pytest.mark.requirement("SYS-DECODE-01")
 @settings(max_examples=300)
 @given(profile=st.sampled_from(PROFILES), stream=st.binary(max_size=600))
 def test_random_bytes(profile, stream) -> None:  # type: ignore[no-untyped-def]
     _check(profile, stream)
 
 
+@pytest.mark.requirement("SYS-DECODE-01", "T1-CRC-01")
 @settings(max_examples=300)
 @given(profile=st.sampled_from(PROFILES), data=st.data())
 def test_truncations_and_bit_flips_of_valid_frames(profile, data) -> None:  # type: ignore[no-untyped-def]

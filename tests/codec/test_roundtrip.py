@@ -1,5 +1,6 @@
 """Encode -> decode is the identity, for every opcode of every shipped profile."""
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -10,6 +11,7 @@ from .strategies import messages
 PROFILES = [get_profile(n) for n in profile_names()]
 
 
+@pytest.mark.requirement("T1-FRAME-01", "T2-FRAME-01")
 @settings(max_examples=400)
 @given(data=st.data(), profile=st.sampled_from(PROFILES))
 def test_encode_decode_roundtrip(data: st.DataObject, profile) -> None:  # type: ignore[no-untyped-def]

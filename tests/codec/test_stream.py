@@ -2,6 +2,7 @@
 
 import random
 
+import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
@@ -104,6 +105,7 @@ def test_chunking_does_not_change_the_result(profile, data, garbage, cuts) -> No
     assert_accounts_for_every_byte(whole, stream)
 
 
+@pytest.mark.requirement("T1-FRAME-03")
 @settings(max_examples=200)
 @given(profile=st.sampled_from(PROFILES), data=st.data(), garbage=st.binary(max_size=64))
 def test_good_frame_after_garbage_is_always_found(profile, data, garbage) -> None:  # type: ignore[no-untyped-def]
@@ -114,6 +116,7 @@ def test_good_frame_after_garbage_is_always_found(profile, data, garbage) -> Non
     assert isinstance(last, Frame) and last.error is None and last.raw == frame
 
 
+@pytest.mark.requirement("T1-FRAME-03")
 def test_false_stx_with_long_len_does_not_swallow_the_next_frame() -> None:
     good = FrameCodec(T1).encode(7, 0x0003)
     false_start = bytes([0x02, 0xFF, 0x03, 0x00, 0x00, 0x00])  # announces 1023 DATA bytes
@@ -124,6 +127,7 @@ def test_false_stx_with_long_len_does_not_swallow_the_next_frame() -> None:
     assert isinstance(records[0], Garbage) and records[0].offset == 0
 
 
+@pytest.mark.requirement("T1-FRAME-02", "SYS-DECODE-01")
 def test_length_beyond_max_is_a_length_error_not_an_allocation() -> None:
     dec = StreamDecoder(T1)
     records = dec.feed(bytes([0x02, 0xFF, 0xFF, 0x01, 0x02, 0x00]) + b"\x00" * 10)
@@ -131,6 +135,7 @@ def test_length_beyond_max_is_a_length_error_not_an_allocation() -> None:
     assert dec.buffered <= 16
 
 
+@pytest.mark.requirement("T1-CRC-01", "T1-FRAME-03")
 def test_crc_error_is_reported_once_then_resync() -> None:
     codec = FrameCodec(T1)
     a = bytearray(codec.encode_message(1, "CHANGE", items=[[0x0202, 2], [0x0102, 2]]))
@@ -217,6 +222,7 @@ def test_truncated_at_end_and_abandon_for_delta_r() -> None:
     assert [r.raw for r in more if isinstance(r, Frame) and r.ok] == [wire]
 
 
+@pytest.mark.requirement("T1-CRC-01")
 @settings(max_examples=150)
 @given(profile=st.sampled_from(PROFILES), data=st.data(), n=st.integers(2, 6))
 def test_single_bit_flip_loses_only_its_own_frame(profile, data, n) -> None:  # type: ignore[no-untyped-def]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from ktcs_bench.ixl.direction import ASK_TIMEOUT_S, Facts, Holding, IntervalEnd
 from ktcs_bench.station import load_line
 from ktcs_bench.station.model import Interval
@@ -38,6 +40,7 @@ def test_after_a_resync_the_one_that_says_it_holds_holds() -> None:
     assert not end.holds  # even the default end does not take what the other holds
 
 
+@pytest.mark.requirement("DIR-02")
 def test_with_nobody_holding_the_default_end_takes_it_once_the_interval_is_clear() -> None:
     default, other = synced(18, phi=0), synced(20, phi=0)
     default.step(OCCUPIED, 0.0)
@@ -48,6 +51,7 @@ def test_with_nobody_holding_the_default_end_takes_it_once_the_interval_is_clear
     assert default.holds and default.phi == 1 and default.direction == "up"
 
 
+@pytest.mark.requirement("DIR-04", "DIR-05")
 def test_the_holder_gives_only_when_asked_and_free_and_stops_holding_first() -> None:
     holder = synced(18, phi=0)
     holder.step(CLEAR, 0.0)
@@ -77,6 +81,7 @@ def test_the_asker_takes_it_when_it_reads_the_gift_and_not_before() -> None:
     assert asker.next_deadline() is None
 
 
+@pytest.mark.requirement("DIR-03")
 def test_an_ask_without_answer_fails_after_its_time() -> None:
     asker = synced(20, phi=1)
     asker.ask(0.0)
@@ -91,6 +96,7 @@ def test_an_ask_without_answer_fails_after_its_time() -> None:
     assert asker.holds
 
 
+@pytest.mark.requirement("DIR-06")
 def test_a_link_failure_changes_nothing_hands_and_a_resync_is_never_read_as_a_gift() -> None:
     holder, asker = synced(18, phi=0), synced(20, phi=1)
     holder.step(CLEAR, 0.0)

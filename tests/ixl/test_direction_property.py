@@ -9,6 +9,7 @@ restarts. After every step: never both ends holding the permission, never depart
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, rule, run_state_machine_as_test
@@ -117,6 +118,7 @@ class PermissionMachine(RuleBasedStateMachine):
         assert len(locked) <= 1, locked  # SPEC §6.2 invariant 5
 
 
+@pytest.mark.requirement("DIR-01", "DIR-05", "IXL-INV-05")
 def test_the_permission_is_never_held_at_both_ends_nor_departures_locked_from_both() -> None:
     run_state_machine_as_test(
         PermissionMachine,

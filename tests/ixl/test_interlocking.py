@@ -38,6 +38,7 @@ def test_reason_numbers_are_the_wire_values() -> None:
     assert result["reasons"] == {int(r): r.text for r in Reason}  # the wire names them alike
 
 
+@pytest.mark.requirement("IXL-ROUTE-01")
 def test_route_set_throws_points_awaits_detection_then_clears(rig: StationRig) -> None:
     result = rig.control("RSC200112")
     assert result.accepted and result.reason is Reason.NONE and result.name == "RSC200112"
@@ -71,6 +72,7 @@ def test_main_route_aspect_follows_the_exit_signal(rig: StationRig) -> None:
     assert rig.ixl.aspect("01") == "Y"
 
 
+@pytest.mark.requirement("IXL-ROUTE-02")
 @pytest.mark.parametrize(
     ("setup", "control", "reason"),
     [
@@ -123,6 +125,7 @@ def test_unknown_code_number(rig: StationRig) -> None:
     assert rig.ixl.control("RSC209999", 1, rig.now).results[0].name is None  # not a control
 
 
+@pytest.mark.requirement("IXL-MODE-01", "IXL-MODE-02")
 def test_center_local_modes_and_cmr_handshake(line: Line) -> None:
     rig = StationRig(line.view(18), mode=Mode.LOCAL)
     assert (rig.ctc["LOC18"], rig.ctc["CTC18"], rig.ctc["CMR18"]) == (1, 0, 0)
@@ -157,6 +160,7 @@ def _run_train_into_track_2(rig: StationRig) -> None:
     rig.occupy("TC2047")
 
 
+@pytest.mark.requirement("IXL-ROUTE-03", "IXL-RELEASE-01")
 def test_signal_to_stop_when_the_train_enters_then_sequential_release(rig: StationRig) -> None:
     _run_train_into_track_2(rig)
     rig.occupy("TC2053A")
@@ -195,6 +199,7 @@ def test_the_overlap_timer_waits_while_no_train_movement_can_be_read(rig: Statio
     assert "32" not in rs.held_points and "TC2057A" not in rs.held_tcs
 
 
+@pytest.mark.requirement("IXL-LOCK-01")
 def test_cancel_with_approach_locking_and_timed_release(rig: StationRig) -> None:
     _run_train_into_track_2(rig)  # train in the approach section, signal clear
     assert rig.control("RCC200112").accepted
@@ -211,6 +216,7 @@ def test_cancel_with_approach_locking_and_timed_release(rig: StationRig) -> None
     assert rig.ctc["ALI200112"] == 0 and rig.ctc["SLI2031"] == 0
 
 
+@pytest.mark.requirement("IXL-ROUTE-04")
 def test_cancel_without_approaching_train_releases_at_once(rig: StationRig) -> None:
     rig.control("RSC200112")
     rig.advance(5)
@@ -218,6 +224,7 @@ def test_cancel_without_approaching_train_releases_at_once(rig: StationRig) -> N
     assert rig.ixl.route_status("0112") is RouteStatus.IDLE and rig.ixl.aspect("01") == "R"
 
 
+@pytest.mark.requirement("IXL-FAIL-01", "IXL-INV-04")
 @pytest.mark.parametrize("fault", ["detection", "track", "atc_link", "io_link", "lamp_stop"])
 def test_faults_put_the_signal_to_stop_at_once(rig: StationRig, fault: str) -> None:
     rig.control("RSC200113")
@@ -253,6 +260,7 @@ def test_faults_put_the_signal_to_stop_at_once(rig: StationRig, fault: str) -> N
     assert rig.ixl.aspect("01") == "Y"
 
 
+@pytest.mark.requirement("TS-SIGNAL-01")
 def test_lamp_failure_is_reported_and_proved_aspect_indicated(rig: StationRig) -> None:
     rig.control("RSC200112")
     rig.advance(5)
@@ -262,6 +270,7 @@ def test_lamp_failure_is_reported_and_proved_aspect_indicated(rig: StationRig) -
     assert rig.atc["SGP2001"] == 0  # the ATC is not told proceed on an unproved lamp
 
 
+@pytest.mark.requirement("IXL-POINT-01", "IXL-INV-02")
 def test_point_control_only_when_free_and_unoccupied(rig: StationRig) -> None:
     assert rig.control("SRC2034").accepted
     assert rig.ctc["SNR2034"] == 1
@@ -299,6 +308,7 @@ def test_occupied_with_signal_at_stop_does_not_count_as_entry(rig: StationRig) -
     assert rig.ixl.aspect("01") == "Y"  # a fault, not a train: the route stays set
 
 
+@pytest.mark.requirement("IXL-FAIL-02", "IXL-START-01")
 def test_links_start_down_and_everything_is_occupied(line: Line) -> None:
     ixl = Interlocking(line.view(18))
     state = ixl.full_state("ctc")

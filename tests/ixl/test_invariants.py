@@ -26,6 +26,7 @@ occupied while the ATC link is down and, after it came back, until the test has 
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.stateful import (
@@ -466,6 +467,7 @@ class InterlockingMachine(RuleBasedStateMachine):
                 assert not self.occupied(tc), f"{sig.name} proceed with {tc} occupied"
 
 
+@pytest.mark.requirement("IXL-INV-01", "IXL-INV-02", "IXL-INV-03", "IXL-INV-04")
 def test_interlocking_invariants_hold_over_random_sequences() -> None:
     STEPS["count"] = 0
     RELEASED.update(passage=0, timed=0)

@@ -246,6 +246,7 @@ class SystemMachine(SearchMachine):
         self.step({"do": "settle", "run_s": 10.0})
 
 
+@pytest.mark.requirement("SYS-SAFE-01", "SYS-SAFE-02", "SYS-SAFE-03", "SYS-VIEW-01")
 def test_the_integrated_system_stays_safe_under_random_commands_trains_and_faults() -> None:
     COUNT.update(steps=0, looks=0, examples=0)
     SEEDS.clear()
@@ -437,6 +438,7 @@ def _search_fails(machine: type[SearchMachine], steps: int, per_example: int = 4
     raise AssertionError(f"the search found nothing in {COUNT['steps']} steps")
 
 
+@pytest.mark.requirement("IXL-INV-06")
 def test_the_search_finds_a_head_on_when_the_direction_check_is_off(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

@@ -94,7 +94,7 @@ def test_the_interval_and_point_procedures_pass_live(lab: RunningLab, tmp_path: 
 FAILING = """\
 id: must-fail
 title: expects a signal to clear with no route set
-verifies: [the reports say what failed]
+verifies: [IXL-INV-03]  # the reports say what failed
 tags: [negative]
 setup: {lab: 'QUIET'}
 steps:
@@ -132,7 +132,7 @@ def test_a_procedure_that_must_fail_fails_and_every_report_says_why(
 INTERRUPTED = """\
 id: interrupted
 title: cut a link, then wait long
-verifies: [Ctrl-C clears the faults]
+verifies: [T1-LINK-01]  # Ctrl-C clears the faults
 tags: [negative]
 setup: {lab: 'QUIET'}
 steps:

@@ -142,7 +142,7 @@ def test_the_top_level_and_setup_are_declared_each_mistake_with_its_line(
 
 
 def test_one_text_or_a_list_of_them_and_the_file_name_by_default(tmp_path: Path) -> None:
-    path = write(tmp_path, "  - wait: 1s\n", "verifies: 7\ntags: [a, 2]\nsteps:\n")
+    path = write(tmp_path, "  - wait: 1s\n", "verifies: IXL-ROUTE-01\ntags: [a, 2]\nsteps:\n")
     procedure = load_procedure(path)
     assert (procedure.id, procedure.title) == ("p", "p")
-    assert procedure.verifies == ("7",) and procedure.tags == ("a", "2")
+    assert procedure.verifies == ("IXL-ROUTE-01",) and procedure.tags == ("a", "2")

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -134,6 +135,7 @@ def _layouts(draw: st.DrawFn) -> tuple[list[Circuit], float, float]:
     return _codes(lengths, limits, gradients), draw(st.floats(0.3, 2.0)), draw(st.floats(50, 100))
 
 
+@pytest.mark.requirement("TRAIN-ATP-02")
 @settings(max_examples=40, deadline=None)
 @given(_layouts())
 def test_an_ato_train_on_legal_codes_never_reaches_the_sbi(

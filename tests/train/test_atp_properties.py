@@ -4,6 +4,7 @@ passes its end of authority and never exceeds its EBD, even with a driver who ig
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -35,6 +36,7 @@ def cases(draw: st.DrawFn) -> tuple[float, list[Restriction], GradientProfile, f
     return eoa, restrictions, GradientProfile(tuple(locs), tuple(grads)), build_up, speed
 
 
+@pytest.mark.requirement("TRAIN-ATP-04", "TRAIN-ATP-02")
 @settings(max_examples=25, deadline=None)
 @given(cases())
 def test_never_past_eoa_never_above_ebd(

@@ -55,6 +55,7 @@ class Ledger:
             self.reported.add(int.from_bytes(msg.data[:2], "little"))
 
 
+@pytest.mark.requirement("T1-ARQ-05")
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_delivered_once_and_intact_or_communication_error(seed: int) -> None:
     faults = {d: FaultInjector.seeded(PROFILE, seed * 10 + i) for i, d in enumerate(("ab", "ba"))}

@@ -53,6 +53,7 @@ def test_default_timers_follow_the_line_rate() -> None:
     assert LinkConfig(delta_r=0.3, ack_timeout=0.5).resolve(PROFILE).ack_timeout == 0.5
 
 
+@pytest.mark.requirement("T1-RESYNC-01", "T1-CODES-01")
 def test_start_up_links_come_up_and_rebuild_state_from_all_info() -> None:
     a, b, bench = settled()
     for link, peer_state in ((a, [0, 1]), (b, [1, 0, 1])):
@@ -63,6 +64,7 @@ def test_start_up_links_come_up_and_rebuild_state_from_all_info() -> None:
         assert info.fields["statuses"] == peer_state
 
 
+@pytest.mark.requirement("T1-ARQ-01")
 def test_message_delivered_once_and_acked() -> None:
     a, b, bench = settled()
     bench.send(a, change(a))
@@ -74,6 +76,7 @@ def test_message_delivered_once_and_acked() -> None:
     assert a.queued == 0
 
 
+@pytest.mark.requirement("T1-CRC-02")
 def test_1_crc_error_nak_then_same_frame_again() -> None:
     a, b, bench = settled()
     bench.fault(bench.ab, CorruptFrame(-5, 0x10))  # the CRC's low byte of a's next frame
@@ -90,6 +93,7 @@ def test_1_crc_error_nak_then_same_frame_again() -> None:
     assert len(received(bench, b)) == 1
 
 
+@pytest.mark.requirement("T1-DR-01")
 def test_2_no_complete_frame_within_delta_r_nak_reason_2() -> None:
     a, b, bench = settled()
     bench.fault(bench.ab, TruncateFrame(4))  # a's next frame loses its last 4 bytes
@@ -104,6 +108,7 @@ def test_2_no_complete_frame_within_delta_r_nak_reason_2() -> None:
     assert len(received(bench, b)) == 1
 
 
+@pytest.mark.requirement("T1-ARQ-02", "T1-ARQ-04")
 def test_3_lost_ack_timeout_retransmits_same_seq_duplicate_not_redelivered() -> None:
     a, b, bench = settled()
     bench.fault(bench.ba, DropFrame())  # b's next frame: the ACK of a's CHANGE
@@ -120,6 +125,7 @@ def test_3_lost_ack_timeout_retransmits_same_seq_duplicate_not_redelivered() -> 
     assert a.queued == 0 and not bench.of(a, CommunicationError)
 
 
+@pytest.mark.requirement("T1-ARQ-03")
 def test_communication_error_after_exactly_three_retransmissions() -> None:
     a, b, bench = settled()
     bench.fault(bench.ab, Cut())  # a's transmitter dies; its frames never arrive
@@ -139,6 +145,7 @@ def test_communication_error_after_exactly_three_retransmissions() -> None:
     assert not received(bench, b)
 
 
+@pytest.mark.requirement("T1-ARQ-04")
 def test_duplicate_seq_is_acked_again_but_not_delivered_twice() -> None:
     link = Type1Link(PROFILE, CONFIG, "rx")
     frame = CODEC.encode(0x42, OPS["CHANGE"], bytes.fromhex("050001"))
@@ -154,6 +161,7 @@ def test_duplicate_seq_is_acked_again_but_not_delivered_twice() -> None:
     assert [e.fields for e in nxt if isinstance(e, MessageReceived)] == [{"items": [[5, 0]]}]
 
 
+@pytest.mark.requirement("T1-FRAME-03")
 def test_resync_after_garbage() -> None:
     a, b, bench = settled()
     junk = bytes.fromhex("ff 02 ff 7f 00 13 02 05 00 99 03 55 aa 02")  # false STXs, silly LENs
@@ -165,6 +173,7 @@ def test_resync_after_garbage() -> None:
     assert b.up
 
 
+@pytest.mark.requirement("T1-FRAME-04")
 def test_unknown_opcode_and_bad_payload_nak_reason_3() -> None:
     a, b, bench = settled()
     bench.inject(bench.ab, CODEC.encode(0x60, 0x0777, b"\x01"))
@@ -185,6 +194,7 @@ def test_ack_and_nak_are_never_acknowledged() -> None:
     assert replies == []
 
 
+@pytest.mark.requirement("T1-LINK-01")
 def test_link_test_when_idle_and_not_delivered() -> None:
     a, b, bench = settled()
     before = len(data_frames(bench.ab, "LINK_TEST"))
@@ -204,6 +214,7 @@ def test_busy_direction_sends_no_link_test() -> None:
     assert len(data_frames(bench.ab, "LINK_TEST")) == before
 
 
+@pytest.mark.requirement("T1-LINK-01", "T1-RESYNC-01")
 def test_link_down_after_silence_and_up_again_with_full_resync() -> None:
     state_a = {1: 1, 2: 0, 3: 1}
     # default timers (ACK timeout 1.7 s): 3 s of silence comes before a LINK_TEST's 4th failure

@@ -92,6 +92,7 @@ def test_ident_request_is_the_worked_example() -> None:
     assert ixl.data_to_send() == bytes.fromhex("02 06 00 01 00 14 00 01 5B DD")
 
 
+@pytest.mark.requirement("T2-SESSION-01", "T2-DUMP-01")
 def test_ident_accept_then_full_state_in_parts_of_40_in_chart_order() -> None:
     w = Wire()
     state = [(code, code % 3) for code in range(1000, 0, -1)]  # given out of order on purpose
@@ -120,6 +121,7 @@ def test_empty_and_exact_multiple_full_states() -> None:
     assert [f.sub for f in frames(w.ixl.data_to_send())] == [1, 2]
 
 
+@pytest.mark.requirement("T2-ADMIT-01")
 def test_ident_refused_closes_both_ends() -> None:
     w = Wire(station=99)
     w.pump()
@@ -130,6 +132,7 @@ def test_ident_refused_closes_both_ends() -> None:
     assert w.ixl.closed and "refused" in (w.ixl.close_reason or "")
 
 
+@pytest.mark.requirement("T2-IND-01")
 def test_change_indications_batch_many_codes_per_message() -> None:
     w = Wire()
     w.open(full=[(c, 0) for c in range(1, 101)])
@@ -148,6 +151,7 @@ def test_indication_change_worked_example() -> None:
     assert w.ixl.data_to_send() == bytes.fromhex("02 09 07 10 00 05 00 01 2C 01 00 3D 5B")
 
 
+@pytest.mark.requirement("T2-CONTROL-01")
 def test_control_and_control_result() -> None:
     w = Wire()
     w.open(full=[])
@@ -164,6 +168,7 @@ def test_control_and_control_result() -> None:
     ]
 
 
+@pytest.mark.requirement("T2-DUMP-02")
 def test_request_all_is_announced_to_the_ixl() -> None:
     w = Wire()
     w.open(full=[])
@@ -180,6 +185,7 @@ def test_sending_before_ident_is_a_usage_error() -> None:
         w.ctc.send_control([(1, 1)], w.now)
 
 
+@pytest.mark.requirement("T2-HB-01")
 def test_heartbeats_keep_an_idle_link_up() -> None:
     w = Wire()
     w.open(full=[])
@@ -192,6 +198,7 @@ def test_heartbeats_keep_an_idle_link_up() -> None:
     assert w.ixl.next_deadline() is not None
 
 
+@pytest.mark.requirement("T2-HB-01")
 def test_link_down_after_t_max_of_silence() -> None:
     w = Wire()
     w.open(full=[])
