@@ -130,17 +130,21 @@ class StreamDecoder:
                 last = self._last_piece()  # its last piece, the frame alone in the buffer
                 if last is not None:
                     return last
-        elif not n0 and n >= self._hsize and buf[0] == stx and buf.find(stx, 1) < 0:
-            # a frame's first piece on an empty buffer, its header whole, no other STX: pending
+        elif not n0 and n >= self._hsize and buf[0] == stx:  # on an empty buffer, a header
             length = self._header.unpack_from(buf, 1)[self._i_len]
             data_len = length - self._fixed
             total = self._hsize + data_len + self._trailer
-            if 0 <= data_len and length <= self._max_len and total > n:
-                base = self._base
-                self._pending = True
-                self._probe_for, self._probe_next, self._probe_wait = base, base + n, []
-                self._need = base + total
-                return []
+            if 0 <= data_len and length <= self._max_len:
+                if total == n:  # a whole frame and nothing else
+                    whole = self._last_piece()
+                    if whole is not None:
+                        return whole
+                elif total > n and buf.find(stx, 1) < 0:  # a frame's first piece: pending
+                    base = self._base
+                    self._pending = True
+                    self._probe_for, self._probe_next, self._probe_wait = base, base + n, []
+                    self._need = base + total
+                    return []
         return self._process(final=False)
 
     def close(self) -> list[Record]:
@@ -178,9 +182,10 @@ class StreamDecoder:
 
     # -- internals ---------------------------------------------------------------------------
     def _last_piece(self) -> list[Record] | None:
-        """The buffer holds exactly the pending frame, now whole: if its checks pass, it is the
-        one record `_process` would give (its fast path, at offset 0), and the buffer empties;
-        None (nothing changed) if not."""
+        """The buffer holds exactly one frame, its LEN in range (the pending frame's last piece
+        has come, or a whole frame came to an empty buffer): if its checks pass, it is the one
+        record `_process` would give (its fast path, at offset 0), and the buffer empties; None
+        (nothing changed) if not."""
         (stx, hs, unpack, i_len, i_seq, i_op, i_sub, fixed, max_len, trailer, crc_fn, crc_init,
          crc_table, crc_xor, crc_from, crc_to, tail_unpack, tail_ok) = self._hot  # fmt: skip
         raw = bytes(self._buf)
