@@ -199,9 +199,10 @@ class StreamDecoder:
         self._need = 0
         self._pending = False
         self._consume(len(raw))
-        return [tuple.__new__(Frame, (self._base - len(raw), raw, h[i_seq], h[i_op],
-                                      None if i_sub is None else h[i_sub], hs, at, calc, calc,
-                                      None))]  # fmt: skip -- built in C, as `_process` does
+        # built in C (`tuple.__new__`), as `_process` builds its frames
+        fields = (self._base - len(raw), raw, h[i_seq], h[i_op],
+                  None if i_sub is None else h[i_sub], hs, at, calc, calc, None)  # fmt: skip
+        return [tuple.__new__(Frame, fields)]
 
     def _pending_at(self) -> int | None:
         return self._held if self._pending else None
