@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import tempfile
 from collections.abc import Callable
+from pathlib import Path
 from typing import TextIO
 
 from ktcs_bench.argtypes import duration as duration
@@ -35,3 +37,29 @@ def port(any_free: bool = False) -> Callable[[str], int]:
             raise argparse.ArgumentTypeError(str(exc)) from None
 
     return parse
+
+
+def output_folder(word: str, option: str) -> Path:
+    """A folder reports are written to, checked before anything runs: a folder, or a path to
+    one that can be made (made when the reports are written)."""
+    path = Path(word)
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{option} {word}: is a file, not a folder")
+    there = path
+    while not there.exists():  # the nearest folder that is there
+        there = there.parent
+    if not there.is_dir():
+        raise UsageError(f"{option} {word}: {there} is a file, not a folder")
+    try:
+        probe_writable(there)
+    except OSError as exc:
+        raise UsageError(f"{option} {word}: cannot write in {there}: "
+                         f"{exc.strerror or exc}") from None  # fmt: skip
+    return path
+
+
+def probe_writable(folder: Path) -> None:
+    """OSError unless a file can be made in `folder` (tried: permissions alone do not say, for
+    root, or on a read-only file system)."""
+    with tempfile.NamedTemporaryFile(dir=folder, prefix=".ktcs-bench-probe-"):
+        pass

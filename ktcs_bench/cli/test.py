@@ -18,6 +18,7 @@ from collections.abc import Coroutine
 from pathlib import Path
 from typing import Any
 
+from ktcs_bench.cli._common import output_folder, probe_writable
 from ktcs_bench.errors import PeerError, UsageError
 
 EPILOG = """\
@@ -215,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("test run: give one procedure file or more")
     files = _procedure_files(args.procedures)
     junit_path = _output_file(args.junit, "--junit") if args.junit else None
-    report_dir = _output_folder(args.report, "--report") if args.report else None
+    report_dir = output_folder(args.report, "--report") if args.report else None
     catalogue = load_catalogue(args.catalogue) if args.catalogue else None
     procedures = [load_procedure(path, catalogue) for path in files]  # every file checked first
     ids = [p.id for p in procedures]
@@ -300,33 +301,7 @@ def _output_file(word: str, option: str) -> Path:
             with path.open("ab"):
                 pass
         else:
-            _probe(folder)
+            probe_writable(folder)
     except OSError as exc:
         raise UsageError(f"{option} {word}: cannot write there: {exc.strerror or exc}") from None
     return path
-
-
-def _output_folder(word: str, option: str) -> Path:
-    """A folder reports are written to, checked before anything runs: a folder, or a path to
-    one that can be made (made when the reports are written)."""
-    path = Path(word)
-    if path.exists() and not path.is_dir():
-        raise UsageError(f"{option} {word}: is a file, not a folder")
-    there = path
-    while not there.exists():  # the nearest folder that is there
-        there = there.parent
-    if not there.is_dir():
-        raise UsageError(f"{option} {word}: {there} is a file, not a folder")
-    try:
-        _probe(there)
-    except OSError as exc:
-        raise UsageError(f"{option} {word}: cannot write in {there}: "
-                         f"{exc.strerror or exc}") from None  # fmt: skip
-    return path
-
-
-def _probe(folder: Path) -> None:
-    """OSError unless a file can be made in `folder` (tried: permissions alone do not say, for
-    root, or on a read-only file system)."""
-    with tempfile.NamedTemporaryFile(dir=folder, prefix=".ktcs-bench-probe-"):
-        pass

@@ -9,6 +9,8 @@ import json
 import sys
 from pathlib import Path
 
+from ktcs_bench.cli._common import output_folder
+
 EPILOG = """\
 examples:
   ktcs-bench test run emulators/procedures --junit run/junit.xml --report run/report
@@ -46,12 +48,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
-    from ktcs_bench.cli.test import _output_folder
     from ktcs_bench.evidence.catalogue import load_catalogue
     from ktcs_bench.evidence.trace import failing, read_results, summary_lines, trace, write_trace
 
     catalogue = load_catalogue(args.catalogue)
-    out = _output_folder(args.out, "--out")
+    out = output_folder(args.out, "--out")
     doc = trace(catalogue, read_results(args.results))
     paths = write_trace(doc, Path(out))
     if args.json:

@@ -209,46 +209,6 @@ class OperationCoverage:
                 "stations": json.loads(json.dumps(self.stations))}  # fmt: skip
 
 
-def procedure_coverage(result: Any) -> OperationCoverage:
-    """A procedure run's coverage (a `procedure.runner.ProcedureResult`), from its timeline --
-    the CTC's routes and points, the interlockings' signals, the ATC codes -- and its steps: the
-    faults it set, the routes the CTC cancelled (a route gone after a cancel was cancelled; one
-    gone without, released by its train or timed out)."""
-    from ktcs_bench import messages as msg
-    from ktcs_bench.procedure.steps import CtcStep, FaultStep
-
-    proc = result.procedure
-    cov = OperationCoverage(proc.setup.lab, proc.names.line)
-    cov.observed.update(CATEGORIES)
-    cancels: list[tuple[float, str, str]] = []
-    for step, sr in zip(proc.steps, result.steps, strict=False):
-        if sr.verdict != "pass":
-            continue
-        if isinstance(step, FaultStep) and step.target != "clear":
-            cov.fault(step.text)
-        elif isinstance(step, CtcStep) and isinstance(step.command, msg.Route):
-            c = step.command
-            if c.action == "cancel" and step.refused is None:
-                station = proc.names.line.station(c.station)
-                for r in station.routes:
-                    if r.entry == c.entry and r.exit == c.exit:
-                        cancels.append((sr.start, str(c.station), r.name))
-    set_at: dict[tuple[str, str], float] = {}
-    for t, what, value in result.timeline:
-        m = OperationCoverage._ROUTES.match(what)
-        gone: tuple[tuple[str, str], ...] = ()
-        if m:
-            gone = tuple((st, r) for when, st, r in cancels
-                         if st == m[1] and when >= set_at.get((st, r), -1.0) and when <= t)  # fmt: skip
-            for r in set(value.split()) - {"-"}:
-                set_at.setdefault((m[1], r), t)
-        cov.sample(what, value, gone)
-        if m:
-            for key in [k for k in set_at if k[0] == m[1] and k[1] not in value.split()]:
-                del set_at[key]
-    return cov
-
-
 def events_coverage(lab: Lab, events: Path) -> OperationCoverage:
     """A lab run's coverage from its event log (events.jsonl): routes, points and aspects from
     the interlockings' events, faults from the lab's own (a tap's fault, a restart). The log

@@ -163,13 +163,10 @@ def _verdict(word: str) -> str:
 
 
 def _read_procedures_json(path: Path, doc: dict[str, Any], res: Results) -> None:
-    from ktcs_bench.procedure.report import page_names
-
-    procs = doc["procedures"]
-    pages = page_names([str(p["id"]) for p in procs])
-    for p, page in zip(procs, pages, strict=True):
+    for p in doc["procedures"]:
         ev = [str(path)]
-        if (path.parent / page).is_file():
+        page = str(p.get("page") or "")
+        if page and (path.parent / page).is_file():
             ev.insert(0, str(path.parent / page))  # the page: steps, timeline, captures
         if p.get("file"):
             ev.append(str(p["file"]))

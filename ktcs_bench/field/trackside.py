@@ -2,7 +2,9 @@
 with link role `io` (`ktcs_bench.kinds`).
 
 Inputs by IXL->IO code name (`receive`), train occupancy from the track-circuit model
-(`set_occupancy`), link state and `now`; outputs the IO->IXL code changes. When its link to the
+(`set_occupancy`), link state and `now`; outputs the IO->IXL code changes -- and a point's four
+indications whenever it is called (PNC/PRC received), changed or not: the answer the interlocking
+waits for before it believes where a call left the blades (`ixl.points`). When its link to the
 IXL is in communication error the rack puts every signal to stop (the vital outputs drop) and
 leaves the points where they are. When the rails (the source of train occupancy) are lost
 (`rails_state(False)`) every track relay reports occupied, whatever it last knew or its faults,
@@ -77,15 +79,18 @@ class Trackside:
                 touched.add(obj)
             else:
                 self._event(now, "fault", f"unknown command {name!r} ignored")
+        called: set[str] = set()  # each answered with its indications (`_finish`)
         for p in sorted(moved):
             if self._demand[p] == (1, 0):
                 self._throw(p, "normal", now)
+                called.add(p)
             elif self._demand[p] == (0, 1):
                 self._throw(p, "reverse", now)
+                called.add(p)
         if self.link_up:
             for s in touched:
                 self.signals[s].command_bits(self._sgc[s])
-        return self._finish(now)
+        return self._finish(now, answered=called)
 
     def set_occupancy(self, occupied: Mapping[str, bool], now: float) -> FieldOutput:
         """Train occupancy per track circuit (from the track-circuit model); others unchanged.
@@ -206,6 +211,10 @@ class Trackside:
 
     # ------------------------------------------------------------------ internals
 
+    def _indications(self, point: str) -> tuple[str, str, str, str]:
+        st = self.st
+        return n.sni(st, point), n.srn(st, point), n.sri(st, point), n.snr(st, point)
+
     def _level(self, point: str, kind: str) -> int:
         pnc, prc = self._demand[point]
         return pnc if kind == "PNC" else prc
@@ -215,13 +224,16 @@ class Trackside:
         if pm.command("normal" if target == "normal" else "reverse", now):
             self._event(now, "point", f"point {point} moving to {target}")
 
-    def _finish(self, now: float) -> FieldOutput:
+    def _finish(self, now: float, answered: set[str] | None = None) -> FieldOutput:
+        """The code changes since the last output, and the indications of every point in
+        `answered` (called in this input) even if unchanged: the answer to a call."""
         for name, pm in self.points.items():
             if pm.handle_timer(now):
                 self._event(now, "point", f"point {name} detected {pm.position}")
         state = self.full_state()
+        again = {c for p in answered or () for c in self._indications(p)}
         out = FieldOutput(
-            changes=[(k, v) for k, v in state.items() if self._sent.get(k) != v],
+            changes=[(k, v) for k, v in state.items() if self._sent.get(k) != v or k in again],
             events=self._events,
         )
         self._sent = state

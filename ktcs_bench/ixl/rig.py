@@ -41,23 +41,41 @@ class StationRig:
         the neighbouring IXLs it is linked with (their links start down: `set_link`)."""
         self.view = view
         self.now = now
-        self.ixl = Interlocking(
-            view, mode=mode, startup_locking=startup_locking, neighbour_links=neighbour_links
-        )
-        self.to_neighbour: dict[str, list[tuple[str, int]]] = {r: [] for r in self.ixl.neighbours}
+        self._mode = mode
+        self._neighbour_links = tuple(neighbour_links)
         self.results: list[ControlResult] = []  # answers that came later (a permission waited)
         self.io = Trackside(view)
         self.occupancy = {t.name: t.name in set(occupied) for t in view.track_circuits}
         self.io.set_occupancy(self.occupancy, now)
-        self.ctc = self.ixl.full_state(kinds.CTC)  # the CTC's picture, kept by indication changes
-        self.atc = self.ixl.full_state(kinds.ATC)  # what the ATC is told
         self.events: list[IxlEvent] = []
         self.on_ctc: Callable[[list[tuple[str, int]]], None] | None = None
-        self.io.link_state(True, now)
-        self.take(self.ixl.link_state(kinds.IO, True, now))
-        self.take(self.ixl.link_state(kinds.ATC, True, now))
-        self.take(self.ixl.receive(kinds.IO, self.io.full_state(), now))
+        self._start(startup_locking)
+
+    def _start(self, startup_locking: bool) -> None:
+        """A new interlocking, its ATC and trackside links brought up."""
+        self.ixl = Interlocking(
+            self.view,
+            mode=self._mode,
+            startup_locking=startup_locking,
+            neighbour_links=self._neighbour_links,
+        )
+        self.to_neighbour: dict[str, list[tuple[str, int]]] = {r: [] for r in self.ixl.neighbours}
+        self.ctc = self.ixl.full_state(kinds.CTC)  # the CTC's picture, kept by indication changes
+        self.atc = self.ixl.full_state(kinds.ATC)  # what the ATC is told
+        self.io.link_state(True, self.now)
+        self.take(self.ixl.link_state(kinds.IO, True, self.now))
+        self.take(self.ixl.link_state(kinds.ATC, True, self.now))
+        self.take(self.ixl.receive(kinds.IO, self.io.full_state(), self.now))
         self._report_occupancy()
+
+    def restart(self) -> None:
+        """The interlocking crashes and a new one starts, as one restarted in a running railway
+        (start-up locking): the trackside keeps its blades, faults and the demands it was last
+        given until the new interlocking's link comes up and says otherwise: every code of its
+        IXL->IO chart, as a Type I link's resync carries them."""
+        self.io.link_state(False, self.now)
+        self._start(startup_locking=True)
+        self.from_field(self.io.receive(self.ixl.full_state(kinds.IO), self.now).changes)
 
     def control(self, name: str, value: int = 1) -> ControlResult:
         """A control answered at once (a departure that waits for a permission: `request`)."""

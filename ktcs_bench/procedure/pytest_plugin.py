@@ -166,6 +166,6 @@ def ktcs_lab(request: pytest.FixtureRequest, tmp_path: Path) -> KtcsLab:
 
 
 def _in_process() -> Any:
-    from ktcs_bench.cli.test import _in_process as lab_class
+    from ktcs_bench.lab.inprocess import InProcessLab  # the lab in one process, virtual clock
 
-    return lab_class()
+    return InProcessLab

@@ -18,8 +18,9 @@ from pathlib import Path
 from typing import Any, TypedDict
 
 from ktcs_bench.capture import PcapngWriter
-from ktcs_bench.evidence.coverage import COVERAGE_FILE, FORMAT, merge, procedure_coverage
+from ktcs_bench.evidence.coverage import COVERAGE_FILE, FORMAT, merge
 from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml, requirement_properties
+from ktcs_bench.procedure.coverage import procedure_coverage
 from ktcs_bench.procedure.runner import ProcedureResult, StepJson, Supervised
 
 _COLOUR = {"pass": "\x1b[32m", "fail": "\x1b[31m", "error": "\x1b[35m", "skipped": "\x1b[2m"}
@@ -117,6 +118,7 @@ class ProcedureJson(TypedDict):
     id: str
     title: str
     file: str
+    page: str  # its page's file name in a report folder (`page_names`); "" when not run
     verifies: list[str]
     tags: list[str]
     mode: str
@@ -137,10 +139,11 @@ class ProcedureJson(TypedDict):
     cleared: list[str]
 
 
-def as_json(result: ProcedureResult) -> ProcedureJson:
+def as_json(result: ProcedureResult, page: str = "") -> ProcedureJson:
     p = result.procedure
     return {
-        "id": p.id, "title": p.title, "file": str(p.path), "verifies": list(p.verifies),
+        "id": p.id, "title": p.title, "file": str(p.path), "page": "" if result.not_run else page,
+        "verifies": list(p.verifies),
         "tags": list(p.tags), "mode": result.mode, "verdict": result.verdict,
         "message": result.message, "setup_error": result.setup_error,
         "started": result.started, "duration_s": round(result.duration, 3),
@@ -160,7 +163,9 @@ def as_json(result: ProcedureResult) -> ProcedureJson:
 def json_text(results: Sequence[ProcedureResult], coverage: str = "") -> str:
     """The run as JSON; `coverage`: the file of its operation coverage (written beside it)."""
     counts = {v: sum(1 for r in results if r.verdict == v) for v in COUNTED}
-    doc: dict[str, Any] = {"summary": counts, "procedures": [as_json(r) for r in results]}
+    pages = page_names([r.procedure.id for r in results])
+    doc: dict[str, Any] = {"summary": counts, "procedures": [
+        as_json(r, page) for r, page in zip(results, pages, strict=True)]}  # fmt: skip
     if coverage:
         doc["coverage"] = coverage
     return json.dumps(doc, ensure_ascii=False, indent=1)

@@ -360,7 +360,8 @@ class ExpectStep(Step):
 
 
 # -- reading a step ------------------------------------------------------------------------------
-KINDS = ("ctc", "local", "train", "fault", "wait", "wait until", "expect")
+CTC_STEP, TRAIN_STEP = "ctc", "train"  # the step words that name a device kind
+KINDS = (CTC_STEP, "local", TRAIN_STEP, "fault", "wait", "wait until", "expect")
 OPTIONS = {"ctc": {"refused"}, "expect": {"within", "holds"}, "wait until": {"within"}}
 
 

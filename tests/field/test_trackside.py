@@ -29,15 +29,29 @@ def test_initial_state_points_normal_signals_red_track_clear(io: Trackside) -> N
 
 
 def test_point_throw_takes_throw_time_and_shows_moving(io: Trackside) -> None:
-    out = io.receive({"PNC1831": 0, "PRC1831": 1}, 10.0)
-    assert dict(out.changes) == {"SNI1831": 0, "SNR1831": 1}
+    out = io.receive({"PNC1831": 0, "PRC1831": 1}, 10.0)  # a call: answered with all four
+    assert dict(out.changes) == {"SNI1831": 0, "SRN1831": 0, "SRI1831": 0, "SNR1831": 1}
     assert io.next_deadline() == 14.0
     assert io.handle_timer(13.9).changes == []
     out = io.handle_timer(14.0)
     assert dict(out.changes) == {"SNR1831": 0, "SRI1831": 1}
     assert io.next_deadline() is None
     out = io.receive({"PRC1831": 0, "PNC1831": 1}, 20.0)
-    assert dict(out.changes) == {"SRI1831": 0, "SRN1831": 1}  # moving reverse -> normal
+    assert dict(out.changes) == {"SNI1831": 0, "SRN1831": 1, "SRI1831": 0, "SNR1831": 0}
+
+
+def test_every_call_is_answered_with_the_point_s_indications_changed_or_not(
+    io: Trackside,
+) -> None:
+    """The interlocking believes a detection only once the trackside has answered its call
+    (`ixl.points`): a call of the position the blades already lie in is answered too, with the
+    indications unchanged -- and with what detection says, right or wrong (a crossed fault)."""
+    out = io.receive({"PNC1831": 1, "PRC1831": 0}, 0.0)
+    assert out.changes == [("SNI1831", 1), ("SRN1831", 0), ("SRI1831", 0), ("SNR1831", 0)]
+    io.fail_point("32", "crossed", 0.0)
+    out = io.receive({"PNC1832": 0, "PRC1832": 1}, 1.0)  # lying normal, reported reverse
+    assert dict(out.changes) == {"SNI1832": 0, "SRN1832": 0, "SRI1832": 0, "SNR1832": 1}
+    assert io.receive({"SGC1801R": 1}, 2.0).changes == []  # no call, no answer
 
 
 def test_throw_reversed_half_way_comes_back_in_the_time_it_ran(io: Trackside) -> None:

@@ -503,7 +503,8 @@ def test_an_interlocking_restarted_with_a_train_on_its_line_locks_the_station_fo
     assert rig.control("SRC2031").reason is Reason.POINT_LOCKED
     assert rig.control("RSC200111").reason is Reason.ROUTE_CONFLICTS
     assert rig.control("RSC201191").reason is Reason.ROUTE_CONFLICTS
-    assert rig.ctc["SLI2031"] == 1 and rig.ixl.full_state("io")["PNC2031"] == 1
+    assert rig.ctc["SLI2031"] == 1
+    assert (rig.ixl.full_state("io")["PNC2031"], rig.ixl.full_state("io")["PRC2031"]) == (0, 0)
     rig.advance(89.5)
     assert rig.control("SRC2032").reason is Reason.POINT_LOCKED
     rig.advance(1.0)  # 90 s, the longest approach-locking time of station 20's routes
@@ -519,24 +520,98 @@ def test_an_interlocking_that_restarts_with_its_line_clear_is_free_at_once(line:
     assert any("start-up locking released (the station is clear)" in e.text for e in rig.events)
 
 
-def test_a_restarted_interlocking_demands_each_point_where_it_lies(line: Line) -> None:
+@pytest.mark.requirement("IXL-INV-02")
+def test_a_restarted_interlocking_demands_no_point_until_a_route_or_a_control_does(
+    line: Line,
+) -> None:
     """Seen while reading a failure of the whole-system search: a restarted IXL demanded every
     point normal (its default), so a point lying reverse was thrown back at once -- under a
-    train standing on it, or a route its predecessor had locked. Restarted, it demands nothing
-    until it reads where a point lies, then demands that."""
+    train standing on it, or a route its predecessor had locked. Demanding the position it
+    reads instead threw the blades over under a train when detection lied (the next test).
+    Restarted, it demands nothing of its own accord: a point is demanded by a route or a
+    control, each with its checks."""
     ixl = Interlocking(line.view(20), mode=Mode.CENTER, startup_locking=True)
     io = ixl.full_state("io")
     assert (io["PNC2031"], io["PRC2031"]) == (0, 0)  # no demand: the machine stays put
     ixl.link_state("io", True, 0.0)
+    ixl.link_state("atc", True, 0.0)
     bits = {
         f"{b}20{p.name}": 0 for p in line.station(20).points for b in ("SNI", "SRN", "SRI", "SNR")
     }
     bits |= {f"SNI20{p.name}": 1 for p in line.station(20).points} | {"SNI2031": 0, "SRI2031": 1}
     out = ixl.receive("io", bits, 1.0)
-    assert ("PRC2031", 1) in out.of("io") and ("PNC2031", 1) not in out.of("io")
-    assert ("PNC2032", 1) in out.of("io")  # the others lie normal: demanded normal
+    assert not [c for c in out.of("io") if c[0].startswith(("PNC", "PRC"))], out.of("io")
+    clear = {t.name: 0 for t in line.view(20).track_circuits}
+    clear |= {n.izc(iv.name): 0 for iv in line.view(20).intervals}
+    ixl.receive("atc", clear, 2.0)  # the station clear: start-up locking goes at once
+    assert not ixl.startup_held
+    assert ixl.full_state("io")["PRC2031"] == 0  # still nothing demanded
+    assert ixl.control("SRC2031", 1, 3.0).results[0].accepted
+    assert (ixl.full_state("io")["PNC2031"], ixl.full_state("io")["PRC2031"]) == (0, 1)
     cold = Interlocking(line.view(20), mode=Mode.CENTER)  # a lab's start: normal, as ever
     assert cold.full_state("io")["PNC2031"] == 1
+
+
+@pytest.mark.requirement("IXL-INV-02")
+def test_a_restarted_interlocking_never_throws_a_point_detected_wrong_under_a_train(
+    line: Line,
+) -> None:
+    """What the whole-system search found (seed 535, docs/system_safety.md): point 32 of station
+    18 lay normal under train 2003 in TC1857A, its detection crossed (a wrong-side fault: the
+    blades lying normal reported reverse). ixl18 restarted; the new IXL took the position it
+    read for its demand, reverse, and the point machine threw the blades under the train, which
+    derailed. Restarted, the IXL demands nothing, so the blades stay where they lie, however
+    long the train stands there; once it has gone, a control is what moves the point."""
+    rig = StationRig(line.view(18), occupied=("TC1857A",))
+    rig.from_field(rig.io.fail_point("32", "crossed", rig.now).changes)
+    assert rig.ixl.detection("32") == "reverse" and rig.io.blades()["32"] == "normal"
+    rig.restart()
+    assert rig.ixl.startup_held and rig.ixl.detection("32") == "reverse"
+    rig.advance(120.0)  # past station 18's start-up lock (90 s), the train still on the point
+    assert not rig.ixl.startup_held
+    assert rig.io.blades()["32"] == "normal"
+    assert not [e for e in rig.io.log if e.kind == "point"], rig.io.log
+    assert rig.control("SRC1832").reason is Reason.TRACK_OCCUPIED
+    rig.occupy("TC1857A", False)
+    assert rig.control("SRC1832").accepted  # the track clear: the operator's throw is checked
+    assert rig.io.blades()["32"] == "moving"
+
+
+@pytest.mark.requirement("IXL-INV-03")
+def test_a_call_is_believed_only_once_the_trackside_has_answered_it(line: Line) -> None:
+    """Found by the whole-system search (seed 1244): point 32 of station 18 lay normal, its
+    detection crossed (reported reverse). Route 02-22 called it reverse; another control came
+    in at the same instant, before the trackside had answered, and the IXL took the reverse it
+    had read before its call as proof: the route went set and signal 02 cleared; then the blades
+    moved under the set route. A detection counts only once the trackside has reported the
+    point since the call (it answers every call)."""
+    view = line.view(18)
+    ixl = Interlocking(view, mode=Mode.CENTER)
+    ixl.link_state("io", True, 0.0)
+    ixl.link_state("atc", True, 0.0)
+    clear = {t.name: 0 for t in view.track_circuits} | {n.izc(iv.name): 0 for iv in view.intervals}
+    ixl.receive("atc", clear, 0.0)
+    bits = {f"{b}18{p.name}": 0 for p in view.station.points for b in ("SNI", "SRN", "SRI", "SNR")}
+    ixl.receive("io", bits | {"SNI1831": 1, "SRI1832": 1}, 0.0)  # 32 lies normal, crossed
+    assert ixl.control("RSC181291", 1, 1.0).results[0].accepted
+    assert ixl.detection("32") == "to_reverse"  # called, not yet answered
+    ixl.receive("atc", {"TC1851": 0}, 1.0)  # another input before the answer
+    assert ixl.route_status("1291") is RouteStatus.SETTING and ixl.aspect("12") == "R"
+    ixl.receive("io", {"SNI1832": 0, "SRN1832": 0, "SRI1832": 0, "SNR1832": 1}, 1.02)  # moving
+    assert ixl.route_status("1291") is RouteStatus.SETTING
+    ixl.receive("io", {"SNR1832": 0, "SNI1832": 1}, 5.0)  # arrived reverse, reported normal
+    assert ixl.route_status("1291") is RouteStatus.SETTING and ixl.aspect("12") == "R"
+    # restarted (no demand), the point really lying reverse: the answer, its indications
+    # unchanged, proves the call
+    ixl = Interlocking(view, mode=Mode.CENTER, startup_locking=True)
+    ixl.link_state("io", True, 0.0)
+    ixl.link_state("atc", True, 0.0)
+    ixl.receive("atc", clear, 0.0)
+    ixl.receive("io", bits | {"SNI1831": 1, "SRI1832": 1}, 0.0)
+    assert ixl.control("RSC181291", 1, 1.0).results[0].accepted
+    assert ixl.route_status("1291") is RouteStatus.SETTING
+    ixl.receive("io", {"SNI1832": 0, "SRN1832": 0, "SRI1832": 1, "SNR1832": 0}, 1.02)
+    assert ixl.route_status("1291") is RouteStatus.SET
 
 
 def test_the_start_up_lock_timer_waits_while_occupancy_cannot_be_read(line: Line) -> None:

@@ -2,14 +2,19 @@
 
 The machine drives one Interlocking directly, playing an adversarial field: track circuits go
 occupied and clear at random, detection is reported in any state (arrived, moving, lost, even the
-wrong position), links drop, time jumps, and trains run through cleared routes. After every step
+wrong position), links drop, time jumps, trains run through cleared routes and the interlocking
+crashes and restarts (start-up locking) with the field and the trains as they are. After every step
 the invariants are checked against what the test itself fed in, not the IXL's own view:
 1. no track circuit or point is held by two routes; declared-conflicting routes are never both
    locked as a whole; a route holds only its own elements;
 2. a point's demand changes only while it is free of routes (or held by the route being set,
-   towards that route's position) and its track circuits are clear;
-3. a signal shows proceed only with its route set, every point detected as required, every track
-   circuit of route and overlap clear, the overlap locked, both links up, and no stop hold;
+   towards that route's position) and of start-up locking, and its track circuits are clear --
+   after a restart too: the field keeps the demand its interlocking last gave it, so a restarted
+   interlocking changing it (to its default, or to a wrong detection) moves the blades;
+3. a signal shows proceed only with its route set, every point detected as required -- in a
+   report fed since the point was last called (what was read before a call proves nothing of
+   where the call leaves the blades) --, every track circuit of route and overlap clear, the
+   overlap locked, both links up, and no stop hold;
 4. is 3 checked after every single input: a failing condition puts the signal to stop at once;
 5. once a route is entered, a section (and its points) is released only after a train's passage
    sequence in the occupancy fed -- the section went occupied in a later report than the track
@@ -85,6 +90,7 @@ class InterlockingMachine(RuleBasedStateMachine):
         self.links = {"atc": True, "io": True}
         self.held_stop: set[str] = set()
         self.demand = {p: "normal" for p in self.points}
+        self.answered = set(self.points)  # detection fed since the point's last call
         self.before = {r: (RouteStatus.IDLE, set(), set()) for r in self.routes}
         self.apply(self.ixl.link_state("atc", True, self.now))
         self.apply(self.ixl.link_state("io", True, self.now))
@@ -113,10 +119,12 @@ class InterlockingMachine(RuleBasedStateMachine):
             if position == self.demand[obj]:
                 continue
             self.demand[obj] = position
+            self.answered.discard(obj)
             point = self.view.station.point(obj)
             assert not any(self.occupied(tc) for tc in point.track_circuits), (
                 f"point {obj} commanded while its track circuit is occupied"
             )
+            assert not self.ixl.startup_locked(obj), f"point {obj} commanded start-up locked"
             for rs in self.ixl.routes.values():
                 if obj in rs.held_points:
                     want = {s.point: s.position for s in rs.route.all_points}[obj]
@@ -137,6 +145,8 @@ class InterlockingMachine(RuleBasedStateMachine):
         for p in points:
             for bit, v in BITS[self.det[p]].items():
                 codes[CodeName(Function(bit), self.st, p).text] = v
+        if self.links["io"]:
+            self.answered |= set(points)
         self.apply(self.ixl.receive("io", codes, self.now))
 
     def feed_occupancy(self, tc: str, value: bool) -> None:
@@ -312,6 +322,14 @@ class InterlockingMachine(RuleBasedStateMachine):
         self.det[point] = detection
         self.feed_detection([point])
 
+    @rule(data=st.data())
+    def crossed_detection(self, data: st.DataObject) -> None:
+        """A wrong-side fault: a point reported in the other end position than the one its
+        machine was last told (a call of the reported one finds the report there already)."""
+        point = data.draw(st.sampled_from(self.points))
+        self.det[point] = "reverse" if self.demand[point] == "normal" else "normal"
+        self.feed_detection([point])
+
     @rule(data=st.data(), value=st.sampled_from([True, False, False]))
     def track_circuit(self, data: st.DataObject, value: bool) -> None:
         self.feed_occupancy(data.draw(st.sampled_from(self.tcs)), value)
@@ -344,6 +362,24 @@ class InterlockingMachine(RuleBasedStateMachine):
             for tc in self.tcs:
                 self.feed_occupancy(tc, self.occ[tc])
         if up and link == "io":
+            self.feed_detection(self.points)
+
+    @rule()
+    def restart(self) -> None:
+        """The interlocking crashes and a new one starts in the running railway (start-up
+        locking): it knows no route, stop hold or report of its predecessor's; the field keeps
+        its points, the demand it was last given and the trains. Its links come up as they are,
+        and the field reports everything again."""
+        self.ixl = Interlocking(self.view, mode=Mode.CENTER, startup_locking=True)
+        self.before = {r: (RouteStatus.IDLE, set(), set()) for r in self.routes}
+        self.held_stop.clear()
+        self.reported.clear()
+        for link, up in self.links.items():
+            if up:
+                self.apply(self.ixl.link_state(link, True, self.now))
+        if self.links["atc"]:
+            self.feed(dict(self.occ))
+        if self.links["io"]:
             self.feed_detection(self.points)
 
     @rule(seconds=st.sampled_from([0.5, 5.0, 31.0, 61.0, 100.0]))
@@ -463,6 +499,7 @@ class InterlockingMachine(RuleBasedStateMachine):
                 assert self.det[s.point] == s.position, (
                     f"{sig.name} proceed with point {s.point} {self.det[s.point]}"
                 )
+                assert s.point in self.answered, f"{sig.name} proceed, point {s.point} unanswered"
             for tc in r.all_track_circuits:
                 assert not self.occupied(tc), f"{sig.name} proceed with {tc} occupied"
 

@@ -232,10 +232,12 @@ class SystemMachine(SearchMachine):
     def track_circuit_failed_occupied(self, tc: str, run_s: float) -> None:
         self.step({"do": "tc_fault", "tc": tc, "run_s": run_s})
 
-    # ATCs only: with IXL restarts the search found a point thrown under a train after an IXL
-    # restart (seed 535, docs/system_safety.md, open); the restarted holder's permission is no
-    # longer read as a gift (`test_a_restarted_holder_is_not_read_as_a_gift`)
-    @rule(device=st.sampled_from([f"atc{n}" for n in STATIONS]), run_s=st.sampled_from(RUN_S))
+    # IXLs and ATCs: an IXL restarted while holding an interval's permission is not read by its
+    # neighbour as giving it (`test_a_restarted_holder_is_not_read_as_a_gift`), nor does one
+    # restarted throw a point whose detection lies under a train
+    # (`test_a_restarted_ixl_no_longer_throws_a_point_detected_wrong_under_a_train`)
+    @rule(device=st.sampled_from([f"{k}{n}" for k in ("ixl", "atc") for n in STATIONS]),
+          run_s=st.sampled_from(RUN_S))  # fmt: skip
     def restart(self, device: str, run_s: float) -> None:
         self.step({"do": "restart", "device": device, "run_s": run_s})
 
@@ -367,15 +369,42 @@ def test_a_restarted_holder_is_not_read_as_a_gift() -> None:
     assert [str(v) for r in runs for v in r.violations] == []
 
 
-@pytest.mark.xfail(strict=True, reason="known open defect: docs/system_safety.md")
-def test_known_open_a_point_thrown_under_a_train_after_ixl_restarts() -> None:
-    """What the search found once IXL restarts were back in it (seed 535, 203 steps, saved as
-    it ran): after ixl18's second restart point 32 of station 18 moves to reverse with train 2003
-    in TC1857A, which derails there. Open, not yet analysed; passes -- and this xfail fails --
-    once fixed (docs/system_safety.md)."""
-    replay = load_replay(
-        Path(__file__).parent / "replays" / "point_thrown_under_a_train_after_ixl_restarts.json"
-    )
+@pytest.mark.parametrize(
+    "saved",
+    [
+        "point_thrown_under_a_train_after_ixl_restarts.json",  # as the search saved it
+        "a_point_detected_wrong_thrown_under_a_train_by_a_restarted_ixl.json",  # cut by hand
+    ],
+)
+def test_a_restarted_ixl_no_longer_throws_a_point_detected_wrong_under_a_train(saved: str) -> None:
+    """What the search found once IXL restarts were back in it (seed 535, 203 steps; cut by hand
+    to the 3 that matter): train 2003 departs from station 18 on route 11-91 and is in TC1857A
+    when point 32's detection is crossed (a wrong-side fault: the blades lying normal reported
+    reverse); ixl18 restarts. The new IXL took the position it read for its demand, reverse,
+    and the point machine threw the blades under the train, which derailed (invariant 3).
+    Restarted, an IXL now demands no point until a route or a control does, with their checks."""
+    replay = load_replay(Path(__file__).parent / "replays" / saved)
+    lab = InProcessLab(LAB, seed=replay.seed)
+    runs = lab.run(lambda access: replay_steps(access, replay, LINE))
+    assert [str(v) for r in runs for v in r.violations] == []
+
+
+@pytest.mark.parametrize(
+    "saved",
+    [
+        "a_point_called_where_a_crossed_detection_read_it.json",  # as the search saved it
+        "a_point_called_where_a_crossed_detection_read_it_cut.json",  # cut by hand
+    ],
+)
+def test_a_called_point_is_not_proven_by_what_was_read_before_its_call(saved: str) -> None:
+    """What the search found with IXL restarts back in it (seed 1244, 188 steps; cut by hand to
+    5, no restart needed): point 32 of station 18 lay normal with its detection crossed
+    (reported reverse). Route 02-22 called it reverse, and route 22-92 was asked in the same
+    instant, before the trackside had answered the call: the IXL took the reverse it had read
+    before its call as proof, set 02-22 and cleared signal 02 -- then the blades moved under the
+    set route (invariant 3, `point_moved_locked`). The trackside now answers every call with the
+    point's indications, and the IXL believes a detection only once its call is answered."""
+    replay = load_replay(Path(__file__).parent / "replays" / saved)
     lab = InProcessLab(LAB, seed=replay.seed)
     runs = lab.run(lambda access: replay_steps(access, replay, LINE))
     assert [str(v) for r in runs for v in r.violations] == []
