@@ -43,9 +43,8 @@ MAX_SPEED = 50.0
 """The fastest scaled clock a whole lab in one process is started on (`lab up --in-process`).
 Measured on a 2-core machine others shared: the reference lab with its trains takes a whole core
 at 70x to 110x real time (7% of one at 5x, 18% at 20x; `lab simulate` runs it at about 230x by
-CPU time);
-at 100x its links went down within 20 s and stayed down, at 50x they stayed up but for a few
-resyncs while the machine was busiest."""
+CPU time); at 100x its links went down within 20 s and stayed down, at 50x they stayed up but for
+a few resyncs while the machine was busiest."""
 
 BEHIND = 1.0
 """Seconds of the lab's clock a timer may be overdue before a scaled loop calls itself behind:
