@@ -41,6 +41,7 @@ bench: setup
 	$(BIN)/python benchmarks/virtual_lab.py
 	$(BIN)/python benchmarks/console_flood.py
 	$(BIN)/python benchmarks/verify.py
+	$(BIN)/python benchmarks/procedures_pytest.py
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info .pytest_cache .mypy_cache .ruff_cache .hypothesis

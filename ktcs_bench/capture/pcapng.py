@@ -138,6 +138,10 @@ class PcapngEncoder:
         self._tcp = _TcpState()
         self._started = False
         self._options: dict[tuple[int, str], bytes] = {}
+        # a Type I direction once its interface is described: (interface, options of its packets)
+        self._serial: dict[str, tuple[int, bytes]] = {}
+        # a Type II direction: (source, destination, the other direction), until an endpoint moves
+        self._routes: dict[str, tuple[tuple[str, int], tuple[str, int], str]] = {}
 
     def set_endpoint(self, name: str, host: str, port: int) -> None:
         """The real address of a Type II endpoint, for the packets that follow. An address the
@@ -149,6 +153,7 @@ class PcapngEncoder:
         v4 = ip if isinstance(ip, ipaddress.IPv4Address) else ip.ipv4_mapped
         if v4 is not None and 0 <= port <= 0xFFFF:
             self._endpoints[name] = (str(v4), port)
+            self._routes.clear()
 
     def start(self) -> bytes:
         self._started = True
@@ -165,6 +170,10 @@ class PcapngEncoder:
         return self._endpoints[name]
 
     def encode(self, record: CaptureRecord) -> bytes:
+        serial = self._serial.get(record.direction)
+        if serial is not None:  # a Type I direction seen before: everything but the packet made
+            time = record.time if record.time is not None else 0.0
+            return self._block(serial[0], time, record.data, serial[1])
         out = b"" if self._started else self.start()
         time = record.time if record.time is not None else 0.0
         direction = record.direction
@@ -177,12 +186,17 @@ class PcapngEncoder:
                 out += interface_description(
                     LINKTYPE_USER0, direction, f"ktcs Type I serial {direction}"
                 )
-            return out + self._packet(self._interfaces[direction], time, record.data, flags,
-                                      direction)  # fmt: skip
-        pair = split_direction(direction) or (direction, reverse_direction(direction))
-        src, dst = self._endpoint(pair[0]), self._endpoint(pair[1])
+            interface = self._interfaces[direction]
+            self._serial[direction] = (interface, self._options_of(flags, direction))
+            return out + self._packet(interface, time, record.data, flags, direction)
+        route = self._routes.get(direction)
+        if route is None:
+            pair = split_direction(direction) or (direction, reverse_direction(direction))
+            route = (self._endpoint(pair[0]), self._endpoint(pair[1]), reverse_direction(direction))
+            self._routes[direction] = route
+        src, dst, back = route
         seq = self._tcp.next_seq.get(direction, ISN)
-        ack = self._tcp.next_seq.get(reverse_direction(direction), ISN)
+        ack = self._tcp.next_seq.get(back, ISN)
         self._tcp.next_seq[direction] = seq + len(record.data)
         self._tcp.ident += 1
         packet = ipv4_tcp_packet(src, dst, seq, ack, record.data, self._tcp.ident)
@@ -190,12 +204,19 @@ class PcapngEncoder:
 
     def _packet(self, interface: int, time: float, data: bytes, flags: int, comment: str) -> bytes:
         """`enhanced_packet`, its options (the same for every packet of a direction) made once."""
+        return self._block(interface, time, data, self._options_of(flags, comment))
+
+    def _options_of(self, flags: int, comment: str) -> bytes:
         opts = self._options.get((flags, comment))
         if opts is None:
             listed = [(EPB_FLAGS, struct.pack("<I", flags))]
             if comment:
                 listed.append((OPT_COMMENT, comment.encode()))
             opts = self._options[(flags, comment)] = _options(listed)
+        return opts
+
+    @staticmethod
+    def _block(interface: int, time: float, data: bytes, opts: bytes) -> bytes:
         us = max(0, round(time * 1_000_000))
         n = len(data)
         pad = -n % 4

@@ -51,6 +51,9 @@ class Garbage(NamedTuple):
 
 Record = Frame | Garbage
 
+EMPTY_FRAMES = 4096
+"""Frames without DATA a codec keeps made (a link's ACKs and LINK_TESTs: one per SEQ)."""
+
 
 class FrameCodec:
     """Encoder and whole-frame helpers for one profile (the streaming decoder is `StreamDecoder`)."""
@@ -74,9 +77,22 @@ class FrameCodec:
         self._crc_from = p.offset_of(p.crc_first)[0]
         self._crc_to_header = None if p.crc_last == "data" else sum(p.offset_of(p.crc_last))
         self.seq_modulo = 1 << (8 * dict(p.header)["seq"])
+        # frames without DATA (ACK, LINK_TEST, ...) by (seq, op, sub): a link sends the same
+        # few again and again (bounded: `EMPTY_FRAMES`)
+        self._empty: dict[tuple[int, int, int | None], bytes] = {}
 
     def encode(self, seq: int, op: int, data: bytes = b"", sub: int | None = None) -> bytes:
         """One complete frame. Raises UsageError for values that do not fit the profile."""
+        if not data:
+            frame = self._empty.get((seq, op, sub))
+            if frame is None:
+                frame = self._encode(seq, op, data, sub)
+                if len(self._empty) < EMPTY_FRAMES:
+                    self._empty[(seq, op, sub)] = frame
+            return frame
+        return self._encode(seq, op, data, sub)
+
+    def _encode(self, seq: int, op: int, data: bytes, sub: int | None) -> bytes:
         if len(data) > self._max_data:
             raise UsageError(
                 f"{len(data)} DATA bytes exceed the profile's maximum {self._max_data}"

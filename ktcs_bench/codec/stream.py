@@ -100,6 +100,11 @@ class StreamDecoder:
         self._probe_for = -1  # absolute offset of the pending candidate the probe state is for
         self._probe_next = 0  # absolute offset from which candidates are not yet classified
         self._probe_wait: list[tuple[int, int]] = []  # (candidate, absolute end) incomplete
+        # absolute offset at which the pending candidate completes, while everything after its
+        # STX is classified and no inner candidate waits (0: not known). Until then bytes with
+        # no STX in them change nothing but the buffer: `feed` takes them without a pass (a
+        # frame arriving in pieces on a line is decoded once, when its last piece comes)
+        self._need = 0
 
     # -- public API --------------------------------------------------------------------------
     @property
@@ -112,12 +117,40 @@ class StreamDecoder:
         return len(self._buf)
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[Record]:
-        self._buf += data
+        buf = self._buf
+        n0 = len(buf)
+        buf += data
+        n = len(buf)
+        stx = self._stx
+        if self._need:  # a frame's next piece: what `_process` would conclude, without a pass
+            if self._base + n < self._need and buf.find(stx, n0) < 0:
+                self._probe_next = self._base + n
+                return []
+            if self._base + n == self._need and not self._held:
+                last = self._last_piece()  # its last piece, the frame alone in the buffer
+                if last is not None:
+                    return last
+        elif not n0 and n >= self._hsize and buf[0] == stx:  # on an empty buffer, a header
+            length = self._header.unpack_from(buf, 1)[self._i_len]
+            data_len = length - self._fixed
+            total = self._hsize + data_len + self._trailer
+            if 0 <= data_len and length <= self._max_len:
+                if total == n:  # a whole frame and nothing else
+                    whole = self._last_piece()
+                    if whole is not None:
+                        return whole
+                elif total > n and buf.find(stx, 1) < 0:  # a frame's first piece: pending
+                    base = self._base
+                    self._pending = True
+                    self._probe_for, self._probe_next, self._probe_wait = base, base + n, []
+                    self._need = base + total
+                    return []
         return self._process(final=False)
 
     def close(self) -> list[Record]:
         """End of input: report what is left (a truncated frame, trailing garbage)."""
         out = self._process(final=False)
+        self._need = 0
         j = self._pending_at()
         buf = self._buf
         if j is not None:
@@ -132,6 +165,7 @@ class StreamDecoder:
 
     def abandon(self) -> list[Record]:
         """Give up on the pending frame (ΔR expired): report it truncated, resume after its STX."""
+        self._need = 0
         j = self._pending_at()
         if j is None:
             return []
@@ -147,6 +181,29 @@ class StreamDecoder:
         return out
 
     # -- internals ---------------------------------------------------------------------------
+    def _last_piece(self) -> list[Record] | None:
+        """The buffer holds exactly one frame, its LEN in range (the pending frame's last piece
+        has come, or a whole frame came to an empty buffer): if its checks pass, it is the one
+        record `_process` would give (its fast path, at offset 0), and the buffer empties; None
+        (nothing changed) if not."""
+        (stx, hs, unpack, i_len, i_seq, i_op, i_sub, fixed, max_len, trailer, crc_fn, crc_init,
+         crc_table, crc_xor, crc_from, crc_to, tail_unpack, tail_ok) = self._hot  # fmt: skip
+        raw = bytes(self._buf)
+        h = unpack(raw, 1)
+        at = hs + h[i_len] - fixed
+        calc = crc_xor ^ crc_fn(raw[crc_from : at if crc_to is None else crc_to], crc_init,
+                                crc_table)  # fmt: skip
+        tail = tail_unpack(raw, at)
+        if tail[0] != calc or tail[1:] != tail_ok:
+            return None
+        self._need = 0
+        self._pending = False
+        self._consume(len(raw))
+        # built in C (`tuple.__new__`), as `_process` builds its frames
+        fields = (self._base - len(raw), raw, h[i_seq], h[i_op],
+                  None if i_sub is None else h[i_sub], hs, at, calc, calc, None)  # fmt: skip
+        return [tuple.__new__(Frame, fields)]
+
     def _pending_at(self) -> int | None:
         return self._held if self._pending else None
 
@@ -277,6 +334,7 @@ class StreamDecoder:
     def _process(self, final: bool) -> list[Record]:
         """Decode what the buffer holds. The loop body is the fast path -- a complete frame whose
         checks pass, at the read position; everything else goes to `_resolve`."""
+        self._need = 0
         out: list[Record] = []
         append = out.append
         buf = self._buf
@@ -357,6 +415,8 @@ class StreamDecoder:
             if n - j < total:
                 q = self._probe(buf, j, n)
                 if q is None:
+                    if not self._probe_wait and self._probe_next == base + n:
+                        self._need = base + j + total  # see `feed`
                     return j, g, True
                 return q, (j if g < 0 else g), False
             packet, calc, error = self._check(buf, j, total, data_len)

@@ -131,7 +131,10 @@ class TapCore:
         self.injectors = {
             d: FaultInjector(profile, random.Random(rng.getrandbits(64))) for d in self.directions
         }
-        self._idle = tuple(self.injectors.values())  # both directions' (`receive`'s fast path)
+        self._both = tuple(self.injectors.values())
+        # both injectors idle (no fault set, nothing held): bytes pass straight through. Only
+        # this core changes them; it says so after every change (`_pump`, `disconnected`)
+        self._clean = True
         self.recorder = Recorder(profile)
         self.cut_all = False  # `cut` with no direction, until `restore` (all) or `clear`
         self.history: deque[CaptureRecord] = deque(maxlen=history)
@@ -140,24 +143,26 @@ class TapCore:
     # -- what comes in -------------------------------------------------------------------------
     def receive(self, direction: str, data: bytes, now: float) -> TapOutput:
         """`data` written by the sending end of `direction` ("a>b")."""
-        inj = self.injectors[direction]
-        if data and self._idle[0].idle and self._idle[1].idle:
+        if data and self._clean:
             # no fault set, nothing held either way: the bytes pass at once and unchanged, as
             # the injector would pass them (its counts kept), and nothing else is due
-            inj.stats.bytes_in += len(data)
-            inj.stats.bytes_out += len(data)
-            out = TapOutput()
-            out.deliveries.append((direction, data))
-            self._publish(out, self.recorder.feed(direction, data, now))
-            self._publish(out, self.recorder.handle_timer(now))
+            stats = self.injectors[direction].stats
+            stats.bytes_in += len(data)
+            stats.bytes_out += len(data)
+            out = TapOutput([(direction, data)])
+            records = self.recorder.passed(direction, data, now)
+            if records:
+                self._publish(out, records)
             return out
-        inj.feed(data, now)
+        self._clean = False
+        self.injectors[direction].feed(data, now)
         return self._pump(now, TapOutput())
 
     def execute(self, cmd: Command, now: float) -> tuple[CommandAnswer, TapOutput]:
         """A command that changes the link: a fault, `restore`, `clear` or `send`. Its answer
         ({"ok": true, "command": WORDS}) and what it caused; UsageError when it cannot be done."""
         out = TapOutput()
+        self._clean = False  # until `_pump` has looked
         if cmd.direction is not None and cmd.direction not in self.directions:
             raise UsageError(f"this tap has directions {', '.join(self.directions)}")
         targets = list(self.directions) if cmd.direction is None else [cmd.direction]
@@ -205,8 +210,9 @@ class TapCore:
         """The connection that carried the link is gone: nothing queued for it (delayed, held
         for a frame fault) reaches the next one."""
         out = TapOutput()
-        for inj in self.injectors.values():
+        for inj in self._both:
             inj.discard()
+        self._clean = all(inj.idle for inj in self._both)
         self._emit(out, {"time": now, "event": "disconnected", "reason": reason})
         return out
 
@@ -215,7 +221,9 @@ class TapCore:
 
     def next_deadline(self) -> float | None:
         best = self.recorder.next_deadline()
-        for inj in self.injectors.values():
+        if self._clean:
+            return best
+        for inj in self._both:
             t = inj.next_deadline()
             if t is not None and (best is None or t < best):
                 best = t
@@ -257,6 +265,7 @@ class TapCore:
                 out.deliveries.append((d, data))
                 self._publish(out, self.recorder.feed(d, data, now))
         self._publish(out, self.recorder.handle_timer(now))
+        self._clean = all(inj.idle for inj in self._both)
         return out
 
     def _publish(self, out: TapOutput, records: list[CaptureRecord]) -> None:

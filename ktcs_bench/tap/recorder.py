@@ -22,6 +22,7 @@ class _Direction:
     decoder: StreamDecoder
     last: float = 0.0
     total: int = 0
+    buffered: bool = False  # the decoder holds bytes (a partial frame) since the last feed
 
 
 @dataclass
@@ -37,10 +38,28 @@ class Recorder:
         return d
 
     def feed(self, direction: str, data: bytes, now: float) -> list[CaptureRecord]:
-        d = self._get(direction)
+        d = self._dirs.get(direction) or self._get(direction)
         d.last = now
         d.total += len(data)
-        return [CaptureRecord(now, direction, r.raw) for r in d.decoder.feed(data)]
+        records = d.decoder.feed(data)
+        d.buffered = d.decoder.buffered > 0
+        return [CaptureRecord(now, direction, r.raw) for r in records]
+
+    def passed(self, direction: str, data: bytes, now: float) -> list[CaptureRecord]:
+        """`feed`, then `handle_timer` -- in one step, for bytes passing the tap: a direction
+        idle long enough with a partial frame is flushed behind them (`direction` itself, fed
+        now, is not idle)."""
+        d = self._dirs.get(direction) or self._get(direction)  # `feed`, inline
+        d.last = now
+        d.total += len(data)
+        records = d.decoder.feed(data)
+        d.buffered = d.decoder.buffered > 0
+        out = [CaptureRecord(now, direction, r.raw) for r in records] if records else []
+        for name, d in self._dirs.items():
+            if name != direction and d.buffered and now >= d.last + self.idle_flush:
+                out += self.handle_timer(now)
+                break
+        return out
 
     def handle_timer(self, now: float) -> list[CaptureRecord]:
         """A direction idle for `idle_flush` with a partial frame: that frame, as it stands."""
@@ -48,9 +67,10 @@ class Recorder:
         for name, d in self._dirs.items():
             # the sum next_deadline() gives: `now - d.last >= idle_flush` can round the other
             # way at that very deadline and leave it standing at `now`
-            if d.decoder.buffered and now >= d.last + self.idle_flush:
+            if d.buffered and now >= d.last + self.idle_flush:
                 out += [CaptureRecord(d.last, name, r.raw) for r in d.decoder.close()]
                 d.decoder = StreamDecoder(self.profile, offset=d.total)
+                d.buffered = False
         return out
 
     def flush(self) -> list[CaptureRecord]:
@@ -59,12 +79,13 @@ class Recorder:
         for name, d in self._dirs.items():
             out += [CaptureRecord(d.last, name, r.raw) for r in d.decoder.close()]
             d.decoder = StreamDecoder(self.profile, offset=d.total)
+            d.buffered = False
         return out
 
     def next_deadline(self) -> float | None:
         best: float | None = None
         for d in self._dirs.values():
-            if d.decoder.buffered:
+            if d.buffered:
                 t = d.last + self.idle_flush
                 if best is None or t < best:
                     best = t

@@ -50,7 +50,8 @@ class WireTap(Tap):
             self._to[f"{other}>{end}"] = se  # what goes that way is delivered at this end
 
     def _line(self, direction: str, data: bytes, now: float) -> None:
-        self._on_data(direction, data)
+        """What a device's line delivered (`_on_data`, on the tap's own clock)."""
+        self._apply(self.core.receive(direction, data, self.timer.now()))
 
     def _deliver(self, direction: str, data: bytes) -> None:
         end = self._to.get(direction)

@@ -29,6 +29,7 @@ self-pipe, which it never waits on.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import heapq
 import selectors
 import time
@@ -41,9 +42,9 @@ from ktcs_bench.errors import KtcsError
 MAX_SPEED = 50.0
 """The fastest scaled clock a whole lab in one process is started on (`lab up --in-process`).
 Measured on a 2-core machine others shared: the reference lab with its trains takes a whole core
-at 70x to 110x real time (7% of one at 5x, 18% at 20x; `lab simulate` runs it at about 180x);
-at 100x its links went down within 20 s and stayed down, at 50x they stayed up but for a few
-resyncs while the machine was busiest."""
+at 70x to 110x real time (7% of one at 5x, 18% at 20x; `lab simulate` runs it at about 230x by
+CPU time); at 100x its links went down within 20 s and stayed down, at 50x they stayed up but for
+a few resyncs while the machine was busiest."""
 
 BEHIND = 1.0
 """Seconds of the lab's clock a timer may be overdue before a scaled loop calls itself behind:
@@ -133,6 +134,36 @@ class _When(float):
     handle: Any  # the TimerHandle (its private fields are what asyncio's loop uses)
 
 
+class _TimerHandle(events.TimerHandle):
+    """asyncio's `TimerHandle`, made and cancelled without asking the loop whether it debugs
+    (the loop makes these only when it does not): a lab's loop makes and cancels a handle for
+    every step of every core's deadline, several for each frame on every link."""
+
+    __slots__ = ()
+
+    def __init__(
+        self, when: float, callback: Callable[..., object], args: Any,
+        loop: VirtualTimeLoop, context: Any,
+    ) -> None:  # fmt: skip
+        self._context = contextvars.copy_context() if context is None else context
+        self._loop = loop
+        self._callback = callback
+        self._args = args
+        self._cancelled = False
+        self._repr = None
+        self._source_traceback = None
+        self._when = when
+        self._scheduled = False
+
+    def cancel(self) -> None:
+        if not self._cancelled:
+            if self._scheduled:  # what `BaseEventLoop._timer_handle_cancelled` counts
+                self._loop._timer_cancelled_count += 1
+            self._cancelled = True
+            self._callback = None  # type: ignore[assignment]  # as asyncio does
+            self._args = None  # type: ignore[assignment]
+
+
 class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
     """An asyncio loop on a virtual clock that starts at `start` and jumps from timer to timer.
 
@@ -166,9 +197,11 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
         if self._debug:  # type: ignore[attr-defined]
             self._check_thread()  # type: ignore[attr-defined]
             self._check_callback(callback, "call_at")  # type: ignore[attr-defined]
-        timer = events.TimerHandle(when, callback, args, self, context)
-        if timer._source_traceback:  # type: ignore[attr-defined]
-            del timer._source_traceback[-1]  # type: ignore[attr-defined]
+            timer = events.TimerHandle(when, callback, args, self, context)
+            if timer._source_traceback:  # type: ignore[attr-defined]
+                del timer._source_traceback[-1]  # type: ignore[attr-defined]
+        else:
+            timer = _TimerHandle(when, callback, args, self, context)
         key = _When(when)
         key.handle = timer
         heapq.heappush(self._scheduled, key)

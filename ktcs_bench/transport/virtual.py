@@ -76,20 +76,27 @@ class VirtualWire:
 
     def next_deadline(self) -> float | None:
         """When bytes next arrive (or the fault injector releases some)."""
-        times = [self._flight[0][0]] if self._flight else []
+        flight = self._flight
+        first = flight[0][0] if flight else None
         if self.faults is not None and (held := self.faults.next_deadline()) is not None:
-            times.append(held)
-        return min(times) if times else None
+            return held if first is None or held < first else first
+        return first
 
     def handle_timer(self, now: float) -> bytes:
         """The bytes that have arrived at the receiver by `now`."""
         self._release(now)
-        out = bytearray()
-        while self._flight and self._flight[0][0] <= now:
-            out += self._flight.popleft()[1]
-        if out and self.record:
-            self.arrived.append((now, bytes(out)))
-        return bytes(out)
+        flight = self._flight
+        if not flight or flight[0][0] > now:
+            return b""
+        out = flight.popleft()[1]  # a piece: mostly the only one due
+        if flight and flight[0][0] <= now:
+            more = bytearray(out)
+            while flight and flight[0][0] <= now:
+                more += flight.popleft()[1]
+            out = bytes(more)
+        if self.record:
+            self.arrived.append((now, out))
+        return out
 
     def sent_bytes(self) -> bytes:
         return b"".join(d for _, d in self.sent)
@@ -104,6 +111,7 @@ class VirtualWire:
     def _line(self, data: bytes, now: float) -> None:
         start = max(now, self._free_at)
         bt = self.byte_time
+        data = bytes(data)  # its pieces are handed on as they are (a no-op for bytes)
         for i in range(0, len(data), self.piece):
             chunk = data[i : i + self.piece]
             self._flight.append((start + (i + len(chunk)) * bt, chunk))

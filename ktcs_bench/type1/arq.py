@@ -153,6 +153,10 @@ class Acceptance:
     gap_expected: int | None  # the SEQ we expected when this one skipped ahead
 
 
+_NEW = Acceptance(False, None)
+_DUPLICATE = Acceptance(True, None)
+
+
 class Receiver:
     def __init__(self, seq_modulo: int) -> None:
         self.seq_modulo = seq_modulo
@@ -162,11 +166,13 @@ class Receiver:
     def accept(self, seq: int, now: float) -> Acceptance:
         last = self.last_seq
         if last is not None and seq == last:
-            return Acceptance(True, None)
+            return _DUPLICATE
         expected = None if last is None else (last + 1) % self.seq_modulo
         self.last_seq = seq
         self.last_time = now
-        return Acceptance(False, expected if expected is not None and expected != seq else None)
+        if expected is None or expected == seq:
+            return _NEW
+        return Acceptance(False, expected)
 
     def forget(self) -> None:
         """The peer may have restarted: the next SEQ is new whatever its value."""

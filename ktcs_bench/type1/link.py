@@ -138,10 +138,12 @@ class Type1Link:
 
     # -- wire side -----------------------------------------------------------------------------
     def receive_data(self, data: bytes, now: float) -> list[LinkEvent]:
-        self._start(now)
+        if not self._started:
+            self._start(now)
         events: list[LinkEvent] = []
         records = self._decoder.feed(data)
-        self._records(records, now, events)
+        if records:
+            self._records(records, now, events)
         if not self._decoder.pending:
             self._rx_pending_since = None
         elif self._rx_pending_since is None or records:
@@ -150,11 +152,17 @@ class Type1Link:
 
     def data_to_send(self, now: float) -> bytes:
         """Everything due on the wire now: ACK/NAK frames first, then at most one data frame."""
-        self._start(now)
-        parts = self._control
-        self._control = []
-        out = self._sender.promote(self._encode, self._make)
+        if not self._started:
+            self._start(now)
+        sender = self._sender
+        out = sender.outstanding
+        if out is None and sender.queue:
+            out = sender.promote(self._encode, self._make)
         frame = out.frame if out is not None and out.due else None
+        parts = self._control
+        if not parts and frame is None:
+            return b""
+        self._control = []
         n = sum(map(len, parts)) + (len(frame) if frame is not None else 0)
         if not n:
             return b""
@@ -188,17 +196,21 @@ class Type1Link:
         if not self._started:
             return None
         t = self.timers
-        times = []
-        if self._rx_pending_since is not None:
-            times.append(self._rx_pending_since + t.delta_r)
-        ack = self._sender.deadline()
-        if ack is not None:
-            times.append(ack)
+        best = None if self._rx_pending_since is None else self._rx_pending_since + t.delta_r
+        sender = self._sender
+        out = sender.outstanding
+        if out is not None and not out.due and out.ack_deadline is not None:  # its ACK's
+            if best is None or out.ack_deadline < best:
+                best = out.ack_deadline
         if self.up:
-            times.append(self._last_rx + t.link_down_after)
-        if self._idle:
-            times.append(self._tx_free_at + t.link_test_period)
-        return min(times) if times else None
+            down = self._last_rx + t.link_down_after
+            if best is None or down < best:
+                best = down
+        if out is None and not sender.queue and not self._control:  # idle: a LINK_TEST's
+            test = self._tx_free_at + t.link_test_period
+            if best is None or test < best:
+                best = test
+        return best
 
     # -- internals -----------------------------------------------------------------------------
     @property
