@@ -24,7 +24,7 @@ from ktcs_bench.threats.application import Application
 from ktcs_bench.threats.report import ThreatResult, not_run
 from ktcs_bench.threats.wire import WireTap, wait_for
 
-REPEAT_TRIES = 5  # repeat the peer's next frame until it is a data frame, not an ACK
+REPEAT_TRIES = 12  # repeat the peer's next frame until it is a data frame, not an ACK (about half are)
 UNKNOWN_STATION = 65000  # IDENT as a station no CTC configures
 NOT_OBSERVED = "not observed (the device's state cannot be read: not one of our emulators)"
 
@@ -109,9 +109,13 @@ def repetition(t: ThreatTarget) -> ThreatResult:
     twice: Frame | None = None
     skipped = 0
     mark = t.tap.mark()
-    for _ in range(REPEAT_TRIES):
+    # a slow machine or a quiet peer delays the frame; the repeat stays armed until it comes
+    window = time.monotonic() + REPEAT_TRIES * (2 * t.timing.link_test_period + 2)
+    while skipped < REPEAT_TRIES and time.monotonic() < window:
         mark = t.tap.act(f"duplicate 1 {t.toward}")
-        pair = t.tap.next_frames(mark, t.toward, 2, 2 * t.timing.link_test_period + 2)
+        pair: list[Frame] = []
+        while len(pair) < 2 and time.monotonic() < window:
+            pair = t.tap.next_frames(mark, t.toward, 2, 1.0)
         if len(pair) < 2:
             break
         if pair[0].raw == pair[1].raw and t.is_data(pair[0]):
