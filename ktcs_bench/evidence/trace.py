@@ -22,7 +22,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench.errors import UsageError
 from ktcs_bench.evidence.catalogue import Catalogue
@@ -32,6 +32,48 @@ from ktcs_bench.junit import REQUIREMENT
 KINDS = ("procedure", "conformance", "threat", "pytest")
 STATUSES = ("failed", "unchecked", "passed")  # the order a person reads them in
 _WORST = {"fail": 3, "error": 2, "pass": 1, "skip": 0}
+
+
+class CheckJson(TypedDict):
+    kind: str
+    name: str
+    verdict: str
+    message: str
+    evidence: list[str]
+
+
+class RequirementJson(TypedDict):
+    """One catalogue requirement in the matrix: its status and the checks naming it."""
+
+    id: str
+    text: str
+    source: str
+    roles: list[str]
+    status: str
+    checks: list[CheckJson]
+
+
+class CoverageCounts(TypedDict):
+    requirements: int
+    checked: int
+    passed: int
+    failed: int
+    unchecked: int
+    checks: int
+    checks_naming_no_requirement: int
+
+
+class TraceJson(TypedDict):
+    """`trace.json` (and `trace --json`): the matrix, its counts and what no run exercised."""
+
+    catalogue: str
+    generated: str
+    results: list[str]
+    coverage: CoverageCounts
+    requirements: list[RequirementJson]
+    operations: dict[str, dict[str, list[str]]]
+    operation_coverage: list[str]
+    unknown_requirements: dict[str, list[str]]
 
 
 @dataclass
@@ -53,7 +95,7 @@ class Check:
         self.requirements = tuple(dict.fromkeys((*self.requirements, *other.requirements)))
         self.evidence += [e for e in other.evidence if e not in self.evidence]
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self) -> CheckJson:
         return {"kind": self.kind, "name": self.name, "verdict": self.verdict,
                 "message": self.message,  # the report pages first: they hold the rest
                 "evidence": sorted(self.evidence, key=lambda e: not e.endswith(".html"))}  # fmt: skip
@@ -218,7 +260,7 @@ def _read_junit(path: Path, res: Results) -> bool:
 
 
 # -- judging --------------------------------------------------------------------------------------
-def trace(catalogue: Catalogue, res: Results) -> dict[str, Any]:
+def trace(catalogue: Catalogue, res: Results) -> TraceJson:
     """The matrix: every requirement of the catalogue with its status and checks, the counts,
     what no run exercised, and the ids the results name that the catalogue lacks."""
     by_id: dict[str, list[Check]] = {}
@@ -229,7 +271,7 @@ def trace(catalogue: Catalogue, res: Results) -> dict[str, Any]:
                 by_id.setdefault(rid, []).append(check)
             else:
                 unknown.setdefault(rid, []).append(f"{check.kind} {check.name}")
-    reqs = []
+    reqs: list[RequirementJson] = []
     for r in catalogue.requirements.values():
         checks = sorted(by_id.get(r.id, []), key=lambda c: (KINDS.index(c.kind), c.name))
         verdicts = {c.verdict for c in checks}
@@ -259,26 +301,27 @@ def trace(catalogue: Catalogue, res: Results) -> dict[str, Any]:
     }
 
 
-def failing(doc: dict[str, Any]) -> list[str]:
+def failing(doc: TraceJson) -> list[str]:
     return [r["id"] for r in doc["requirements"] if r["status"] == "failed"]
 
 
-def _reading_order(doc: dict[str, Any]) -> list[dict[str, Any]]:
+def _reading_order(doc: TraceJson) -> list[RequirementJson]:
     """Failing first, then unchecked, then passed; the catalogue's order within each."""
     return sorted(doc["requirements"], key=lambda r: STATUSES.index(r["status"]))
 
 
 # -- writing ---------------------------------------------------------------------------------------
-def csv_text(doc: dict[str, Any]) -> str:
+def csv_text(doc: TraceJson) -> str:
     """One row per requirement and check (a requirement nothing checks: one row, no check)."""
     out = io.StringIO()
     w = csv.writer(out, lineterminator="\n")
     w.writerow(["id", "status", "text", "source", "check_kind", "check", "verdict", "evidence"])
     for r in _reading_order(doc):
         head = [r["id"], r["status"], r["text"], r["source"]]
-        for c in r["checks"] or [None]:
-            w.writerow(head + (["", "", "", ""] if c is None else
-                               [c["kind"], c["name"], c["verdict"], "; ".join(c["evidence"])]))  # fmt: skip
+        if not r["checks"]:
+            w.writerow(head + ["", "", "", ""])
+        for c in r["checks"]:
+            w.writerow(head + [c["kind"], c["name"], c["verdict"], "; ".join(c["evidence"])])
     return out.getvalue()
 
 
@@ -307,7 +350,7 @@ def _evidence(item: str, out: Path) -> str:
     return _e(item)
 
 
-def html_page(doc: dict[str, Any], out: Path) -> str:
+def html_page(doc: TraceJson, out: Path) -> str:
     """A self-contained page (no script, no file beside it but the evidence it links to)."""
     cov = doc["coverage"]
     rows = []
@@ -356,7 +399,7 @@ def html_page(doc: dict[str, Any], out: Path) -> str:
 """
 
 
-def write_trace(doc: dict[str, Any], out: Path) -> list[Path]:
+def write_trace(doc: TraceJson, out: Path) -> list[Path]:
     """OUT/trace.json, OUT/trace.csv and OUT/index.html."""
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / "trace.json", out / "trace.csv", out / "index.html"]
@@ -366,7 +409,7 @@ def write_trace(doc: dict[str, Any], out: Path) -> list[Path]:
     return paths
 
 
-def summary_lines(doc: dict[str, Any]) -> Iterable[str]:
+def summary_lines(doc: TraceJson) -> Iterable[str]:
     cov = doc["coverage"]
     yield (f"{cov['requirements']} requirements: {cov['passed']} passed, {cov['failed']} failed, "
            f"{cov['unchecked']} unchecked ({cov['checks']} checks read)")  # fmt: skip
