@@ -24,9 +24,7 @@ from ktcs_bench.threats.application import Application
 from ktcs_bench.threats.report import ThreatResult, not_run
 from ktcs_bench.threats.wire import WireTap, wait_for
 
-REPEAT_TRIES = (
-    12  # repeat the peer's next frame until it is a data frame, not an ACK (about half are)
-)
+REPEAT_TRIES = 12  # repeat the peer's next frame until it is data, not an ACK (about half are)
 UNKNOWN_STATION = 65000  # IDENT as a station no CTC configures
 NOT_OBSERVED = "not observed (the device's state cannot be read: not one of our emulators)"
 
