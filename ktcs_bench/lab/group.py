@@ -58,6 +58,7 @@ class DeviceGroup:
         self.running: dict[str, list[asyncio.Task[None]]] = {}
         self.ended: dict[str, str] = {}  # device -> why it ended (stopped, or its task's error)
         self.stop_requested = asyncio.Event()
+        self._ending: set[asyncio.Task[None]] = set()  # stops under way (held: the loop does not)
 
     async def start(self, name: str, argv: list[str]) -> ReadyInfo:
         """Build device `name` from its emulator arguments and launch it (stopping the one of
@@ -91,12 +92,16 @@ class DeviceGroup:
             await device.close()
         self.ended[name] = why
 
+    def _end(self, name: str, why: str) -> None:
+        """Stop device `name` from one of its own tasks (which the stop cancels: not awaited)."""
+        task = asyncio.ensure_future(self.stop(name, why))
+        self._ending.add(task)
+        task.add_done_callback(self._ending.discard)
+
     async def _stop_when_asked(self, name: str, device: Device, asked: asyncio.Event) -> None:
         await asked.wait()
         if self.devices.get(name) is device:
-            asyncio.get_running_loop().call_soon(
-                lambda: asyncio.ensure_future(self.stop(name, "stopped (its stop command)"))
-            )
+            self._end(name, "stopped (its stop command)")
 
     def _task_done(self, name: str, device: Device, task: asyncio.Task[None]) -> None:
         """A device whose task failed ends, as its process would end (exit 3); the others run on."""
@@ -105,7 +110,7 @@ class DeviceGroup:
         exc = task.exception()
         if exc is not None:
             log.error("%s: %s", name, exc)
-            asyncio.ensure_future(self.stop(name, f"crashed: {type(exc).__name__}: {exc}"))
+            self._end(name, f"crashed: {type(exc).__name__}: {exc}")
 
     def members(self) -> dict[str, str]:
         return {**self.ended, **dict.fromkeys(self.devices, RUNNING)}

@@ -461,7 +461,14 @@ class LabRunner:
         private_dir(self.dir / "captures")
         self.token, self.token_file = server_token(self.dir / "token")
         self._write_state()  # from now on, whatever kills this lab, the next one can clean up
-        await start_in_order(self.lab, self, self.endpoints, together=True)
+        # the group processes need nothing of the others: they start beside the first step
+        groups = {g for n in self.lab.devices if (g := self.group_of(n)) is not None}
+        early = asyncio.ensure_future(_together(*(self._group_process(g) for g in sorted(groups))))
+        try:
+            await start_in_order(self.lab, self, self.endpoints, together=True)
+        finally:
+            await asyncio.gather(early, return_exceptions=True)
+        early.result()  # a group process that did not start fails the lab's start
         await self._trains_to_ctc()
         await self._serve_control()
         self._write_state()

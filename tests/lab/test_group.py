@@ -86,6 +86,24 @@ def test_killing_an_atc_leaves_the_rest_of_its_group_running(lab: RunningLab) ->
     wait_until("station 18 synced", lambda: synced(lab, 18), timeout=60)
 
 
+def test_a_grouped_device_stopped_by_its_own_command_ends_alone(lab: RunningLab) -> None:
+    io = lab.device("io22")
+    assert request(io, {"cmd": "stop"})["ok"]
+    wait_until("io22's control port closed", lambda: not answers(io))
+    wait_until(
+        "the lab sees io22 ended and ixl22 running",
+        lambda: (
+            (d := lab.lab({"cmd": "status"})["status"]["devices"])
+            and not d["io22"]["alive"]
+            and d["ixl22"]["alive"]
+        ),
+    )
+    assert lab.lab({"cmd": "restart", "device": "io22"})["ok"]
+    wait_until(
+        "ixl22's trackside link back", lambda: lab.status("ixl22")["links"]["io"], timeout=60
+    )
+
+
 def test_lab_down_leaves_no_process_behind(lab: RunningLab) -> None:
     devices = lab.state()["devices"]
     procs = {(d["pid"], d["started"]) for d in devices.values()}
