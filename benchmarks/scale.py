@@ -10,8 +10,8 @@ counts the interpreter's shared pages once per process. Goals: 20 stations live 
 <= 1.5 GB.
 
 Grouped (issue 26 §1): the same lab with `lab up --group station`, a station's IXL, ATC and
-trackside in one process (Type I still over the taps' ptys), so 20 stations are 22 processes, not
-62. Both figures are printed, one row each (`--groups`). Goal: 20 stations live in <= 8 s and
+trackside in one process (Type I still over the taps' ptys), forked from one template process
+that has loaded the lab, so 20 stations are 23 processes, not 62. Both figures are printed, one row each (`--groups`). Goal: 20 stations live in <= 8 s and
 <= 1.0 GB summed RSS.
 
 Where the time goes: `lab up` starts the devices of each step together (every ATC and trackside,
@@ -165,7 +165,8 @@ def live(n: int, timeout: float, group: str = "none") -> dict[str, Any]:
         by_kind: dict[str, list[int]] = {}
         cpu_by_kind: dict[str, list[float]] = {}
         for pid, (rss, _) in memory.items():
-            kind = "lab up + taps" if pid == proc.pid else kinds.get(pid, "other")
+            other = "group template" if group == "station" else "other"  # forks the groups
+            kind = "lab up + taps" if pid == proc.pid else kinds.get(pid, other)
             by_kind.setdefault(kind, []).append(rss)
             cpu_by_kind.setdefault(kind, []).append(cpu_at_ready[pid])
         spawned = [boot + d["started"] / CLOCK_TICKS - t0 for d in state["devices"].values()]

@@ -12,6 +12,8 @@ control port goes away and comes back, its links drop and resynchronise.
 
 prints one ready line, {"ready": NAME, "kind": "group", "control": "HOST:PORT"}, as a device does,
 and stops (every device in it) when its launcher is gone (`--lifeline`), on SIGTERM, or on `down`.
+`lab up` does not start it so: it starts one template (`--template SOCKET`, `serve_template`) that
+loads the lab once and forks each group process from there (`ForkedGroup`).
 Commands: {"cmd": "start", "device": N, "argv": [...]} -> {"ok": true, "ready": {...}};
 {"cmd": "stop", "device": N}; {"cmd": "members"} -> {"ok": true, "members": {N: "running" or why
 it ended}}; {"cmd": "down"}.
@@ -25,18 +27,25 @@ import contextlib
 import json
 import logging
 import os
+import select
 import signal
+import socket
 import sys
+import time
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from functools import partial
-from typing import Any
+from importlib import import_module
+from pathlib import Path
+from typing import IO, Any
 
 from ktcs_bench.emulator.build import build_device, device_namespace
 from ktcs_bench.emulator.device import Device
-from ktcs_bench.errors import KtcsError, UsageError
+from ktcs_bench.errors import KtcsError, PeerError, UsageError
+from ktcs_bench.lab.processes import READY_TIMEOUT, STOP_GRACE
 from ktcs_bench.lab.topology import Lab, load_lab, resolve_lab_path
-from ktcs_bench.messages import JsonObject, ReadyInfo
-from ktcs_bench.runtime import server_token
+from ktcs_bench.messages import JsonObject, ReadyInfo, ReadyLine
+from ktcs_bench.runtime import process_alive, process_started, server_token
 from ktcs_bench.transport import jsonlines, net
 
 log = logging.getLogger("ktcs_bench.lab.group")
@@ -141,9 +150,9 @@ class DeviceGroup:
     async def _handle(self, obj: JsonObject, peer: jsonlines.Peer) -> dict[str, Any]:
         return await self.command(obj)
 
-    async def run(self, token_file: str | None, lifeline: int | None) -> int:
+    async def run(self, token_file: str | None, lifeline: int | None, out: IO[str]) -> int:
         """Serve the group's control port until asked to stop or the launcher is gone; then stop
-        every device in it."""
+        every device in it. Its ready line goes to `out`."""
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.add_signal_handler(sig, self.stop_requested.set)
@@ -154,13 +163,14 @@ class DeviceGroup:
         try:
             server = await jsonlines.serve("127.0.0.1", 0, self._handle, token=self.token)
         except OSError as exc:
-            sys.stdout.write(json.dumps({"error": str(exc)}) + "\n")
-            sys.stdout.flush()
+            out.write(json.dumps({"error": str(exc)}) + "\n")
+            out.flush()
             return 3
         host, port = net.server_address(server)
-        ready = {"ready": self.name, "kind": GROUP_KIND, "control": f"{host}:{port}"}
-        sys.stdout.write(json.dumps(ready) + "\n")
-        sys.stdout.flush()
+        ready = {"ready": self.name, "kind": GROUP_KIND, "control": f"{host}:{port}",
+                 "pid": os.getpid()}  # fmt: skip
+        out.write(json.dumps(ready) + "\n")
+        out.flush()
         try:
             await self.stop_requested.wait()
         finally:
@@ -181,17 +191,129 @@ class DeviceGroup:
             self.stop_requested.set()
 
 
-def group_argv(lab: Lab, name: str, token_file: str | None) -> list[str]:
-    """The command line of group process `name` of `lab` (`lab.processes.Child` adds its
-    lifeline)."""
-    argv = [sys.executable, "-m", "ktcs_bench.lab.group", "--lab", str(lab.file), "--name", name]
+def template_argv(lab: Lab, socket_path: Path, token_file: str | None) -> list[str]:
+    """The command line of the group template of `lab` (`lab.processes.Child` adds its
+    lifeline): the process that loads the lab once and forks a group process per request on
+    `socket_path` (`serve_template`)."""
+    argv = [sys.executable, "-m", "ktcs_bench.lab.group", "--lab", str(lab.file),
+            "--template", str(socket_path)]  # fmt: skip
     return argv + (["--token-file", token_file] if token_file else [])
+
+
+def serve_template(lab: Lab, socket_path: str, token_file: str | None, lifeline: int | None) -> int:
+    """Fork a group process for each request on `socket_path` ({"fork": NAME}), which answers on
+    that connection with its ready line. The template imports the devices' modules and loads the
+    lab and its line before it forks, so a group process starts with all of it (about 0.3 s of
+    CPU an interpreter and its line would take again). It forks from no event loop and no
+    thread; it stops when its launcher is gone (`lifeline`) or on SIGTERM."""
+    lab.load_line()
+    import_module("ktcs_bench.emulator.ixl")
+    import_module("ktcs_bench.emulator.atc")
+    import_module("ktcs_bench.emulator.trackside")
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernel reaps the groups
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(socket_path)
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    server.bind(socket_path)
+    server.listen(16)
+    sys.stdout.write(json.dumps({"ready": "template", "kind": "template", "control": ""}) + "\n")
+    sys.stdout.flush()
+    watched = [server] + ([lifeline] if lifeline is not None else [])
+    while True:
+        readable, _, _ = select.select(watched, [], [])
+        if lifeline is not None and lifeline in readable and not os.read(lifeline, 64):
+            return 0
+        if server not in readable:
+            continue
+        conn, _ = server.accept()
+        with conn:
+            line = conn.makefile("r").readline()
+            try:
+                name = str(json.loads(line)["fork"])
+            except (ValueError, KeyError, TypeError):
+                continue
+            if os.fork() == 0:  # the group process
+                code = 3
+                try:
+                    server.close()
+                    os.setsid()  # its own process group, as `lab up`'s children are
+                    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                    out = conn.makefile("w")
+                    code = asyncio.run(DeviceGroup(name, lab).run(token_file, lifeline, out))
+                finally:
+                    os._exit(code)
+
+
+@dataclass
+class Forked:
+    """A forked group process's id, as `subprocess.Popen` gives a started one's."""
+
+    pid: int
+
+
+@dataclass
+class ForkedGroup:
+    """A group process forked by the lab's template (`serve_template`), seen as `lab.processes
+    .Child` sees a process it started: `start` (blocking) asks the template for it and returns
+    its ready line; alive while its pid runs with its start time; `stop` SIGTERM then SIGKILL."""
+
+    name: str
+    socket_path: Path
+    ready: ReadyLine = field(default_factory=lambda: ReadyLine())
+    proc: Forked | None = None
+    started: int | None = None
+    exit_code: int | None = None
+
+    def start(self) -> ReadyLine:
+        self.stop()
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+            sock.settimeout(READY_TIMEOUT)
+            sock.connect(str(self.socket_path))
+            sock.sendall(json.dumps({"fork": self.name}).encode() + b"\n")
+            line = sock.makefile("r").readline()
+        try:
+            ready = json.loads(line)
+        except ValueError:
+            ready = None
+        if not isinstance(ready, dict) or "error" in ready or "pid" not in ready:
+            why = ready.get("error") if isinstance(ready, dict) else "no ready line"
+            raise PeerError(f"{self.name} did not start: {why}")
+        self.proc = Forked(int(ready.pop("pid")))
+        self.started, self.exit_code = process_started(self.proc.pid), None
+        self.ready = ReadyLine(ready=self.name, kind=GROUP_KIND, control=str(ready["control"]))
+        return self.ready
+
+    @property
+    def alive(self) -> bool:
+        return self.proc is not None and process_alive(self.proc.pid, self.started)
+
+    def poll(self) -> int | None:
+        if self.proc is None or self.exit_code is not None or self.alive:
+            return None
+        self.exit_code = -signal.SIGKILL  # its exit status went to the template, which reaped it
+        return self.exit_code
+
+    def stop(self, sig: int = signal.SIGTERM) -> None:
+        for s in (sig, signal.SIGKILL):
+            if not self.alive:
+                return
+            assert self.proc is not None
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, s)
+            end = time.monotonic() + STOP_GRACE
+            while self.alive and time.monotonic() < end:
+                time.sleep(0.02)
+
+    def kill(self) -> None:
+        self.stop(signal.SIGKILL)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m ktcs_bench.lab.group")
     p.add_argument("--lab", required=True, help="the lab file")
-    p.add_argument("--name", required=True, help="the group's name (st20: station 20's)")
+    p.add_argument("--name", help="the group's name (st20: station 20's)")
+    p.add_argument("--template", metavar="SOCKET",
+                   help="be the lab's group template: fork a group per request on SOCKET")  # fmt: skip
     p.add_argument("--token-file", help="the token its control port and its devices' require")
     p.add_argument("--lifeline", type=int, help="stop at end of file on this descriptor")
     p.add_argument("-v", "--verbose", action="store_true", help="log every event to stderr")
@@ -205,7 +327,12 @@ def main(argv: list[str] | None = None) -> int:
     except KtcsError as exc:
         sys.stdout.write(json.dumps({"error": str(exc)}) + "\n")
         return 2
-    code: int = asyncio.run(DeviceGroup(args.name, lab).run(args.token_file, args.lifeline))
+    if args.template:
+        return serve_template(lab, args.template, args.token_file, args.lifeline)
+    if not args.name:
+        p.error("--name or --template is required")
+    group = DeviceGroup(args.name, lab)
+    code: int = asyncio.run(group.run(args.token_file, args.lifeline, sys.stdout))
     return code
 
 

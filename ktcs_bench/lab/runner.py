@@ -9,7 +9,9 @@ to put one device on another machine -- so the lab assumes nothing the devices d
 
 `--group station` (`LabRunner.group`) puts the devices of one station -- its IXL, ATC and
 trackside -- in one process (`lab.group`), built from those same arguments, to spare a process's
-memory per device; their Type I links still run over the taps' ptys. Such a device is a
+memory per device; their Type I links still run over the taps' ptys. The station processes are
+forked from one template process that has loaded the lab (`lab.group.serve_template`), which spares
+each the start of an interpreter and the load of its line. Such a device is a
 `GroupMember`: started, stopped and killed one at a time through its group process's control
 port, so `restart` and `kill` still act on one device. `--group none` (a process per device, the
 default) keeps the fidelity of separate processes.
@@ -34,7 +36,7 @@ from urllib.parse import urlsplit
 from ktcs_bench import kinds
 from ktcs_bench.capture import open_writer
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
-from ktcs_bench.lab.group import group_argv
+from ktcs_bench.lab.group import ForkedGroup, template_argv
 from ktcs_bench.lab.processes import READY_TIMEOUT, Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
@@ -247,7 +249,7 @@ class GroupMember:
     process gone)."""
 
     name: str
-    group: Child
+    group: ForkedGroup
     ready: ReadyLine = field(default_factory=lambda: ReadyLine())
     running: bool = False
     _ended: int | None = None  # how it ended, not reported yet
@@ -283,7 +285,8 @@ class LabRunner:
     console: bool = True
     group: str = "none"  # GROUPINGS: "station" runs a station's devices in one process
     children: dict[str, Child | GroupMember] = field(default_factory=dict)
-    groups: dict[str, Child] = field(default_factory=dict)  # group processes, by name (st20)
+    groups: dict[str, ForkedGroup] = field(default_factory=dict)  # group processes (st20)
+    template: Child | None = None  # the process that forks the group processes
     taps: dict[str, Tap] = field(default_factory=dict)
     endpoints: dict[str, dict[str, str]] = field(default_factory=dict)  # device -> role -> endpoint
     control_address: str = ""
@@ -357,21 +360,34 @@ class LabRunner:
         self._write_state()
         return member.ready
 
-    async def _group_process(self, group: str) -> Child:
-        """Group process `group`, started if it is not running."""
+    async def _group_process(self, group: str) -> ForkedGroup:
+        """Group process `group`, started if it is not running: forked by the lab's template
+        (started first if it is not running), which has loaded the lab and its line already."""
         async with self._group_locks.setdefault(group, asyncio.Lock()):
             child = self.groups.get(group)
             if child is not None and child.alive:
                 return child
-            child = child or Child(group, [], self.dir / "logs" / f"{group}.log")
-            child.argv = group_argv(self.lab, group, str(self.token_file or "") or None)
+            async with self._group_locks.setdefault("", asyncio.Lock()):
+                if self.template is None or not self.template.alive:
+                    self.template = self.template or Child(
+                        "groups", [], self.dir / "logs" / "groups.log"
+                    )
+                    self.template.argv = template_argv(
+                        self.lab, self._template_socket, str(self.token_file or "") or None
+                    )
+                    await asyncio.to_thread(self.template.start)
+            child = child or ForkedGroup(group, self._template_socket)
             self.groups[group] = child
             async with self._starting:
                 await asyncio.to_thread(child.start)
             return child
 
+    @property
+    def _template_socket(self) -> Path:
+        return self.dir / "groups.sock"
+
     async def _group_request(
-        self, process: Child, obj: dict[str, Any], timeout: float = 10.0
+        self, process: ForkedGroup, obj: dict[str, Any], timeout: float = 10.0
     ) -> dict[str, Any]:
         """A command to a group process's control port; PeerError when it says no."""
         host, _, port = process.ready["control"].rpartition(":")
@@ -678,6 +694,8 @@ class LabRunner:
             *(asyncio.to_thread(c.stop) for c in alone),
             *(asyncio.to_thread(g.stop) for g in self.groups.values()),
         )
+        if self.template is not None:
+            await asyncio.to_thread(self.template.stop)
         for tap in self.taps.values():
             tap.stop()  # closes its pty pairs (the ptys are gone) and withdraws it
         if getattr(self, "_control", None) is not None:

@@ -5,10 +5,11 @@ group process, and `lab down` leaves no process behind. Real processes, real pty
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
-from ktcs_bench.runtime import process_alive
+from ktcs_bench.runtime import process_alive, process_started
 
 from .conftest import RunningLab, request, start_lab, wait_until
 from .test_lab import route, summary
@@ -104,10 +105,31 @@ def test_a_grouped_device_stopped_by_its_own_command_ends_alone(lab: RunningLab)
     )
 
 
+def descendants(root: int) -> set[tuple[int, int | None]]:
+    """Every live process under `root`, with its start time (from /proc)."""
+    parent: dict[int, int] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rpartition(")")[2].split()
+            except OSError:
+                continue
+            parent[int(entry.name)] = int(fields[1])
+    out, todo = set(), [root]
+    while todo:
+        at = todo.pop()
+        kids = [c for c, p in parent.items() if p == at]
+        out |= {(k, process_started(k)) for k in kids}
+        todo += kids
+    return out
+
+
 def test_lab_down_leaves_no_process_behind(lab: RunningLab) -> None:
     devices = lab.state()["devices"]
     procs = {(d["pid"], d["started"]) for d in devices.values()}
     assert len(procs) == 2 + len(STATIONS)  # ctc, tc and one process per station
+    procs |= descendants(lab.proc.pid)  # and the template the station processes are forked from
+    assert len(procs) == 3 + len(STATIONS), procs
     down = lab.cli("lab", "down", "grouplab")
     assert down.returncode == 0, down.stderr
     assert lab.proc.wait(30) == 0
