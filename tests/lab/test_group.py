@@ -4,6 +4,8 @@ group process, and `lab down` leaves no process behind. Real processes, real pty
 
 from __future__ import annotations
 
+import os
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -103,6 +105,27 @@ def test_a_grouped_device_stopped_by_its_own_command_ends_alone(lab: RunningLab)
     wait_until(
         "ixl22's trackside link back", lambda: lab.status("ixl22")["links"]["io"], timeout=60
     )
+
+
+def test_a_station_process_killed_is_three_crashes_each_restarted_alone(lab: RunningLab) -> None:
+    pid = lab.state()["devices"]["ixl22"]["pid"]
+    os.killpg(pid, signal.SIGKILL)
+    wait_until(
+        "the lab sees station 22's three devices dead",
+        lambda: (
+            not any(
+                d["alive"]
+                for n, d in lab.lab({"cmd": "status"})["status"]["devices"].items()
+                if n.endswith("22")
+            )
+        ),
+    )
+    for device in ("io22", "atc22", "ixl22"):
+        assert lab.lab({"cmd": "restart", "device": device})["ok"]
+    devices = lab.state()["devices"]
+    assert len({devices[f"{k}22"]["pid"] for k in ("ixl", "atc", "io")} - {pid}) == 1
+    wait_until("station 22 resyncs at the CTC", lambda: synced(lab, 22), timeout=60)
+    wait_until("ixl22's links all up", lambda: all(lab.status("ixl22")["links"].values()))
 
 
 def descendants(root: int) -> set[tuple[int, int | None]]:
