@@ -7,6 +7,15 @@ the machine has cores), none waiting for another's ready line: nothing one needs
 another of its step. Every device is `ktcs-bench emulator KIND ...` -- the same command a user runs
 to put one device on another machine -- so the lab assumes nothing the devices do not.
 
+`--group station` (`LabRunner.group`) puts the devices of one station -- its IXL, ATC and
+trackside -- in one process (`lab.group`), built from those same arguments, to spare a process's
+memory per device; their Type I links still run over the taps' ptys. The station processes are
+forked from one template process that has loaded the lab (`lab.group.serve_template`), which spares
+each the start of an interpreter and the load of its line. Such a device is a
+`GroupMember`: started, stopped and killed one at a time through its group process's control
+port, so `restart` and `kill` still act on one device. `--group none` (a process per device, the
+default) keeps the fidelity of separate processes.
+
 An external device (a real one, `external:` in the lab file) is not started: its link's tap opens
 its serial endpoint as that end (Type I), connects to it (a CTC) or serves the address it connects
 to (an IXL). It is alive while that link is up, as the device of ours at the other end sees it;
@@ -26,8 +35,9 @@ from urllib.parse import urlsplit
 
 from ktcs_bench import kinds
 from ktcs_bench.capture import open_writer
-from ktcs_bench.errors import KtcsError, UsageError
-from ktcs_bench.lab.processes import Child, emulator_argv
+from ktcs_bench.errors import KtcsError, PeerError, UsageError
+from ktcs_bench.lab.group import ForkedGroup, template_argv
+from ktcs_bench.lab.processes import READY_TIMEOUT, Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
 from ktcs_bench.lab.view import LinkEntry
@@ -43,6 +53,11 @@ T = TypeVar("T")
 
 # devices a live lab starts at once: a start is mostly the interpreter's CPU (imports, line data)
 STARTS_AT_ONCE = max(4, 2 * (os.cpu_count() or 1))
+
+GROUPINGS = ("none", "station")
+"""How `lab up` puts devices in processes (`--group`): one each, or one per station."""
+
+KILLED = -9  # what a killed device's process exits with (SIGKILL): `lab kill` of a member too
 
 
 def device_args(
@@ -228,12 +243,50 @@ async def lab_command(lab: LabCommands, obj: Mapping[str, object]) -> dict[str, 
 
 
 @dataclass
+class GroupMember:
+    """A device living in a group process, seen as `Child` sees a device process: alive while it
+    runs there and its process lives; `poll` reports once how it ended (killed, crashed, or its
+    process gone)."""
+
+    name: str
+    group: ForkedGroup
+    ready: ReadyLine = field(default_factory=lambda: ReadyLine())
+    running: bool = False
+    _ended: int | None = None  # how it ended, not reported yet
+
+    @property
+    def proc(self) -> Any:
+        return self.group.proc
+
+    @property
+    def started(self) -> int | None:
+        return self.group.started
+
+    @property
+    def alive(self) -> bool:
+        return self.running and self.group.alive
+
+    def ended(self, code: int) -> None:
+        if self.running:
+            self.running, self._ended = False, code
+
+    def poll(self) -> int | None:
+        if self.running and not self.group.alive:
+            self.ended(self.group.exit_code if self.group.exit_code is not None else KILLED)
+        code, self._ended = self._ended, None
+        return code
+
+
+@dataclass
 class LabRunner:
     lab: Lab
     unpaced: bool = False
     capture: bool = True
     console: bool = True
-    children: dict[str, Child] = field(default_factory=dict)
+    group: str = "none"  # GROUPINGS: "station" runs a station's devices in one process
+    children: dict[str, Child | GroupMember] = field(default_factory=dict)
+    groups: dict[str, ForkedGroup] = field(default_factory=dict)  # group processes (st20)
+    template: Child | None = None  # the process that forks the group processes
     taps: dict[str, Tap] = field(default_factory=dict)
     endpoints: dict[str, dict[str, str]] = field(default_factory=dict)  # device -> role -> endpoint
     control_address: str = ""
@@ -243,22 +296,40 @@ class LabRunner:
     token: str = ""  # what every control port of this lab requires (runtime)
     token_file: Path | None = None
     _starting: asyncio.Semaphore = field(default_factory=lambda: asyncio.Semaphore(STARTS_AT_ONCE))
+    _group_locks: dict[str, asyncio.Lock] = field(default_factory=dict)
 
     @property
     def dir(self) -> Path:
         return lab_dir(self.lab.name)
 
     # -- start -------------------------------------------------------------------------------
-    def _argv(self, name: str) -> list[str]:
-        """The device's command line (`device_args`), with what it had before if it ran."""
+    def _args(self, name: str) -> list[str]:
+        """The device's emulator arguments (`device_args`), with what it had before if it ran."""
         before = self.children[name].ready if name in self.children else {}
-        return emulator_argv(*device_args(
+        return device_args(
             self.lab, name, before=before, endpoints=self.endpoints.get(name, {}),
             token_file=self.token_file, unpaced=self.unpaced, console=self.console,
-        ))  # fmt: skip
+        )  # fmt: skip
+
+    def _argv(self, name: str) -> list[str]:
+        """The device's command line."""
+        return emulator_argv(*self._args(name))
+
+    def group_of(self, name: str) -> str | None:
+        """The group process device `name` lives in (None: a process of its own)."""
+        d = self.lab.devices[name]
+        if self.group != "station" or d.station is None or d.external is not None:
+            return None
+        return f"st{d.station}" if kinds.KINDS[d.kind].station else None
 
     async def _start(self, name: str) -> ReadyLine:
-        child = self.children.get(name) or Child(name, [], self.dir / "logs" / f"{name}.log")
+        group = self.group_of(name)
+        if group is not None:
+            return await self._start_member(name, group)
+        old = self.children.get(name)
+        child = (
+            old if isinstance(old, Child) else Child(name, [], self.dir / "logs" / f"{name}.log")
+        )
         child.argv = self._argv(name)
         self.children[name] = child
         async with self._starting:
@@ -268,6 +339,92 @@ class LabRunner:
                 self._write_state()
         self.crashed.pop(name, None)
         return ready
+
+    async def _start_member(self, name: str, group: str) -> ReadyLine:
+        """Start device `name` in its group process (starting that first if it is not running)."""
+        process = await self._group_process(group)
+        argv = self._args(name)
+        answer = await self._group_request(
+            process, {"cmd": "start", "device": name, "argv": argv}, READY_TIMEOUT
+        )
+        ready = answer.get("ready")
+        if not isinstance(ready, dict):
+            raise PeerError(f"{name} did not start in {group}: {answer.get('error')}")
+        old = self.children.get(name)
+        member = old if isinstance(old, GroupMember) else GroupMember(name, process)
+        member.group, member.running = process, True
+        member.poll()  # how it ended before is no news now
+        member.ready = ReadyLine(ready=name, kind=self.lab.devices[name].kind, **ready)  # type: ignore[typeddict-item]
+        self.children[name] = member
+        self.crashed.pop(name, None)
+        self._write_state()
+        return member.ready
+
+    async def _group_process(self, group: str) -> ForkedGroup:
+        """Group process `group`, started if it is not running: forked by the lab's template
+        (started first if it is not running), which has loaded the lab and its line already."""
+        async with self._group_locks.setdefault(group, asyncio.Lock()):
+            child = self.groups.get(group)
+            if child is not None and child.alive:
+                return child
+            async with self._group_locks.setdefault("", asyncio.Lock()):
+                if self.template is None or not self.template.alive:
+                    self.template = self.template or Child(
+                        "groups", [], self.dir / "logs" / "groups.log"
+                    )
+                    self.template.argv = template_argv(
+                        self.lab, self._template_socket, str(self.token_file or "") or None
+                    )
+                    await asyncio.to_thread(self.template.start)
+            child = child or ForkedGroup(group, self._template_socket)
+            self.groups[group] = child
+            async with self._starting:
+                await asyncio.to_thread(child.start)
+            return child
+
+    @property
+    def _template_socket(self) -> Path:
+        return self.dir / "groups.sock"
+
+    async def _group_request(
+        self, process: ForkedGroup, obj: dict[str, Any], timeout: float = 10.0
+    ) -> dict[str, Any]:
+        """A command to a group process's control port; PeerError when it says no."""
+        host, _, port = process.ready["control"].rpartition(":")
+        answer = await jsonlines.request(host, int(port), obj, timeout=timeout, token=self.token)
+        if not answer.get("ok"):
+            raise PeerError(f"{process.name}: {answer.get('error')}")
+        return answer
+
+    async def _stop_device(self, name: str, why: str = "stopped", code: int = 0) -> None:
+        """Stop device `name`: its process, or its part of its group process."""
+        child = self.children[name]
+        if isinstance(child, Child):
+            await asyncio.to_thread(child.kill if code == KILLED else child.stop)
+            return
+        if child.group.alive:
+            await self._group_request(child.group, {"cmd": "stop", "device": name, "why": why})
+        child.ended(code)
+        if code == 0:
+            child.poll()  # stopped on purpose: not a crash to report
+
+    async def _refresh_members(self) -> None:
+        """Learn from each group process which of its devices ended there (a task's error)."""
+        for process in self.groups.values():
+            if not process.alive:
+                continue
+            try:
+                members = (await self._group_request(process, {"cmd": "members"}))["members"]
+            except (OSError, TimeoutError, KtcsError, KeyError):
+                continue
+            for name, state in members.items():
+                member = self.children.get(name)
+                if isinstance(member, GroupMember) and state != "running" and member.running:
+                    if str(state).startswith("crashed"):
+                        self.notices.append(f"{name} {state}")
+                        member.ended(3)
+                    else:
+                        member.ended(0)
 
     async def type2_end(self, link: LinkSpec, index: int, ctc: tuple[str, int]) -> str:
         if not link.tap:
@@ -320,7 +477,14 @@ class LabRunner:
         private_dir(self.dir / "captures")
         self.token, self.token_file = server_token(self.dir / "token")
         self._write_state()  # from now on, whatever kills this lab, the next one can clean up
-        await start_in_order(self.lab, self, self.endpoints, together=True)
+        # the group processes need nothing of the others: they start beside the first step
+        groups = {g for n in self.lab.devices if (g := self.group_of(n)) is not None}
+        early = asyncio.ensure_future(_together(*(self._group_process(g) for g in sorted(groups))))
+        try:
+            await start_in_order(self.lab, self, self.endpoints, together=True)
+        finally:
+            await asyncio.gather(early, return_exceptions=True)
+        early.result()  # a group process that did not start fails the lab's start
         await self._trains_to_ctc()
         await self._serve_control()
         self._write_state()
@@ -354,6 +518,7 @@ class LabRunner:
                     "pid": c.proc.pid if c.proc and c.started is not None else None,
                     "started": c.started,
                     **c.ready,
+                    **({"process": c.group.name} if isinstance(c, GroupMember) else {}),
                 }
                 for n, c in self.children.items()
             },
@@ -365,8 +530,11 @@ class LabRunner:
         return await lab_command(self, obj)
 
     async def kill(self, name: str) -> None:
+        """As a crash would: SIGKILL to its process; a device of a group process is stopped there
+        at once, the others of its group run on."""
         self._refuse_external(name, "kill")
-        self._child(name).kill()
+        self._child(name)
+        await self._stop_device(name, "killed", KILLED)
 
     def _refuse_external(self, name: str, what: str) -> None:
         d = self.lab.devices.get(name)
@@ -377,7 +545,7 @@ class LabRunner:
                 "through the tap when it is there again"
             )
 
-    def _child(self, name: str) -> Child:
+    def _child(self, name: str) -> Child | GroupMember:
         if name not in self.children:
             raise UsageError(
                 f"no device {name!r} in lab {self.lab.name} ({', '.join(self.children)})"
@@ -389,8 +557,8 @@ class LabRunner:
         keep its address is re-pointed: an IXL makes new ptys for its untapped Type I links, so
         the peers on them restart on the new paths; a new CTC learns the trains again."""
         self._refuse_external(name, "restart")
-        child = self._child(name)
-        await asyncio.to_thread(child.stop)
+        self._child(name)
+        await self._stop_device(name)
         ready = await self._start(name)
         kind = self.lab.devices[name].kind
         if kind == kinds.IXL:
@@ -398,7 +566,7 @@ class LabRunner:
                 if lk.a == name and lk.type == "type1" and not lk.tap and lk.b in self.children:
                     role = self.lab.peer_role(lk, name)
                     self.endpoints.setdefault(lk.b, {})[kinds.IXL] = ready["ptys"][role]
-                    await asyncio.to_thread(self.children[lk.b].stop)
+                    await self._stop_device(lk.b)
                     await self._start(lk.b)
         if kind == kinds.CTC:
             await self._trains_to_ctc()
@@ -430,7 +598,14 @@ class LabRunner:
         status = answer.get("status")
         return status if isinstance(status, dict) else None
 
+    def process_of(self, name: str) -> dict[str, Any]:
+        """The process device `name` lives in: its pid and name (its own, or its group's)."""
+        child = self.children[name]
+        process = child.group if isinstance(child, GroupMember) else child
+        return {"pid": process.proc.pid if process.proc else None, "name": process.name}
+
     async def status(self) -> dict[str, Any]:
+        await self._refresh_members()
         names = list(self.children)
         results = await asyncio.gather(*(self.device_status(n) for n in names))
         devices = dict(zip(names, results, strict=True))
@@ -442,7 +617,12 @@ class LabRunner:
             "lab": self.lab.name,
             "stations": (ctc or {}).get("stations", {}),
             "devices": {
-                n: {"alive": self.children[n].alive, "crashed": self.crashed.get(n), "status": s}
+                n: {
+                    "alive": self.children[n].alive,
+                    "crashed": self.crashed.get(n),
+                    "status": s,
+                    "process": self.process_of(n),
+                }
                 for n, s in devices.items()
             },
             "taps": taps,
@@ -508,9 +688,14 @@ class LabRunner:
     # -- stop --------------------------------------------------------------------------------------
     async def down(self) -> None:
         ixls = [n for n, c in self.children.items() if self.lab.devices[n].kind == kinds.IXL]
-        others = [n for n in self.children if n not in ixls]
-        await asyncio.gather(*(asyncio.to_thread(self.children[n].stop) for n in ixls))
-        await asyncio.gather(*(asyncio.to_thread(self.children[n].stop) for n in others))
+        alone = [c for n, c in self.children.items() if isinstance(c, Child) and n not in ixls]
+        await asyncio.gather(*(self._stop_device(n) for n in ixls), return_exceptions=True)
+        await asyncio.gather(
+            *(asyncio.to_thread(c.stop) for c in alone),
+            *(asyncio.to_thread(g.stop) for g in self.groups.values()),
+        )
+        if self.template is not None:
+            await asyncio.to_thread(self.template.stop)
         for tap in self.taps.values():
             tap.stop()  # closes its pty pairs (the ptys are gone) and withdraws it
         if getattr(self, "_control", None) is not None:

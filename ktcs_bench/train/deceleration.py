@@ -13,14 +13,27 @@ import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-
-import numpy as np
-import numpy.typing as npt
+from typing import TYPE_CHECKING
 
 from ktcs_bench.errors import UsageError
 from ktcs_bench.train.units import G
 
-FloatArray = npt.NDArray[np.float64]
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    FloatArray = npt.NDArray[np.float64]
+
+
+def __getattr__(name: str) -> object:
+    """`FloatArray`, with numpy imported on first use: the wayside ATC (`atc.track_codes`) needs
+    only the scalar forms, and a device process spares numpy's memory (about 12 MB)."""
+    if name == "FloatArray":
+        import numpy as np
+        import numpy.typing as npt
+
+        return npt.NDArray[np.float64]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
@@ -106,6 +119,8 @@ class GradientProfile:
 
     def on_grid(self, x: FloatArray) -> FloatArray:
         """Vectorised lookup of the gradient at every location of `x`."""
+        import numpy as np
+
         if not self.locations:
             return np.full_like(x, self.default)
         idx = np.searchsorted(np.asarray(self.locations), x, side="right") - 1
@@ -149,6 +164,8 @@ class SafeDeceleration:
         return self.brake(v) + gradient_acceleration(self.gradient.at(x), self.rotating)
 
     def gradient_accel_grid(self, x: FloatArray) -> FloatArray:
+        import numpy as np
+
         g = self.gradient.on_grid(x)
         if self.rotating.nominal is not None:
             m = np.full_like(g, self.rotating.nominal)

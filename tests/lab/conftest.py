@@ -162,10 +162,11 @@ def start_lab(
     path: Path | None = None,
     ready: Callable[[RunningLab], Any] | None = None,
     trains: bool = False,
+    up_args: tuple[str, ...] = (),
 ) -> Iterator[RunningLab]:
-    """Start a lab and wait until every station is synced at the CTC in center mode with every
-    point detected (and, with `clear`, the empty line reported clear), or until `ready(lab)` holds
-    when given (a lab whose CTC is not its own). The lab is the reference lab renamed `name`
+    """Start a lab (`lab up` with `up_args` added) and wait until every station is synced at the
+    CTC in center mode with every point detected (and, with `clear`, the empty line reported
+    clear), or until `ready(lab)` holds when given (a lab whose CTC is not its own). The lab is the reference lab renamed `name`
     (`lab_file`, with its timetable trains if `trains`), or the lab file at `path` (whose lab must
     be called `name`)."""
     run_dir = tmp / "run"
@@ -174,7 +175,7 @@ def start_lab(
         path = lab_file(tmp, name, extra_devices, console_port, origins, trains)
     stderr = open(tmp / f"{name}.stderr", "w")  # noqa: SIM115 -- closed below
     proc = subprocess.Popen(
-        [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(path), "--json", "--interval", "5"],
+        [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(path), "--json", "--interval", "5", *up_args],
         stdout=subprocess.PIPE, stderr=stderr, text=True, start_new_session=True,
         env={**os.environ, "KTCS_BENCH_RUN_DIR": str(run_dir)},
     )  # fmt: skip
