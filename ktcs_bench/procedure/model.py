@@ -18,6 +18,7 @@ ConfigError naming the file, the step (or key) and what is wrong.
         within: 10s
     always:                       # expectations that hold at every sample, steps or not
       - ixl 20 signal 21 is R
+      - lab invariants hold       # the lab safety invariants (docs/system_safety.md)
 
 The top level and `setup:` are declared in `shapes` (a key no reader knows is refused with its
 line); the step kinds are in `steps`, the expectation words in `expect`. `verifies:` names
@@ -74,6 +75,13 @@ class Procedure:
     steps: tuple[Step, ...]
     names: LabNames
     always: tuple[Expectation, ...] = ()  # hold at every sample of the run
+
+    @property
+    def checks_invariants(self) -> bool:
+        """An expectation of it (in `always:` or a step) is `lab invariants hold`: the run looks
+        at the lab's safety invariants at every sample."""
+        steps = (getattr(s, "expectation", None) for s in self.steps)
+        return any(e is not None and e.invariants for e in (*self.always, *steps))
 
     @property
     def devices(self) -> set[str]:
