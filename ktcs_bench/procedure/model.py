@@ -77,6 +77,12 @@ class Procedure:
     always: tuple[Expectation, ...] = ()  # hold at every sample of the run
 
     @property
+    def most_lab_time_s(self) -> float:
+        """The most lab time its steps may take (their waits, `within:` and `holds:`): how long
+        a run may be, for ordering the longest first."""
+        return sum(_longest(s) for s in self.steps)
+
+    @property
     def checks_invariants(self) -> bool:
         """An expectation of it (in `always:` or a step) is `lab invariants hold`: the run looks
         at the lab's safety invariants at every sample."""
@@ -207,7 +213,7 @@ def load_procedure(path: str | Path, catalogue: Catalogue | None = None) -> Proc
             raise r.fail(f"always[{i}]", "always: holds of a state, not of an event or a "
                          "frame (those are looked for after an action)")  # fmt: skip
         always.append(exp)
-    total = sum(_longest(s) for s in steps)
+    total = sum(_longest(s) for s in steps)  # Procedure.most_lab_time_s
     if total > MAX_DURATION_S:
         raise r.fail(
             "steps",
