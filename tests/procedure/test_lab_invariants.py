@@ -85,6 +85,36 @@ def test_lab_invariants_hold_through_the_same_run_without_the_fault(tmp_path: Pa
     assert doc["steps"][-1]["message"] == "held 120 s"
 
 
+QUIET = data_dir("emulators") / "procedures" / "labs" / "quiet.yaml"
+PLACED_ANEW = f"""\
+id: placed-anew
+title: a train the procedure moves, put somewhere else, has not run there
+verifies: [SYS-SAFE-02]
+setup:
+  lab: '{QUIET}'
+  trains: [{{id: T1, head: TC1851, length_m: 40}}]
+always:
+  - lab invariants hold
+steps:
+  - train: T1 place TC2247
+    note: beyond two stations with no route set -- run there, it would have passed their signals
+  - wait: 2s
+  - train: T1 run to 12100 at 80
+    note: run on into station 22 with no route set, past a signal at stop
+"""
+
+
+def test_a_train_placed_anew_has_not_run_there_but_one_run_past_a_signal_has(
+    tmp_path: Path,
+) -> None:
+    code, doc, err = run(tmp_path, PLACED_ANEW)
+    assert code == 1, err
+    assert [s["verdict"] for s in doc["steps"]] == ["pass"] * 3
+    [broken] = doc["broken"]
+    assert broken["t_s"] >= doc["steps"][2]["start_s"], broken  # not at the place, at the run
+    assert "invariant 2 (danger_point)" in broken["seen"] and "train T1's head" in broken["seen"]
+
+
 def test_lab_invariants_words_are_checked_before_anything_runs(tmp_path: Path) -> None:
     path = tmp_path / "p.yaml"
     path.write_text(FAILS_CLEAR.replace("lab invariants hold", "lab invariant holds"))
