@@ -12,6 +12,7 @@ serial run.
 from __future__ import annotations
 
 import importlib.util
+import os
 import subprocess
 import sys
 import time
@@ -22,8 +23,9 @@ from ktcs_bench.datafiles import data_dir
 PLUGIN = "ktcs_bench.procedure.pytest_plugin"
 
 
-def timed(folder: Path, *extra: str) -> float:
-    """Wall seconds of one pytest run of `folder`; a run that does not pass stops the bench."""
+def timed(folder: Path, *extra: str) -> tuple[float, str]:
+    """Wall seconds of one pytest run of `folder` and its output; a run that does not pass
+    stops the bench."""
     t0 = time.monotonic()
     done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", PLUGIN, "-p",
                            "no:cacheprovider", *extra, str(folder)],
@@ -31,18 +33,25 @@ def timed(folder: Path, *extra: str) -> float:
     took = time.monotonic() - t0
     if done.returncode != 0:
         sys.exit(f"pytest {' '.join(extra)} failed:\n{done.stdout[-3000:]}{done.stderr[-2000:]}")
-    return took
+    return took, done.stdout
+
+
+def longest(output: str, n: int = 3) -> list[str]:
+    """The `n` longest items of a run with `--durations` (what bounds two workers)."""
+    return [line.strip() for line in output.splitlines() if " call " in line][:n]
 
 
 def main() -> None:
     folder = Path(sys.argv[1]) if len(sys.argv) > 1 else data_dir("emulators") / "procedures"
-    serial = timed(folder)
-    print(f"serial: {serial:.1f} s")
+    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    serial, output = timed(folder, "--durations=3")
+    print(f"serial: {serial:.1f} s; the longest: {'; '.join(longest(output))}")
     if importlib.util.find_spec("xdist") is None:
         print("-n 2: pytest-xdist is not installed (pip install pytest-xdist)")
         return
-    parallel = timed(folder, "-n", "2")
+    parallel, _ = timed(folder, "-n", "2")
     print(f"-n 2:   {parallel:.1f} s = {parallel / serial:.2f}x the serial time (goal <= 0.6x)")
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@ injected. What was never exercised is what an assessor asks about ("the suite ne
 
 A plain class fed what the bench already records, in order: a procedure's timeline and steps
 (`procedure_coverage`, the same for a lab in one process and a live one) and a lab's event log
-(`events_coverage`, `lab simulate`'s events.jsonl). Each feed says which categories it observed:
+(`events_coverage`, `lab simulate`'s events.jsonl; `lab_events_coverage` fed as they come, the
+whole-system search). Each feed says which categories it observed:
 the event log carries no codes, so a run that only read it says nothing of codes.
 `coverage.json` is the document; `merge` adds documents up, `never` lists what none exercised.
 """
@@ -136,6 +137,8 @@ class OperationCoverage:
         `restart atc18`."""
         w = words.split()
         if len(w) >= 3 and w[0] == "link":
+            if w[2] not in LINK_FAULTS:
+                return  # restore, clear: the tap's faults taken off, none injected
             for st in self._stations_of_link(w[1]):
                 self._count_fault(st, f"link {w[2]}")
         elif len(w) == 4 and w[0] == "point":
@@ -189,7 +192,9 @@ class OperationCoverage:
     def event(self, device: str, kind: str, text: str) -> None:
         """One event of a lab's log (events.jsonl: device, kind, text)."""
         dev = self.lab.devices.get(device)
-        if dev is not None and dev.kind == kinds.IXL and dev.station is not None:
+        if kind == "lab" and text == "restarted":  # the lab's own event, whatever the device
+            self.fault(f"restart {device}")
+        elif dev is not None and dev.kind == kinds.IXL and dev.station is not None:
             st = str(dev.station)
             if kind == "route" and (m := self._EV_ROUTE.match(text)):
                 what = {"set: points detected": "set", "fully released": "released"}
@@ -200,8 +205,6 @@ class OperationCoverage:
                 self.aspect(st, m[1], m[2])
         elif kind == "tap" and text.split():
             self.fault(f"link {device} {text.split()[0]}")
-        elif kind == "lab" and text == "restarted":
-            self.fault(f"restart {device}")
 
     # -- the document ---------------------------------------------------------------------------
     def as_json(self) -> CoverageJson:
@@ -209,16 +212,23 @@ class OperationCoverage:
                 "stations": json.loads(json.dumps(self.stations))}  # fmt: skip
 
 
-def events_coverage(lab: Lab, events: Path) -> OperationCoverage:
-    """A lab run's coverage from its event log (events.jsonl): routes, points and aspects from
-    the interlockings' events, faults from the lab's own (a tap's fault, a restart). The log
-    carries no ATC codes: a coverage made from it has not observed them."""
+def lab_events_coverage(lab: Lab) -> OperationCoverage:
+    """A coverage to be fed a lab's events as they come (`event`: the interlockings' routes,
+    points and aspects, the lab's own tap faults and restarts), each signal's first aspect
+    counted already: every interlocking starts with its signals at stop (SPEC §6.2) and logs an
+    aspect only when it changes. The events carry no ATC codes: codes are not observed."""
     cov = OperationCoverage(lab)
     cov.observed.update(("routes", "points", "aspects", "faults"))
-    for st, table in cov.stations.items():  # every interlocking starts with its signals at stop
-        for signal, aspects in table.get("aspects", {}).items():  # (SPEC §6.2), logged only
-            if aspects:  # when they change
+    for st, table in cov.stations.items():
+        for signal, aspects in table.get("aspects", {}).items():
+            if aspects:
                 cov.aspect(st, signal, next(iter(aspects)))
+    return cov
+
+
+def events_coverage(lab: Lab, events: Path) -> OperationCoverage:
+    """A lab run's coverage from its event log (events.jsonl), as `lab_events_coverage`."""
+    cov = lab_events_coverage(lab)
     with events.open(encoding="utf-8") as fh:
         for line in fh:
             try:
@@ -230,12 +240,16 @@ def events_coverage(lab: Lab, events: Path) -> OperationCoverage:
     return cov
 
 
+def write_coverage(path: Path, cov: OperationCoverage) -> Path:
+    """The coverage document written to `path` (its folder made if need be)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(cov.as_json(), indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    return path
+
+
 def write_events_coverage(out: Path, lab: Lab) -> Path:
     """`out`/coverage.json from `out`/events.jsonl (`lab simulate`)."""
-    path = out / COVERAGE_FILE
-    doc = events_coverage(lab, out / "events.jsonl").as_json()
-    path.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    return path
+    return write_coverage(out / COVERAGE_FILE, events_coverage(lab, out / "events.jsonl"))
 
 
 # -- documents added up ------------------------------------------------------------------------------

@@ -72,7 +72,8 @@ class InProcessLab:
 
     `clock`: "virtual" (as fast as it goes) or "scaled" (`speed` × wall time, real sockets work).
     `seed`: the taps' fault injectors. `out`: where events.jsonl, captures/ and summary.json go
-    (None: nothing is written). `console`: the CTC serves its web console (a scaled lab)."""
+    (None: nothing is written). `console`: the CTC serves its web console (a scaled lab).
+    `on_event`: called with each event of the lab's log (what it records, without a file)."""
 
     def __init__(
         self,
@@ -86,6 +87,7 @@ class InProcessLab:
         token_file: Path | None = None,
         invariants: bool = False,
         on_violation: Callable[[Violation], None] | None = None,
+        on_event: Callable[[dict[str, Any]], None] | None = None,
     ) -> None:
         if clock not in CLOCKS:
             raise UsageError(f"clock must be one of {', '.join(CLOCKS)}, not {clock!r}")
@@ -138,6 +140,7 @@ class InProcessLab:
         self._wall = 0.0
         self._virtual = 0.0
         self.invariants, self.on_violation = invariants, on_violation
+        self.on_event = on_event  # each event as events.jsonl has it, written or not
         self.watch: Watch | None = None
         self._watching: asyncio.Task[None] | None = None
 
@@ -511,6 +514,8 @@ class InProcessLab:
 
     # -- the event log -------------------------------------------------------------------------------
     def _log(self, event: dict[str, Any]) -> None:
+        if self.on_event is not None:
+            self.on_event(event)
         if self._events is not None:
             self._events.write(json.dumps(event, sort_keys=True, separators=(",", ":")) + "\n")
 

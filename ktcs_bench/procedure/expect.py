@@ -25,6 +25,8 @@ read from words and checked against the lab's names before anything runs.
     no event atc18 "comm"                (`no`: none)
     frame st18-atc atc18>ixl18 op NAK  a frame on the link's capture since the last action
                                          ([DIRECTION] [op NAME] [error KIND]); `no frame ...`
+    lab invariants hold                the lab safety invariants (`lab.invariants`, 1-3, 5, 6)
+                                         at this sample: none broken since the last sample
 
 Predicates: `is V[,V...]`, `is not V[,V...]`, `> N`, `>= N`, `< N`, `<= N`, `contains X`,
 `lacks X`. Words compare without regard to case; numbers as numbers.
@@ -35,9 +37,13 @@ from __future__ import annotations
 import shlex
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
+from ktcs_bench import kinds
 from ktcs_bench.procedure.names import LabNames, StepError
+
+if TYPE_CHECKING:
+    from ktcs_bench.lab.invariants import Violation
 
 
 @dataclass(frozen=True)
@@ -63,6 +69,11 @@ class Observer(Protocol):
     def new_frames(self, link: str) -> list[FrameSeen]: ...
 
     def ghost_speed(self, train: str) -> float | None: ...
+
+    async def violations(self) -> list[Violation]:
+        """The lab safety invariants found broken at this sample (a `SafetyChecker` fed every
+        sample of the run; times since the run began); [] when the run does not check them."""
+        ...
 
 
 Reader = Callable[[Observer], Awaitable[Any]]
@@ -149,6 +160,7 @@ class Expectation:
     offset: float = 0.0  # added to the other value (`- 200`)
     among: tuple[Reader, ...] = ()  # `at most N of A, B is ...`: the values counted
     bound: tuple[str, int] | None = None  # ("most" | "least", N)
+    invariants: bool = False  # `lab invariants hold`: the run feeds a SafetyChecker every sample
 
     async def check(self, obs: Observer) -> tuple[bool, Any]:
         if self.bound is not None:
@@ -549,6 +561,33 @@ def _counted(text: str, words: list[str], names: LabNames) -> Expectation:
                        among=tuple(reads), bound=bound)  # fmt: skip
 
 
+INVARIANTS = ("lab", "invariants", "hold")
+HOLD = "hold"
+"""What `lab invariants hold` reads at a sample where no invariant is broken."""
+CHECKED_KINDS = (kinds.TRACKCIRCUIT, kinds.IXL, kinds.TRACKSIDE)
+"""The devices a look of the invariants reads (`lab.invariants.snapshot`, without the CTC's
+views: invariant 4 asks for a settled line, which a procedure's sample is not)."""
+
+
+async def _read_invariants(obs: Observer) -> Any:
+    """`hold`, or the violations found at this sample (the first three, each with its invariant,
+    kind, where and when)."""
+    found = await obs.violations()
+    if not found:
+        return HOLD
+    more = f" (and {len(found) - 3} more)" if len(found) > 3 else ""
+    return "; ".join(str(v) for v in found[:3]) + more
+
+
+def _invariants(text: str, words: list[str], names: LabNames) -> Expectation:
+    """`lab invariants hold`: the lab safety invariants over every sample of the run."""
+    if [w.lower() for w in words] != list(INVARIANTS):
+        raise StepError("lab invariants hold (the lab safety invariants, docs/system_safety.md)")
+    devices = tuple(d.name for d in names.lab.devices.values() if d.kind in CHECKED_KINDS)
+    return Expectation(text, _read_invariants, Predicate("is", (HOLD,)), devices,
+                       invariants=True)  # fmt: skip
+
+
 def parse_expectation(text: str, names: LabNames) -> Expectation:
     """Words -> an Expectation; StepError naming what is wrong."""
     try:
@@ -559,6 +598,8 @@ def parse_expectation(text: str, names: LabNames) -> Expectation:
         raise StepError("empty expectation")
     if words[0].lower() == "at" and len(words) > 1 and words[1].lower() in ("most", "least"):
         return _counted(text, words, names)
+    if words[0].lower() == "lab":
+        return _invariants(text, words, names)
     negated = words[0].lower() == "no"
     if negated:
         words = words[1:]
@@ -571,7 +612,7 @@ def parse_expectation(text: str, names: LabNames) -> Expectation:
     probe = PROBES.get(head)
     if probe is None:
         raise StepError(f"unknown expectation {words[0]!r} (one of: {', '.join(PROBES)}, "
-                        "signal, point, no event, no frame)")  # fmt: skip
+                        "signal, point, no event, no frame, lab invariants hold)")  # fmt: skip
     read, rest, devices = probe(names, words[1:])
     links: tuple[str, ...] = ()
     if head in ("event", "frame"):

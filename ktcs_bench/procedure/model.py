@@ -18,6 +18,7 @@ ConfigError naming the file, the step (or key) and what is wrong.
         within: 10s
     always:                       # expectations that hold at every sample, steps or not
       - ixl 20 signal 21 is R
+      - lab invariants hold       # the lab safety invariants (docs/system_safety.md)
 
 The top level and `setup:` are declared in `shapes` (a key no reader knows is refused with its
 line); the step kinds are in `steps`, the expectation words in `expect`. `verifies:` names
@@ -74,6 +75,19 @@ class Procedure:
     steps: tuple[Step, ...]
     names: LabNames
     always: tuple[Expectation, ...] = ()  # hold at every sample of the run
+
+    @property
+    def most_lab_time_s(self) -> float:
+        """The most lab time its steps may take (their waits, `within:` and `holds:`): how long
+        a run may be, for ordering the longest first."""
+        return sum(_longest(s) for s in self.steps)
+
+    @property
+    def checks_invariants(self) -> bool:
+        """An expectation of it (in `always:` or a step) is `lab invariants hold`: the run looks
+        at the lab's safety invariants at every sample."""
+        steps = (getattr(s, "expectation", None) for s in self.steps)
+        return any(e is not None and e.invariants for e in (*self.always, *steps))
 
     @property
     def devices(self) -> set[str]:
@@ -199,7 +213,7 @@ def load_procedure(path: str | Path, catalogue: Catalogue | None = None) -> Proc
             raise r.fail(f"always[{i}]", "always: holds of a state, not of an event or a "
                          "frame (those are looked for after an action)")  # fmt: skip
         always.append(exp)
-    total = sum(_longest(s) for s in steps)
+    total = sum(_longest(s) for s in steps)  # Procedure.most_lab_time_s
     if total > MAX_DURATION_S:
         raise r.fail(
             "steps",

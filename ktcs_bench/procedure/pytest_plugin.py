@@ -62,6 +62,21 @@ def pytest_collect_file(file_path: Path, parent: pytest.Collector) -> pytest.Col
     return None
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The procedures longest first (by the most lab time their steps may take), each in a place
+    a procedure had: under pytest-xdist the long runs (the meet, the train run: most of the
+    suite's time) start at once instead of one of them last, with the short ones filling in
+    beside them. Other tests keep their order."""
+    at = [i for i, item in enumerate(items) if isinstance(item, ProcedureItem)]
+    ordered = sorted((items[i] for i in at), key=_lab_time, reverse=True)
+    for i, item in zip(at, ordered, strict=True):
+        items[i] = item
+
+
+def _lab_time(item: pytest.Item) -> float:
+    return float(item.procedure.most_lab_time_s) if isinstance(item, ProcedureItem) else 0.0
+
+
 def mark_name(tag: str) -> str:
     """A tag as a mark's name: `approach-locking` -> `approach_locking`."""
     name = re.sub(r"\W", "_", tag)

@@ -20,6 +20,7 @@ from typing import Any, TypedDict
 from ktcs_bench.capture import PcapngWriter
 from ktcs_bench.evidence.coverage import COVERAGE_FILE, FORMAT, merge
 from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml, requirement_properties
+from ktcs_bench.lab.invariants import ViolationJson
 from ktcs_bench.procedure.coverage import procedure_coverage
 from ktcs_bench.procedure.runner import ProcedureResult, StepJson, Supervised
 
@@ -132,6 +133,7 @@ class ProcedureJson(TypedDict):
     steps: list[StepJson]
     always: list[str]
     broken: list[BrokenJson]
+    violations: list[ViolationJson]  # the lab invariants broken (`lab invariants hold`)
     logs: dict[str, list[dict[str, Any]]]  # the CTC's and interlockings' events over the run
     timeline: list[TimelineJson]
     trains: dict[str, list[TrainSampleJson]]
@@ -151,6 +153,7 @@ def as_json(result: ProcedureResult, page: str = "") -> ProcedureJson:
         "steps": [s.as_dict() for s in result.steps],
         "always": [e.text for e in p.always],
         "broken": [{"t_s": t, "expectation": x, "seen": seen} for t, x, seen in result.broken],
+        "violations": [v.to_json() for v in result.violations],
         "logs": result.logs,
         "timeline": [{"t_s": t, "what": k, "value": v} for t, k, v in result.timeline],
         "trains": {tid: [{"t_s": t, "head_m": h, "tail_m": tl, "speed_kmh": v}
@@ -508,6 +511,13 @@ def html_report(result: ProcedureResult) -> str:
     always_html = (f"<h2>Always</h2><p>Checked at every sample, alongside the steps.</p><table>"
                    f"<tr><th>expectation</th><th>verdict</th></tr>{always}</table>"
                    if always else "")  # fmt: skip
+    if result.violations:
+        rows_v = "".join(f"<tr><td>{v.time:.1f} s</td><td>{v.invariant} ({_e(v.kind)})</td>"
+                         f"<td>{_e(v.where)}</td><td>{_e(v.text)}</td></tr>"
+                         for v in result.violations)  # fmt: skip
+        always_html += ("<h2>Lab invariants broken</h2><p>Each where it was first found "
+                        "(docs/system_safety.md).</p><table><tr><th>at</th><th>invariant</th>"
+                        f"<th>where</th><th>what</th></tr>{rows_v}</table>")  # fmt: skip
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{_e(p.id)}: {_e(result.verdict)}</title>
 <style>{CSS}</style></head><body>

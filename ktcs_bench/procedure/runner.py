@@ -5,7 +5,9 @@ The run moves on the lab's clock only (`access.now()`, `access.sleep()`): live t
 clock, in one process the virtual one, and the same file gives the same verdicts on both. Every
 sample period the runner reads each device's status once (`Snapshot`); expectations judge that
 snapshot, and the timeline keeps what changed in it (CTC indications, the interlockings' signals,
-the ATC codes, train positions).
+the ATC codes, train positions). A procedure that expects `lab invariants hold` has each sample
+looked at by the lab's `SafetyChecker` as well (`lab.invariants.snapshot`, from the end of the
+setup on), so its checks see the history they need (what a head ran into since the last sample).
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ from ktcs_bench.codec.render import payload
 from ktcs_bench.codec.stream import StreamDecoder
 from ktcs_bench.errors import KtcsError, PeerError
 from ktcs_bench.lab.access import LabAccess, LabGone
+from ktcs_bench.lab.invariants import SafetyChecker, Violation
+from ktcs_bench.lab.invariants import snapshot as lab_snapshot
 from ktcs_bench.procedure.expect import FrameSeen, Observer
 from ktcs_bench.procedure.model import Procedure
 from ktcs_bench.procedure.names import LabNames
@@ -118,6 +122,9 @@ class ProcedureResult:
     broken: list[tuple[float, str, str]] = field(default_factory=list)
     """`always:` expectations broken: (s since the run began, the expectation, what was seen),
     each at the first sample it did not hold."""
+    violations: list[Violation] = field(default_factory=list)
+    """The lab safety invariants found broken over the run (`lab invariants hold`), each
+    (invariant, kind, where) at the first sample it was found, its time since the run began."""
 
     @property
     def failed_step(self) -> StepResult | None:
@@ -243,6 +250,7 @@ class Snapshot:
         self.run = run
         self._status: dict[str, dict[str, Any] | None] = {}
         self._show: dict[int, dict[str, Any] | None] = {}
+        self.found: list[Violation] = []  # the lab invariants broken at this sample
 
     async def status(self, device: str) -> dict[str, Any] | None:
         if device not in self._status:
@@ -298,6 +306,9 @@ class Snapshot:
         g = self.run.ghosts.get(train)
         return None if g is None else g.speed_kmh
 
+    async def violations(self) -> list[Violation]:
+        return self.found
+
 
 def _event_key(e: dict[str, Any]) -> tuple[Any, ...]:
     return (e.get("time"), e.get("kind"), e.get("text"))
@@ -330,6 +341,7 @@ class ProcedureRun:
         lab = procedure.setup.lab
         self.sampled = [d.name for d in lab.devices.values()
                         if d.kind in (kinds.CTC, kinds.IXL, kinds.ATC, kinds.TRACKCIRCUIT, kinds.TRAIN)]  # fmt: skip
+        self.checker = SafetyChecker(self.names.line) if procedure.checks_invariants else None
 
     # -- the context steps run with ------------------------------------------------------------
     def elapsed(self) -> float:
@@ -347,8 +359,30 @@ class ProcedureRun:
         await self.snapshot.prefetch(self.sampled)
         await self._record(self.snapshot)
         if self.watching:
+            await self._look(self.snapshot)
             await self._always(self.snapshot)
         return self.snapshot
+
+    async def _look(self, snap: Snapshot) -> None:
+        """The lab safety invariants at this sample (`lab invariants hold`): a look fed to the
+        run's checker, what it finds kept on the sample and, the first time, in the result."""
+        if self.checker is None:
+            return
+        found = self.checker.feed(await lab_snapshot(self.access, views=False))
+        snap.found = [replace(v, time=round(v.time - self.t0, 3)) for v in found]
+        seen = {(v.invariant, v.kind, v.where) for v in self.result.violations}
+        for v in snap.found:
+            if (v.invariant, v.kind, v.where) not in seen:
+                seen.add((v.invariant, v.kind, v.where))
+                self.result.violations.append(v)
+
+    def placed_anew(self, train: str) -> None:
+        """A train put somewhere else (not run there): the invariants' checks forget where it
+        was, so that the jump is not taken for a run past danger points."""
+        last = self.checker.last if self.checker is not None else None
+        if self.checker is not None and last is not None and train in last.trains:
+            trains = {k: v for k, v in last.trains.items() if k != train}
+            self.checker.last = replace(last, trains=trains)
 
     async def _always(self, snap: Snapshot) -> None:
         """Each `always:` expectation judged on this sample; the first sample one fails on is
@@ -637,7 +671,8 @@ class ProcedureRun:
                 result.setup_error = f"the lab did not answer: {exc}"
             if not result.setup_error:
                 self.watching = True
-                await self._always(self.snapshot)  # the state the setup left
+                await self._look(self.snapshot)  # the state the setup left
+                await self._always(self.snapshot)
                 for step, sr in zip(self.procedure.steps, result.steps, strict=True):
                     await self._step(step, sr)
                     if sr.verdict == "error" or (sr.verdict == "fail" and not self.keep_going):

@@ -27,6 +27,8 @@ carried out through the run's context, giving a verdict:
       within: 10s                         true at some moment within the time (default 10 s),
     - expect: ixl 18 route 0111 is set    or with `holds: 30s` true throughout that time
       holds: 30s
+    - expect: lab invariants hold         the lab safety invariants, looked at every sample
+      holds: 60s
 
 Any step may carry `note:`, a sentence for the report. Times are on the lab's clock.
 """
@@ -137,6 +139,8 @@ class Context(Protocol):
 
     async def place(self, ghost: Ghost) -> None: ...
 
+    def placed_anew(self, train: str) -> None: ...
+
     async def clear_faults(self) -> list[str]: ...
 
 
@@ -236,6 +240,7 @@ class TrainStep(Step):
                 direction=self.direction or (ghost.direction if ghost else "up"),
             )  # fmt: skip
             await ctx.place(ghost)
+            ctx.placed_anew(self.train)
             await ctx.action_done()
             return Outcome("pass", f"head at {ghost.head:g} m")
         if ghost is None:

@@ -43,6 +43,8 @@ def test_every_shipped_procedure_is_collected(tmp_path: Path) -> None:
     assert f"{len(shipped)} tests collected" in run.stdout
     for path in shipped:
         assert f"{path.name}::" in run.stdout, path  # its labs (labs/*.yaml) are not items
+    items = [line for line in run.stdout.splitlines() if "::" in line]
+    assert [i.split("::")[1] for i in items[:2]] == ["meet-at-20", "train-run-18-22"]  # longest
     only = pytest_run("--collect-only", "-q", "-m", "approach_locking", str(PROCEDURES),
                       cwd=tmp_path)  # fmt: skip
     assert "cancel_approach_locked.yaml::cancel-approach-locked" in only.stdout

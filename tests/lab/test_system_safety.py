@@ -16,6 +16,11 @@ both ends, no train entering an interval against another or a locked departure);
 clears every fault and waits until each CTC view equals its IXL and each IXL's occupancy the
 rails (invariant 4).
 
+What the search exercised (routes set, released and cancelled, points thrown each way, aspects
+shown, faults injected: operation coverage, `evidence.coverage`, from the labs' events as they
+come) is written after the run to `coverage.json` in KTCS_SYSTEM_FAILURES, or to the file
+KTCS_SYSTEM_COVERAGE names, for `ktcs-bench trace` to merge.
+
 A failure shrinks, and the shrunk sequence is saved as a replay file (seed + steps, in
 KTCS_SYSTEM_FAILURES, default `.system-safety/` in the repository) named in the failure message;
 `ktcs-bench lab simulate --replay FILE` runs it again. KTCS_SYSTEM_STEPS raises the number of steps
@@ -49,10 +54,17 @@ from hypothesis.stateful import (
 
 from ktcs_bench.atc.track_circuits import TrackCircuitModel
 from ktcs_bench.datafiles import data_dir
+from ktcs_bench.evidence.coverage import (
+    COVERAGE_FILE,
+    OperationCoverage,
+    lab_events_coverage,
+    write_coverage,
+)
 from ktcs_bench.ixl.interlocking import Interlocking
 from ktcs_bench.lab.inprocess import InProcessLab
 from ktcs_bench.lab.invariants import Geometry, SafetyChecker
 from ktcs_bench.lab.safety import Replay, StepRun, load_replay, replay_steps, run_step, run_steps
+from ktcs_bench.lab.topology import load_lab
 from ktcs_bench.station import load_line
 from ktcs_bench.transport import memory
 
@@ -63,6 +75,7 @@ LAB_NAME = "safety"  # what a replay file names: the shipped lab, wherever the c
 LINE = load_line()
 GEO = Geometry(LINE)
 FAILURES = Path(os.environ.get("KTCS_SYSTEM_FAILURES", ROOT / ".system-safety"))
+COVERAGE = Path(os.environ.get("KTCS_SYSTEM_COVERAGE", FAILURES / COVERAGE_FILE))
 STEPS = int(os.environ.get("KTCS_SYSTEM_STEPS", "2000"))
 STEPS_PER_EXAMPLE = 200
 WARM_UP_S = 8.0  # the links come up, the CTC has every station
@@ -90,6 +103,7 @@ class SearchMachine(RuleBasedStateMachine):
 
     FAIL_ON: frozenset[str] | None = None  # violation kinds that fail it (None: every one)
     SAVE = True  # a failure is saved as a replay file
+    exercised: OperationCoverage | None = None  # what the search did (None: not recorded)
 
     def __init__(self) -> None:
         super().__init__()
@@ -107,7 +121,9 @@ class SearchMachine(RuleBasedStateMachine):
         COUNT["examples"] += 1
         SEEDS.append(seed)
         self.seed = seed
-        self.lab = InProcessLab(LAB, seed=seed)
+        cov = self.exercised
+        on_event = None if cov is None else (lambda e: cov.event(e["device"], e["kind"], e["text"]))
+        self.lab = InProcessLab(LAB, seed=seed, on_event=on_event)
         self.loop = self.lab.new_loop()
         self.run(self.lab.up())
         self.run(self.lab.sleep(WARM_UP_S))
@@ -123,6 +139,12 @@ class SearchMachine(RuleBasedStateMachine):
         assert self.lab is not None
         self.steps.append(step)
         COUNT["steps"] += 1
+        if self.exercised is not None:  # the lab logs its tap faults and restarts itself
+            if step["do"] == "point_fault":
+                kind = step.get("kind", "detection")
+                self.exercised.fault(f"point {step['station']} {step['point']} {kind}")
+            elif step["do"] == "tc_fault":
+                self.exercised.fault(f"tc {step['tc']} {step.get('kind', 'failed_occupied')}")
         looks = self.checker.looks
         done = self.run(run_step(self.lab, self.checker, step))
         COUNT["looks"] += self.checker.looks - looks
@@ -248,23 +270,67 @@ class SystemMachine(SearchMachine):
         self.step({"do": "settle", "run_s": 10.0})
 
 
-@pytest.mark.requirement("SYS-SAFE-01", "SYS-SAFE-02", "SYS-SAFE-03", "SYS-VIEW-01")
+@pytest.mark.requirement("SYS-SAFE-01", "SYS-SAFE-02", "SYS-SAFE-03", "SYS-VIEW-01",
+                         "IXL-INV-05", "IXL-INV-06")  # fmt: skip
 def test_the_integrated_system_stays_safe_under_random_commands_trains_and_faults() -> None:
     COUNT.update(steps=0, looks=0, examples=0)
     SEEDS.clear()
-    while COUNT["steps"] < STEPS:  # an example may end before its last step: run on to STEPS
-        run_state_machine_as_test(
-            SystemMachine,
-            settings=settings(
-                max_examples=max(1, -(-(STEPS - COUNT["steps"]) // STEPS_PER_EXAMPLE)),
-                stateful_step_count=STEPS_PER_EXAMPLE,
-                deadline=None,
-                suppress_health_check=list(HealthCheck),
-            ),
-        )
-    print(f"{COUNT['steps']} steps clean, lab seeds {SEEDS}")
+    SystemMachine.exercised = exercised = lab_events_coverage(load_lab(LAB))
+    try:
+        while COUNT["steps"] < STEPS:  # an example may end before its last step: run on to STEPS
+            run_state_machine_as_test(
+                SystemMachine,
+                settings=settings(
+                    max_examples=max(1, -(-(STEPS - COUNT["steps"]) // STEPS_PER_EXAMPLE)),
+                    stateful_step_count=STEPS_PER_EXAMPLE,
+                    deadline=None,
+                    suppress_health_check=list(HealthCheck),
+                ),
+            )
+    finally:  # what the search exercised, failed or not (a shrinking run's examples too)
+        SystemMachine.exercised = None
+        write_coverage(COVERAGE, exercised)
+    print(f"{COUNT['steps']} steps clean, lab seeds {SEEDS}; exercised: {COVERAGE}")
     # the lab was looked at through every step's run, not only stepped
     assert COUNT["looks"] >= COUNT["steps"], COUNT
+
+
+def test_the_search_records_what_it_exercised_for_trace(tmp_path: Path) -> None:
+    """The search's lab as a search example brings it up, stepped by hand: what the steps
+    exercised -- the tap's fault (not its clearing), a point and a track-circuit fault, a restart,
+    a route set and the points it threw -- is counted from the lab's events and the steps, and
+    `ktcs-bench trace` reads the written file as operation coverage."""
+    machine = SystemMachine()
+    machine.exercised = cov = lab_events_coverage(load_lab(LAB))
+    try:
+        machine.up(seed=1)
+        machine.route((18, "0112", "01", "12"), cancel=False, run_s=10.0)  # into the loop
+        for step in (
+            {"do": "link", "link": "st20-atc", "fault": {"cmd": "cut"}, "run_s": 1.0},
+            {"do": "link", "link": "st20-atc", "fault": {"cmd": "clear"}, "run_s": 1.0},
+        ):
+            machine.step(step)
+        machine.point_fault((22, "31"), "crossed", run_s=1.0)
+        machine.track_circuit_failed_occupied("TC2055", run_s=1.0)
+        machine.restart("ixl22", run_s=1.0)
+    finally:
+        machine.teardown()
+    doc = json.loads(write_coverage(tmp_path / "coverage.json", cov).read_text(encoding="utf-8"))
+    assert doc["observed"] == ["aspects", "faults", "points", "routes"]  # no codes in the events
+    st = doc["stations"]
+    assert st["18"]["routes"]["0112"]["set"] == 1 and st["18"]["points"]["31"]["reverse"] == 1
+    assert st["18"]["aspects"]["01"]["R"] >= 1  # as every signal starts
+    assert st["20"]["faults"]["link cut"] == 1 and "link clear" not in st["20"]["faults"]
+    assert st["22"]["faults"]["point crossed"] == 1 and st["20"]["faults"]["tc failed_occupied"]
+    assert st["22"]["faults"]["restart ixl"] == 1
+    out = tmp_path / "trace"
+    run = subprocess.run([sys.executable, "-m", "ktcs_bench.cli.main", "trace",
+                          str(tmp_path / "coverage.json"), "--out", str(out), "--json"],
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    never = json.loads(run.stdout)["operations"]
+    assert "0112" not in never["routes_never_set"]["18"] and "codes_never_sent" not in never
+    assert "link cut" not in never["faults_never_injected"]["20"]
 
 
 # A wrong-side failure (a track circuit failing clear under the train standing at station 18's
