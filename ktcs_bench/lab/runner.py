@@ -30,7 +30,7 @@ import os
 from collections.abc import Awaitable, Coroutine, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any, Protocol, TypedDict, TypeVar
 from urllib.parse import urlsplit
 
 from ktcs_bench import kinds
@@ -102,6 +102,13 @@ def device_args(
     if d.kind == kinds.TRAIN and kinds.TRAIN in d.options:
         argv += ["--train", str(d.options[kinds.TRAIN])]
     return argv
+
+
+class ProcessJson(TypedDict):
+    """The process a device lives in (`lab status`): its own, or its station's group's."""
+
+    pid: int | None
+    name: str
 
 
 class LabStarter(Protocol):
@@ -598,7 +605,7 @@ class LabRunner:
         status = answer.get("status")
         return status if isinstance(status, dict) else None
 
-    def process_of(self, name: str) -> dict[str, Any]:
+    def process_of(self, name: str) -> ProcessJson:
         """The process device `name` lives in: its pid and name (its own, or its group's)."""
         child = self.children[name]
         process = child.group if isinstance(child, GroupMember) else child

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 from ktcs_bench import kinds
+from ktcs_bench.emulator.device import Event
 from ktcs_bench.procedure.names import LabNames, StepError
 
 if TYPE_CHECKING:
@@ -64,7 +65,7 @@ class Observer(Protocol):
 
     async def show(self, station: int) -> dict[str, Any] | None: ...
 
-    async def new_events(self, device: str) -> list[dict[str, Any]]: ...
+    async def new_events(self, device: str) -> list[Event]: ...
 
     def new_frames(self, link: str) -> list[FrameSeen]: ...
 

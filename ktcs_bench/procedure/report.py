@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, TypedDict
 
 from ktcs_bench.capture import PcapngWriter
+from ktcs_bench.emulator.device import Event
 from ktcs_bench.evidence.coverage import COVERAGE_FILE, FORMAT, merge
 from ktcs_bench.junit import JUnitCase, JUnitSuite, junit_xml, requirement_properties
 from ktcs_bench.lab.invariants import ViolationJson
@@ -134,7 +135,7 @@ class ProcedureJson(TypedDict):
     always: list[str]
     broken: list[BrokenJson]
     violations: list[ViolationJson]  # the lab invariants broken (`lab invariants hold`)
-    logs: dict[str, list[dict[str, Any]]]  # the CTC's and interlockings' events over the run
+    logs: dict[str, list[Event]]  # the CTC's and interlockings' events over the run
     timeline: list[TimelineJson]
     trains: dict[str, list[TrainSampleJson]]
     captures: dict[str, int]  # link -> frames captured

@@ -18,7 +18,7 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import Any, TypedDict, cast
 
 from ktcs_bench import kinds
 from ktcs_bench import messages as msg
@@ -28,6 +28,7 @@ from ktcs_bench.codec.frame import Frame
 from ktcs_bench.codec.profile import get_profile
 from ktcs_bench.codec.render import payload
 from ktcs_bench.codec.stream import StreamDecoder
+from ktcs_bench.emulator.device import Event
 from ktcs_bench.errors import KtcsError, PeerError
 from ktcs_bench.lab.access import LabAccess, LabGone
 from ktcs_bench.lab.invariants import SafetyChecker, Violation
@@ -116,7 +117,7 @@ class ProcedureResult:
     interrupted: str = ""  # where a SIGINT or SIGTERM stopped it ("in step 3 (wait: 1h)")
     lab_gone: str = ""  # the lab went away during the run (why)
     not_run: str = ""  # why it was not run at all (verdict skipped)
-    logs: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    logs: dict[str, list[Event]] = field(default_factory=dict)
     """The CTC's and the interlockings' event logs over the run (refusals and their reasons,
     ARS, route and signal events), each device's events in its order."""
     broken: list[tuple[float, str, str]] = field(default_factory=list)
@@ -279,7 +280,7 @@ class Snapshot:
             self._show[station] = answer if answer.get("ok") else None
         return self._show[station]
 
-    async def new_events(self, device: str) -> list[dict[str, Any]]:
+    async def new_events(self, device: str) -> list[Event]:
         try:
             answer = wire(await self.run.access.device(device, msg.Events(last=2000)))
         except LabGone:
@@ -310,7 +311,7 @@ class Snapshot:
         return self.found
 
 
-def _event_key(e: dict[str, Any]) -> tuple[Any, ...]:
+def _event_key(e: Event) -> tuple[Any, ...]:
     return (e.get("time"), e.get("kind"), e.get("text"))
 
 
@@ -518,13 +519,17 @@ class ProcedureRun:
         return [d.name for d in lab.devices.values() if d.kind in (kinds.CTC, kinds.IXL)
                 and d.name in self.access.devices]  # fmt: skip
 
-    async def _log_events(self, device: str) -> list[dict[str, Any]]:
+    async def _log_events(self, device: str) -> list[Event]:
         try:
             answer = wire(await self.access.device(device, msg.Events(last=2000)))
         except LAB_ERRORS:
             return []
         events = answer.get("events", [])
-        return [e for e in events if isinstance(e, dict)] if isinstance(events, list) else []
+        return (
+            [cast(Event, e) for e in events if isinstance(e, dict)]
+            if isinstance(events, list)
+            else []
+        )
 
     async def _mark_logs(self) -> None:
         for device in self._logged():
