@@ -40,7 +40,7 @@ bench: setup
 	$(BIN)/python benchmarks/scale.py
 	$(BIN)/python benchmarks/virtual_lab.py
 	$(BIN)/python benchmarks/console_flood.py
-	$(BIN)/python benchmarks/verify.py
+	$(BIN)/python benchmarks/verify.py --generated 20
 	$(BIN)/python benchmarks/procedures_pytest.py
 
 clean:
