@@ -403,18 +403,21 @@ def test_an_ixl_restarted_under_a_departing_train_keeps_what_it_may_run_onto_loc
     assert ixl18["startup_held"], "the restarted IXL still holds its station"
 
 
+def replayed_violations(saved: str) -> list[str]:
+    """The violations a run saved in `replays/` shows when replayed on a fresh lab, its seed."""
+    replay = load_replay(Path(__file__).parent / "replays" / saved)
+    lab = InProcessLab(LAB, seed=replay.seed)
+    runs = lab.run(lambda access: replay_steps(access, replay, LINE))
+    return [str(v) for r in runs for v in r.violations]
+
+
 def test_a_down_departure_no_longer_codes_the_up_train_standing_on_its_approach() -> None:
     """What the search found (seed 16080, 163 steps, replayed as it was saved): up train 2005
     stood on station 18's track 1; the operator set the down departure 21-92 from it; the train
     departed on that route's code and ran past starting signal 11 at stop into TC1857A. A code
     now carries its direction (SPEC §6.6): the up train reads the down route's code as the most
     restrictive, and stays behind signal 11."""
-    replay = load_replay(
-        Path(__file__).parent / "replays" / "opposing_departure_from_an_occupied_track.json"
-    )
-    lab = InProcessLab(LAB, seed=replay.seed)
-    runs = lab.run(lambda access: replay_steps(access, replay, LINE))
-    assert [str(v) for r in runs for v in r.violations] == []
+    assert replayed_violations("opposing_departure_from_an_occupied_track.json") == []
 
 
 def test_a_restarted_holder_is_not_read_as_a_gift() -> None:
@@ -427,12 +430,7 @@ def test_a_restarted_holder_is_not_read_as_a_gift() -> None:
     now a gift only as the answer to an ask, with the giver's departure and half clear; any
     other is a neighbour that forgot, read again as a resync, and nobody holds the permission
     until the interval is clear."""
-    replay = load_replay(
-        Path(__file__).parent / "replays" / "a_restarted_holder_read_as_a_gift.json"
-    )
-    lab = InProcessLab(LAB, seed=replay.seed)
-    runs = lab.run(lambda access: replay_steps(access, replay, LINE))
-    assert [str(v) for r in runs for v in r.violations] == []
+    assert replayed_violations("a_restarted_holder_read_as_a_gift.json") == []
 
 
 @pytest.mark.parametrize(
@@ -449,10 +447,7 @@ def test_a_restarted_ixl_no_longer_throws_a_point_detected_wrong_under_a_train(s
     reverse); ixl18 restarts. The new IXL took the position it read for its demand, reverse,
     and the point machine threw the blades under the train, which derailed (invariant 3).
     Restarted, an IXL now demands no point until a route or a control does, with their checks."""
-    replay = load_replay(Path(__file__).parent / "replays" / saved)
-    lab = InProcessLab(LAB, seed=replay.seed)
-    runs = lab.run(lambda access: replay_steps(access, replay, LINE))
-    assert [str(v) for r in runs for v in r.violations] == []
+    assert replayed_violations(saved) == []
 
 
 @pytest.mark.parametrize(
@@ -470,10 +465,7 @@ def test_a_called_point_is_not_proven_by_what_was_read_before_its_call(saved: st
     before its call as proof, set 02-22 and cleared signal 02 -- then the blades moved under the
     set route (invariant 3, `point_moved_locked`). The trackside now answers every call with the
     point's indications, and the IXL believes a detection only once its call is answered."""
-    replay = load_replay(Path(__file__).parent / "replays" / saved)
-    lab = InProcessLab(LAB, seed=replay.seed)
-    runs = lab.run(lambda access: replay_steps(access, replay, LINE))
-    assert [str(v) for r in runs for v in r.violations] == []
+    assert replayed_violations(saved) == []
 
 
 # ------------------------------------------------------------------------ the search can fail
