@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import math
 import signal
 import sys
 from functools import partial
@@ -85,6 +86,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "faithful) or station (a station's IXL, ATC and trackside in one process, their Type I "
         "links still over the taps' ptys: less memory, a faster start)",
     )  # fmt: skip
+    up.add_argument("--wait-for-place", action="store_true",
+                    help="a labgrid place (external: {labgrid: PLACE}) someone else holds: wait "
+                    "until it is released (default: exit 3 naming the holder); Ctrl-C gives up")  # fmt: skip
+    up.add_argument("--place-timeout", type=duration, metavar="SECONDS",
+                    help="with --wait-for-place: give up after this long (exit 3)")  # fmt: skip
     up.add_argument("--speed", type=_speed, default=None,
                     help=f"with --in-process: the clock's speed, times real time (default 1, at "
                     f"most {MAX_SPEED:g}; a warning says when this machine does not keep up)")  # fmt: skip
@@ -128,6 +134,9 @@ def run(args: argparse.Namespace) -> int:
         if args.speed is not None and not args.in_process:
             raise UsageError("lab up: --speed sets the clock of a lab in one process: give "
                              "--in-process too (a lab of processes runs on the wall clock)")  # fmt: skip
+        if args.place_timeout is not None and not args.wait_for_place:
+            raise UsageError("lab up: --place-timeout is how long --wait-for-place waits: give "
+                             "--wait-for-place too")  # fmt: skip
         return _up_in_process(args) if args.in_process else _up(args)
     if args.lab_command == "simulate":
         return _simulate(args)
@@ -219,6 +228,8 @@ def _up(args: argparse.Namespace) -> int:
     lab = load_lab(resolve_lab_path(args.lab))
     colour = args.colour
     runner = LabRunner(lab, unpaced=args.unpaced, group=args.group)
+    if args.wait_for_place:
+        runner.wait_for_place = math.inf if args.place_timeout is None else args.place_timeout
 
     stopped_by: list[int] = []  # the signal that stopped it (exit 128 + it), if one did
 
@@ -237,6 +248,8 @@ def _up(args: argparse.Namespace) -> int:
                     flush=True,
                 )
             await runner.up()
+            if runner.stop_requested.is_set():  # stopped while it started (waiting for a place)
+                return
             for line in runner.notices:  # what was cleaned up after a lab that died
                 print(line, file=sys.stderr, flush=True)
             if args.json:

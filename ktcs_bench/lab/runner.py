@@ -19,7 +19,9 @@ default) keeps the fidelity of separate processes.
 An external device (a real one, `external:` in the lab file) is not started: its link's tap opens
 its serial endpoint as that end (Type I), connects to it (a CTC) or serves the address it connects
 to (an IXL). It is alive while that link is up, as the device of ours at the other end sees it;
-`restart` and `kill` refuse it (the lab does not run it).
+`restart` and `kill` refuse it (the lab does not run it). One shared through labgrid (`external:
+{labgrid: PLACE}`) is acquired first and released when the lab ends, however it ends
+(`lab.labgrid.Places`); its exported serial port is its endpoint.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from ktcs_bench import kinds
 from ktcs_bench.capture import open_writer
 from ktcs_bench.errors import KtcsError, PeerError, UsageError
 from ktcs_bench.lab.group import ForkedGroup, template_argv
+from ktcs_bench.lab.labgrid import Places
 from ktcs_bench.lab.processes import READY_TIMEOUT, Child, emulator_argv
 from ktcs_bench.lab.state import clean_up_after, lab_dir, read_state, state_file, write_state
 from ktcs_bench.lab.topology import Lab, LinkSpec
@@ -304,6 +307,8 @@ class LabRunner:
     token_file: Path | None = None
     _starting: asyncio.Semaphore = field(default_factory=lambda: asyncio.Semaphore(STARTS_AT_ONCE))
     _group_locks: dict[str, asyncio.Lock] = field(default_factory=dict)
+    wait_for_place: float | None = None  # a held labgrid place: None an error, else wait (s, inf)
+    places: Places | None = None  # the labgrid places it holds
 
     @property
     def dir(self) -> Path:
@@ -483,6 +488,10 @@ class LabRunner:
         private_dir(self.dir / "logs")
         private_dir(self.dir / "captures")
         self.token, self.token_file = server_token(self.dir / "token")
+        self.places = Places(self.dir / "logs", self.wait_for_place)  # shared real devices first
+        self.lab = await self.places.acquire(self.lab, self.stop_requested)
+        if self.stop_requested.is_set():  # stopped while it waited for a place
+            return
         self._write_state()  # from now on, whatever kills this lab, the next one can clean up
         # the group processes need nothing of the others: they start beside the first step
         groups = {g for n in self.lab.devices if (g := self.group_of(n)) is not None}
@@ -707,5 +716,8 @@ class LabRunner:
             tap.stop()  # closes its pty pairs (the ptys are gone) and withdraws it
         if getattr(self, "_control", None) is not None:
             self._control.close()
+        if self.places is not None:  # after the taps: the device's port is closed, then given back
+            for problem in await asyncio.to_thread(self.places.release):
+                log.warning(problem)
         if (read_state(self.lab.name) or {}).get("pid") == os.getpid():  # ours, not a lab up
             state_file(self.lab.name).unlink(missing_ok=True)

@@ -6,7 +6,9 @@ ConfigError naming the file, the key path and what is wrong.
 A device may be external -- a real one the lab does not run, linked through its link's tap:
     atc18: {kind: atc, station: 18, external: {serial: "rfc2217://10.0.0.2:4000"}}
     ixl22: {kind: ixl, station: 22, external: {address: "0.0.0.0:6000"}}
-Type I devices (atc, trackside) give `serial`, a device path or any pyserial URL the tap opens;
+Type I devices (atc, trackside) give `serial`, a device path or any pyserial URL the tap opens,
+or `labgrid: PLACE`, a place of a labgrid coordinator that `lab up` acquires for the lab's life
+(`LabgridPlace`; `lab.labgrid`) and whose exported serial port it opens;
 a CTC gives `address`, where the taps connect to it; an IXL gives `address`, where the tap serves
 it (the real IXL is set to connect there; its own Type I peers are its business, not the lab's).
 An external ATC or trackside is off the lab's rails unless `rails: true` says it joins them itself
@@ -47,20 +49,38 @@ _ORIGIN = re.compile(r"https?://[^/\s:]+(:\d{1,5})?/?|https?://\[[0-9a-fA-F:]+\]
 _HOST_PORT_URL = re.compile(r"(rfc2217|socket)://([^/?]*)")  # pyserial URLs that name HOST:PORT
 
 
+LABGRID_PORT = 20408  # a labgrid coordinator's, when its address gives none
+
+
+@dataclass(frozen=True)
+class LabgridPlace:
+    """A shared real device's labgrid place: `lab up` acquires it through the `coordinator`
+    (HOST:PORT; None: labgrid's own default, LG_COORDINATOR or 127.0.0.1:20408) and opens its
+    exported serial port (`resource`: which one, when the place has several)."""
+
+    place: str
+    coordinator: str | None = None
+    resource: str | None = None
+
+
 @dataclass(frozen=True)
 class External:
     """A real device the lab does not run, reached through its link's tap: at `serial` (a device
-    path or pyserial URL: Type I) or at `address` (HOST:PORT: where a CTC serves, or where the tap
-    serves an IXL). `rails`: an ATC or trackside that joins the lab's rails itself."""
+    path or pyserial URL: Type I; for a `labgrid` place, its exported port once acquired) or at
+    `address` (HOST:PORT: where a CTC serves, or where the tap serves an IXL). `rails`: an ATC or
+    trackside that joins the lab's rails itself."""
 
     serial: str | None = None
     address: tuple[str, int] | None = None
     rails: bool = False
+    labgrid: LabgridPlace | None = None
 
     @property
     def endpoint(self) -> str:
         if self.address is not None:
             return f"tcp://{self.address[0]}:{self.address[1]}"
+        if self.serial is None and self.labgrid is not None:
+            return f"labgrid place {self.labgrid.place}"
         return str(self.serial)
 
 
@@ -482,9 +502,13 @@ def _check_lab(lab: Lab, fail: _Fail) -> None:
 
 
 class _SerialShape(Shape):
-    """An external Type I device (atc, trackside): where its serial port is."""
+    """An external Type I device (atc, trackside): where its serial port is, or the labgrid place
+    that exports it (`LabgridPlace`)."""
 
-    serial: str
+    serial: str | None = None
+    labgrid: str | None = None
+    coordinator: str | None = None  # with labgrid
+    resource: str | None = None  # with labgrid
     rails: bool = False  # it joins the lab's rails itself
 
 
@@ -510,10 +534,42 @@ def _external(raw: Any, kind: str, place: str, file: Path, fail: _Fail) -> Exter
         except UsageError as exc:
             raise fail(f"{place}.address", str(exc)) from None
     shape = convert(raw, _SerialShape, file, place)
+    if shape.serial is None and shape.labgrid is None:
+        raise fail(f"{place}.serial", f"missing key: the serial port ({_EXAMPLE['serial']}) or "
+                   f"the labgrid place that exports it (labgrid: {_EXAMPLE['labgrid']})")  # fmt: skip
+    if shape.serial is not None and shape.labgrid is not None:
+        raise fail(f"{place}.labgrid", "serial or labgrid, not both: a labgrid place's serial "
+                   "port is the one its exporter serves")  # fmt: skip
+    if shape.labgrid is not None:
+        return External(labgrid=_labgrid_place(shape, place, fail), rails=shape.rails)
+    for key in ("coordinator", "resource"):
+        if getattr(shape, key) is not None:
+            raise fail(f"{place}.{key}", "goes with a labgrid place (labgrid: PLACE)")
+    assert shape.serial is not None
     _text(shape.serial, f"{place}.serial", fail)
     return External(
         serial=_serial_url(shape.serial.strip(), f"{place}.serial", fail), rails=shape.rails
     )
+
+
+def _labgrid_place(shape: _SerialShape, place: str, fail: _Fail) -> LabgridPlace:
+    """`labgrid: PLACE` with its optional `coordinator` (HOST or HOST:PORT) and `resource`."""
+    assert shape.labgrid is not None
+    for key in ("labgrid", "coordinator", "resource"):
+        value = getattr(shape, key)
+        if value is not None and (not value.strip() or value.strip() != value or "\n" in value):
+            raise fail(f"{place}.{key}", f"must be a name without spaces around it, e.g. "
+                       f"{_EXAMPLE[key]}, not {excerpt(value)}")  # fmt: skip
+    coordinator = shape.coordinator
+    if coordinator is not None:
+        try:
+            host, port = parse_host_port(
+                coordinator if ":" in coordinator else f"{coordinator}:{LABGRID_PORT}"
+            )
+        except UsageError as exc:
+            raise fail(f"{place}.coordinator", str(exc)) from None
+        coordinator = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    return LabgridPlace(shape.labgrid, coordinator, shape.resource)
 
 
 def _text(value: str, place: str, fail: _Fail) -> None:
@@ -522,7 +578,8 @@ def _text(value: str, place: str, fail: _Fail) -> None:
         raise fail(place, f"must be text, e.g. {_EXAMPLE[key]}, not {excerpt(value)}")
 
 
-_EXAMPLE = {"serial": '"/dev/ttyUSB0" or "rfc2217://10.0.0.2:4000"', "address": '"10.0.0.5:6000"'}
+_EXAMPLE = {"serial": '"/dev/ttyUSB0" or "rfc2217://10.0.0.2:4000"', "address": '"10.0.0.5:6000"',
+            "labgrid": "atc18-rack2", "coordinator": '"10.0.0.9:20408"', "resource": "atc"}  # fmt: skip
 
 
 def _serial_url(text: str, place: str, fail: _Fail) -> str:
