@@ -66,13 +66,14 @@ _NO_PLACE = re.compile(r"place pattern \S+ matches nothing|place \S+ not found|m
 class PlaceHeld(PeerError):
     """A labgrid place someone else holds (`holder`: labgrid's HOST/USER of whoever acquired it)."""
 
-    def __init__(self, place: str, holder: str, where: str) -> None:
+    def __init__(self, place: str, holder: str, where: str, waited: float | None = None) -> None:
         self.place, self.holder = place, holder
-        super().__init__(
-            f"labgrid place {place} is held by {holder} (coordinator {where}); `lab up "
-            f"--wait-for-place` waits until it is released, or ask {holder} to release it "
-            f"(labgrid-client -p {place} release)"
-        )
+        if waited is None:
+            then = "`lab up --wait-for-place` waits until it is released, or ask"
+        else:
+            then = f"still, after waiting {waited:g} s (--place-timeout); ask"
+        super().__init__(f"labgrid place {place} is held by {holder} (coordinator {where}); "
+                         f"{then} {holder} to release it (labgrid-client -p {place} release)")  # fmt: skip
 
 
 class LabgridMissing(UsageError):
@@ -216,9 +217,7 @@ def keep(place: LabgridPlace, wait: float | None) -> int:
                 _say({"error": str(why), "holder": getattr(why, "holder", None)})
                 return 1
             if deadline is not None and time.monotonic() >= deadline:
-                _say(
-                    {"error": f"{why} (still held after waiting {wait:g} s)", "holder": why.holder}
-                )
+                _say({"error": str(why), "holder": why.holder, "waited": wait})
                 return 1
             if why.holder != told:
                 _say({"waiting": why.holder})
@@ -373,7 +372,7 @@ class Places:
                     raise LabgridMissing(str(said["error"]))
                 if said.get("holder"):
                     raise PlaceHeld(keeper.place.place, str(said["holder"]),
-                                    coordinator_of(keeper.place))  # fmt: skip
+                                    coordinator_of(keeper.place), said.get("waited"))  # fmt: skip
                 raise PeerError(str(said["error"]))
         if keeper.proc.stdin is None or keeper.proc.stdin.closed:
             return ""  # given up: the lab is stopping

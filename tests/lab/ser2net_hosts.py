@@ -1,8 +1,8 @@
 """Two hosts on one machine: a lab on one, an ATC behind Debian's `ser2net` (RFC 2217) on the other.
 
-Run by `test_ser2net.py` as `unshare --user --map-root-user --net --pid --fork --kill-child
---mount-proc python -m tests.lab.ser2net_hosts TMP` (no root needed where user namespaces are
-allowed). In there this process is the lab's host: a network namespace of its own (10.99.0.1) and
+Run by `test_ser2net.py` through `netns.run_driver` (`unshare --user --map-root-user --net --pid
+--fork --kill-child --mount-proc python -m tests.lab.ser2net_hosts TMP`: no root needed where
+user namespaces are allowed). In there this process is the lab's host: a network namespace of its own (10.99.0.1) and
 pid 1 of a pid namespace, so when it ends, however it ends, the kernel ends every process it
 started and both namespaces go with them. The device's host is a second network namespace
 (10.99.0.2), joined to the first by a veth pair. On it run the emulated ATC (its Type I line a pty)
@@ -15,74 +15,20 @@ Prints one JSON line of what it saw and exits 0, or prints why it failed and exi
 
 from __future__ import annotations
 
-import json
 import os
-import signal
-import socket
 import subprocess
-import sys
-import traceback
 from pathlib import Path
 from typing import Any
 
 from ktcs_bench.runtime import private_dir, read_token
 from tests.lab.conftest import request, start_lab, wait_until
+from tests.lab.netns import DEVICE_IP, LAB_IP, DeviceHost, driver_main, emulated_atc, reachable, sh
 
-LAB_IP, DEVICE_IP, SER2NET_PORT, RAILS_PORT = "10.99.0.1", "10.99.0.2", 4000, 7000
+SER2NET_PORT, RAILS_PORT = 4000, 7000
 LINE = Path(__file__).resolve().parents[2] / "emulators" / "lines" / "reference.yaml"
 # ser2net's serial device here is a pty, which has no modem lines: it cannot acknowledge DTR/RTS,
 # so pyserial is told not to wait for that (a real UART behind ser2net would acknowledge them)
 URL = f"rfc2217://{DEVICE_IP}:{SER2NET_PORT}?ign_set_control"
-
-
-def sh(*args: str) -> None:
-    done = subprocess.run(args, capture_output=True, text=True, timeout=30)
-    if done.returncode != 0:
-        raise RuntimeError(f"{' '.join(args)}: exit {done.returncode}: {done.stderr.strip()}")
-
-
-class DeviceHost:
-    """The second host: a network namespace held by a `sleep`, joined to ours by a veth pair."""
-
-    def __init__(self) -> None:
-        self.procs: list[subprocess.Popen[str]] = []
-        self.holder = self.spawn(["unshare", "--net", "--", "sleep", "infinity"], enter=False)
-        self.pid = self.holder.pid
-        sh("ip", "link", "set", "lo", "up")
-        sh("ip", "link", "add", "lab0", "type", "veth", "peer", "name", "dev0")
-        sh("ip", "link", "set", "dev0", "netns", str(self.pid))
-        sh("ip", "addr", "add", f"{LAB_IP}/24", "dev", "lab0")
-        sh("ip", "link", "set", "lab0", "up")
-        for cmd in (["ip", "addr", "add", f"{DEVICE_IP}/24", "dev", "dev0"],
-                    ["ip", "link", "set", "dev0", "up"], ["ip", "link", "set", "lo", "up"]):  # fmt: skip
-            sh(*self.inside(cmd))
-
-    def inside(self, argv: list[str]) -> list[str]:
-        return ["nsenter", "-t", str(self.pid), "-n", "--", *argv]
-
-    def spawn(self, argv: list[str], enter: bool = True, **kw: Any) -> subprocess.Popen[str]:
-        proc = subprocess.Popen(self.inside(argv) if enter else argv, text=True, **kw)
-        self.procs.append(proc)
-        return proc
-
-    def close(self) -> None:
-        for proc in reversed(self.procs):
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGTERM)
-        for proc in reversed(self.procs):
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-
-
-def reachable(host: str, port: int) -> bool:
-    try:
-        with socket.create_connection((host, port), timeout=1):
-            return True
-    except OSError:
-        return False
 
 
 def main(tmp: Path) -> dict[str, Any]:
@@ -92,14 +38,7 @@ def main(tmp: Path) -> dict[str, Any]:
     seen: dict[str, Any] = {}
     host = DeviceHost()
     try:
-        atc = host.spawn(
-            [sys.executable, "-m", "ktcs_bench.cli.main", "emulator", "atc", "--station", "18",
-             "--name", "atc18", "--link", "ixl=pty", "--control", f"{DEVICE_IP}:0",
-             "--link", f"rails=tcp://{LAB_IP}:{RAILS_PORT}", "--token-file", str(token)],
-            stdout=subprocess.PIPE, stderr=open(tmp / "atc.log", "w"),  # noqa: SIM115
-        )  # fmt: skip
-        assert atc.stdout is not None
-        ready = json.loads(atc.stdout.readline())
+        ready = emulated_atc(host, tmp, token, f"{LAB_IP}:{RAILS_PORT}")[1]
         pty = ready["ptys"]["ixl"]
         conf = tmp / "ser2net.yaml"  # ser2net reads only files named *.yaml
         conf.write_text(
@@ -185,9 +124,4 @@ def main(tmp: Path) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    try:
-        print(json.dumps(main(Path(sys.argv[1]))), flush=True)
-    except BaseException:  # noqa: BLE001 - reported to the test, which fails with it
-        traceback.print_exc()
-        sys.exit(1)
-    sys.exit(0)
+    driver_main(main)

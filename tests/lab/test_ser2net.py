@@ -8,55 +8,15 @@ set-up (`.ci/system-deps`), and a machine that refuses the namespaces fails here
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
-import signal
-import subprocess
-import sys
 from pathlib import Path
 
-import pytest
+from tests.lab.netns import require_namespaces, run_driver
 
-ROOT = Path(__file__).resolve().parents[2]
-# a user namespace (root inside, no privilege outside), a network namespace (the lab's host) and
-# a pid namespace whose pid 1 is the driver: when it ends, the kernel ends all it started
-UNSHARE = ["unshare", "--user", "--map-root-user", "--net", "--pid", "--fork", "--kill-child",
-           "--mount-proc"]  # fmt: skip
 TIMEOUT = 300.0
 
 
 def test_a_type1_device_behind_ser2net_on_another_host(tmp_path: Path) -> None:
-    missing = [tool for tool in ("ser2net", "unshare", "nsenter", "ip") if not shutil.which(tool)]
-    if missing:
-        pytest.fail(f"{', '.join(missing)} not installed: `make setup` installs them "
-                    "(.ci/system-deps, as root); this test needs them and is not skipped")  # fmt: skip
-    probe = subprocess.run([*UNSHARE, "ip", "link", "add", "p0", "type", "veth", "peer", "p1"],
-                           capture_output=True, text=True, timeout=30)  # fmt: skip
-    if probe.returncode != 0:
-        pytest.fail(
-            "this machine refuses the namespaces the test stands two hosts up in "
-            f"({' '.join(UNSHARE)} ...: {probe.stderr.strip()}). They need user namespaces "
-            "(sysctl kernel.unprivileged_userns_clone=1; on Ubuntu 24.04 also "
-            "kernel.apparmor_restrict_unprivileged_userns=0), or root outside a container "
-            "that filters unshare(2)"
-        )
-    proc = subprocess.Popen(
-        [*UNSHARE, sys.executable, "-m", "tests.lab.ser2net_hosts", str(tmp_path)],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        start_new_session=True,
-    )  # fmt: skip
-    try:
-        out, err = proc.communicate(timeout=TIMEOUT)
-    finally:
-        if proc.poll() is None:  # --kill-child: unshare's end takes the driver and all it started
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
-    logs = "".join(
-        f"\n--- {p.name}\n{p.read_text(errors='replace')[-3000:]}"
-        for p in sorted(tmp_path.glob("*.log")) + sorted(tmp_path.glob("*.stderr"))
-    )
-    assert proc.returncode == 0, f"exit {proc.returncode}\n{err[-6000:]}{logs}"
-    seen = json.loads(out.strip().splitlines()[-1])
+    require_namespaces(("ser2net",))
+    seen = run_driver("tests.lab.ser2net_hosts", tmp_path, TIMEOUT)
     assert seen["alive"] and seen["after_outage"]["atc18"]["open"], seen
     assert seen["code_TC1853A"][1] > seen["code_TC1853A"][0], seen

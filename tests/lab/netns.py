@@ -1,0 +1,159 @@
+"""Two hosts on one machine, for the tests of devices on another host (`test_ser2net.py`,
+`test_labgrid.py`): Linux namespaces made without root where user namespaces are allowed.
+
+A test runs its driver module as `UNSHARE python -m tests.lab.DRIVER TMP` (`run_driver`): in
+there the driver is the lab's host -- a network namespace of its own (`LAB_IP`) and pid 1 of a pid
+namespace, so when it ends, however it ends, the kernel ends every process it started and the
+namespaces go with them. `DeviceHost` is the second host, a network namespace (`DEVICE_IP`)
+joined to the first by a veth pair. The driver prints one JSON line of what it saw and exits 0,
+or prints why it failed and exits 1 (`driver_main`).
+
+These tests are never skipped: the tools are part of the set-up (`.ci/system-deps`, `make
+setup`), and a machine that lacks them or refuses the namespaces fails, saying so
+(`require_namespaces`)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+LAB_IP, DEVICE_IP = "10.99.0.1", "10.99.0.2"
+# a user namespace (root inside, no privilege outside), a network namespace (the lab's host) and
+# a pid namespace whose pid 1 is the driver: when it ends, the kernel ends all it started
+UNSHARE = ["unshare", "--user", "--map-root-user", "--net", "--pid", "--fork", "--kill-child",
+           "--mount-proc"]  # fmt: skip
+
+
+def require_namespaces(tools: tuple[str, ...] = ()) -> None:
+    """Fail (never skip) when a tool the test needs is missing or the machine refuses the
+    namespaces: `make setup` installs the tools, CI runs as root."""
+    needed = ("unshare", "nsenter", "ip", *tools)
+    missing = [tool for tool in needed if not shutil.which(tool)]
+    if missing:
+        pytest.fail(f"{', '.join(missing)} not installed: `make setup` installs them "
+                    "(.ci/system-deps and the venv's extras); this test needs them and is not "
+                    "skipped")  # fmt: skip
+    probe = subprocess.run([*UNSHARE, "ip", "link", "add", "p0", "type", "veth", "peer", "p1"],
+                           capture_output=True, text=True, timeout=30)  # fmt: skip
+    if probe.returncode != 0:
+        pytest.fail(
+            "this machine refuses the namespaces the test stands two hosts up in "
+            f"({' '.join(UNSHARE)} ...: {probe.stderr.strip()}). They need user namespaces "
+            "(sysctl kernel.unprivileged_userns_clone=1; on Ubuntu 24.04 also "
+            "kernel.apparmor_restrict_unprivileged_userns=0), or root outside a container "
+            "that filters unshare(2)"
+        )
+
+
+def run_driver(module: str, tmp: Path, timeout: float) -> dict[str, Any]:
+    """Run `python -m module TMP` as the lab's host in its namespaces; what it saw (its last JSON
+    line). A failure shows its stderr and the logs it left in TMP."""
+    proc = subprocess.Popen(
+        [*UNSHARE, sys.executable, "-m", module, str(tmp)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:  # --kill-child: unshare's end takes the driver and all it started
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    logs = "".join(
+        f"\n--- {p.name}\n{p.read_text(errors='replace')[-3000:]}"
+        for p in sorted(tmp.glob("*.log")) + sorted(tmp.glob("*.stderr"))
+    )
+    assert proc.returncode == 0, f"exit {proc.returncode}\n{err[-6000:]}{logs}"
+    return json.loads(out.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def driver_main(main: Callable[[Path], dict[str, Any]]) -> None:
+    """A driver's `__main__`: one JSON line of what `main(TMP)` saw and exit 0, or its traceback
+    and exit 1."""
+    try:
+        print(json.dumps(main(Path(sys.argv[1]))), flush=True)
+    except BaseException:  # noqa: BLE001 - reported to the test, which fails with it
+        traceback.print_exc()
+        sys.exit(1)
+    sys.exit(0)
+
+
+def sh(*args: str, env: dict[str, str] | None = None) -> str:
+    """Run a command; its stdout, or RuntimeError with its stderr."""
+    done = subprocess.run(args, capture_output=True, text=True, timeout=60,
+                          env=None if env is None else {**os.environ, **env})  # fmt: skip
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(args)}: exit {done.returncode}: {done.stderr.strip()}")
+    return done.stdout
+
+
+class DeviceHost:
+    """The second host: a network namespace held by a `sleep`, joined to ours by a veth pair."""
+
+    def __init__(self, lab_ip: str = LAB_IP, device_ip: str = DEVICE_IP) -> None:
+        self.procs: list[subprocess.Popen[str]] = []
+        self.holder = self.spawn(["unshare", "--net", "--", "sleep", "infinity"], enter=False)
+        self.pid = self.holder.pid
+        sh("ip", "link", "set", "lo", "up")
+        sh("ip", "link", "add", "lab0", "type", "veth", "peer", "name", "dev0")
+        sh("ip", "link", "set", "dev0", "netns", str(self.pid))
+        sh("ip", "addr", "add", f"{lab_ip}/24", "dev", "lab0")
+        sh("ip", "link", "set", "lab0", "up")
+        for cmd in (["ip", "addr", "add", f"{device_ip}/24", "dev", "dev0"],
+                    ["ip", "link", "set", "dev0", "up"], ["ip", "link", "set", "lo", "up"]):  # fmt: skip
+            sh(*self.inside(cmd))
+
+    def inside(self, argv: list[str]) -> list[str]:
+        return ["nsenter", "-t", str(self.pid), "-n", "--", *argv]
+
+    def spawn(self, argv: list[str], enter: bool = True, **kw: Any) -> subprocess.Popen[str]:
+        proc = subprocess.Popen(self.inside(argv) if enter else argv, text=True, **kw)
+        self.procs.append(proc)
+        return proc
+
+    def close(self) -> None:
+        for proc in reversed(self.procs):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        for proc in reversed(self.procs):
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def reachable(host: str, port: int) -> bool:
+    try:
+        with socket.create_connection((host, port), timeout=1):
+            return True
+    except OSError:
+        return False
+
+
+def emulated_atc(
+    host: DeviceHost, tmp: Path, token: Path, rails: str, station: int = 18
+) -> tuple[subprocess.Popen[str], dict[str, Any]]:
+    """Station `station`'s emulated ATC on the device's host: its Type I line a pty, on the lab's
+    rails at `rails` (HOST:PORT), its control port on the device's address; and its ready line
+    (`ptys`, `control`)."""
+    atc = host.spawn(
+        [sys.executable, "-m", "ktcs_bench.cli.main", "emulator", "atc", "--station", str(station),
+         "--name", f"atc{station}", "--link", "ixl=pty", "--control", f"{DEVICE_IP}:0",
+         "--link", f"rails=tcp://{rails}", "--token-file", str(token)],
+        stdout=subprocess.PIPE, stderr=open(tmp / "atc.log", "w"),  # noqa: SIM115
+    )  # fmt: skip
+    assert atc.stdout is not None
+    return atc, json.loads(atc.stdout.readline())
