@@ -17,6 +17,7 @@ place `atc18` is made with `labgrid-client create` / `add-match`, and the lab fi
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -141,17 +142,29 @@ def main(tmp: Path) -> dict[str, Any]:
         seen["held"] = held.stderr.strip().splitlines()[-1]
 
         # --wait-for-place: it waits, she releases, it comes up with the place
+        failed: list[BaseException] = []
+
         def release_when_waiting() -> None:
             said = tmp / f"{name}.stderr"
-            wait_until("lab up waiting for the place", lambda: said.is_file() and
-                       "held by bench2/alice; waiting" in said.read_text())  # fmt: skip
-            assert holder() == "bench2/alice"  # still hers while lab up waits
-            must(labgrid("-p", PLACE, "release", who=ALICE))
+            try:
+                wait_until("lab up waiting for the place", lambda: said.is_file() and
+                           "held by bench2/alice; waiting" in said.read_text())  # fmt: skip
+                assert holder() == "bench2/alice"  # still hers while lab up waits
+                must(labgrid("-p", PLACE, "release", who=ALICE))
+            except BaseException as exc:  # noqa: BLE001 - raised in the driver's thread below
+                failed.append(exc)
 
         releaser = threading.Thread(target=release_when_waiting)
         releaser.start()
-        with start_lab(tmp, name, path=lab_file, up_args=("--wait-for-place",)) as lab:
-            releaser.join()
+        # a release that never came: lab up gives up after --place-timeout, and the test says why
+        up_args = ("--wait-for-place", "--place-timeout", "60")
+        with contextlib.ExitStack() as stack:
+            try:
+                lab = stack.enter_context(start_lab(tmp, name, path=lab_file, up_args=up_args))
+            finally:
+                releaser.join()
+                if failed:
+                    raise failed[0]
             assert holder() == "labhost/engineer"
             end = lab.links["st18-atc"]["b_end"]
             assert re.fullmatch(rf"rfc2217://{re.escape(DEVICE_IP)}:\d+\?ign_set_control", end), end
@@ -159,7 +172,7 @@ def main(tmp: Path) -> dict[str, Any]:
                 "test", "run", "--live", name, str(procedure), "--no-colour", timeout=120
             )
             assert done.returncode == 0, done.stdout + done.stderr
-            seen["procedure"] = done.stdout.strip().splitlines()[-1]
+            seen["procedure"] = done.stdout
             down = lab.cli("lab", "down", name)
             assert down.returncode == 0, down.stderr
             assert holder() is None, "lab down returned with the place still held"

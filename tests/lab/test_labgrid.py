@@ -37,7 +37,10 @@ def test_a_shared_atc_reserved_through_labgrid_on_another_host(tmp_path: Path) -
     require_namespaces(("ser2net",))
     seen = run_driver("tests.lab.labgrid_hosts", tmp_path, TIMEOUT)
     assert "held by bench2/alice" in seen["held"], seen
-    assert seen["procedure"].startswith("1 of 1 procedures passed"), seen
+    report = seen["procedure"]
+    assert report.startswith("PASS  labgrid-atc18"), report
+    frames = [ln for ln in report.splitlines() if "frame st18-atc" in ln]  # both ways, via labgrid
+    assert len(frames) == 2 and all(" pass " in ln for ln in frames), report
     assert seen["after_down"] is None and seen["after_sigint"] is None, seen
     assert seen["after_sigkill"] is None, seen
 
