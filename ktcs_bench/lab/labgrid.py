@@ -43,7 +43,7 @@ import yaml
 from ktcs_bench.errors import PeerError, UsageError
 
 if TYPE_CHECKING:
-    from ktcs_bench.lab.topology import Lab, LabgridPlace
+    from ktcs_bench.lab.topology import Lab
 
 CLIENT = "labgrid-client"
 CLIENT_TIMEOUT = 60.0
@@ -61,6 +61,22 @@ _HELD_BY_US = re.compile(
 )
 _UNREACHABLE = ("Could not connect to coordinator", "coordinator is unavailable")
 _NO_PLACE = re.compile(r"place pattern \S+ matches nothing|place \S+ not found|matches nothing")
+
+
+LABGRID_PORT = 20408
+"""A labgrid coordinator's port, when its address gives none (labgrid's own default)."""
+
+
+@dataclass(frozen=True)
+class LabgridPlace:
+    """A lab file's `external: {labgrid: PLACE, coordinator: HOST:PORT, resource: NAME}`: the
+    place `lab up` acquires through the `coordinator` (None: labgrid's own default,
+    LG_COORDINATOR or 127.0.0.1:20408) and whose exported serial port it opens (`resource`: which
+    one, when the place has several)."""
+
+    place: str
+    coordinator: str | None = None
+    resource: str | None = None
 
 
 class PlaceHeld(PeerError):
@@ -112,11 +128,10 @@ def failure(place: LabgridPlace, stderr: str, what: str) -> PeerError:
     if held:
         return PlaceHeld(place.place, held.group("holder"), where)
     ours = _HELD_BY_US.search(stderr)
-    if ours:
-        holder = (
-            f"{ours.group('host') or 'this host'} as this user (another lab or labgrid session)"
-        )
-        return PlaceHeld(place.place, holder, where)
+    if ours:  # the same host and user: another lab up, or the engineer's own acquire
+        host = f" on {ours.group('host')}" if ours.group("host") else ""
+        return PlaceHeld(place.place, f"you{host} (another lab up, or a labgrid-client acquire)",
+                         where)  # fmt: skip
     if any(words in stderr for words in _UNREACHABLE):
         return PeerError(f"labgrid coordinator {where} cannot be reached (place {place.place}): "
                          "is labgrid-coordinator running there? (lab file: external.coordinator, "
@@ -142,7 +157,7 @@ def serial_url(env_text: str, place: LabgridPlace) -> str | None:
     except (yaml.YAMLError, TypeError, KeyError, AttributeError, StopIteration):
         raise PeerError(f"labgrid place {place.place}: labgrid-client env gave no environment "
                         f"to read ({env_text[:200]!r})") from None  # fmt: skip
-    ports: list[tuple[str, dict[str, Any]]] = []
+    ports: list[tuple[str, dict[str, object]]] = []
     for entry in resources:
         if isinstance(entry, dict) and isinstance(entry.get("NetworkSerialPort"), dict):
             args = entry["NetworkSerialPort"]
@@ -168,7 +183,7 @@ def serial_url(env_text: str, place: LabgridPlace) -> str | None:
 # -- the keeper: one process per place, holding it for as long as lab up lives ------------------
 
 
-def _say(obj: dict[str, Any]) -> None:
+def _say(obj: dict[str, object]) -> None:
     """One JSON line to lab up (gone already: nothing to tell, the place is released anyway)."""
     try:
         print(json.dumps(obj), flush=True)
@@ -267,8 +282,6 @@ def _release(place: LabgridPlace) -> None:
 def main(argv: list[str] | None = None) -> int:
     """`python -m ktcs_bench.lab.labgrid keep --place P [--coordinator C] [--resource R]
     [--wait SECONDS|inf]`: the keeper `Places` starts."""
-    from ktcs_bench.lab.topology import LabgridPlace
-
     parser = argparse.ArgumentParser(prog="python -m ktcs_bench.lab.labgrid")
     parser.add_argument("action", choices=["keep"])
     parser.add_argument("--place", required=True)
@@ -361,7 +374,10 @@ class Places:
         wait as long as someone else holds the place)."""
         assert keeper.proc.stdout is not None
         for line in keeper.proc.stdout:
-            said = json.loads(line)
+            try:
+                said = json.loads(line)
+            except ValueError:
+                continue  # not the keeper's word (it says all it has to say as JSON)
             if "waiting" in said:
                 self.say(f"lab: {keeper.device}'s labgrid place {keeper.place.place} is held by "
                          f"{said['waiting']}; waiting until it is released (Ctrl-C gives up)")  # fmt: skip

@@ -39,6 +39,7 @@ import serial
 from ktcs_bench import kinds
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
+from ktcs_bench.lab.labgrid import LABGRID_PORT, LabgridPlace
 from ktcs_bench.schema import Shape, convert, located
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
@@ -47,20 +48,6 @@ from ktcs_bench.transport.endpoints import check_port, parse_endpoint, parse_hos
 
 _ORIGIN = re.compile(r"https?://[^/\s:]+(:\d{1,5})?/?|https?://\[[0-9a-fA-F:]+\](:\d{1,5})?/?")
 _HOST_PORT_URL = re.compile(r"(rfc2217|socket)://([^/?]*)")  # pyserial URLs that name HOST:PORT
-
-
-LABGRID_PORT = 20408  # a labgrid coordinator's, when its address gives none
-
-
-@dataclass(frozen=True)
-class LabgridPlace:
-    """A shared real device's labgrid place: `lab up` acquires it through the `coordinator`
-    (HOST:PORT; None: labgrid's own default, LG_COORDINATOR or 127.0.0.1:20408) and opens its
-    exported serial port (`resource`: which one, when the place has several)."""
-
-    place: str
-    coordinator: str | None = None
-    resource: str | None = None
 
 
 @dataclass(frozen=True)
@@ -79,8 +66,9 @@ class External:
     def endpoint(self) -> str:
         if self.address is not None:
             return f"tcp://{self.address[0]}:{self.address[1]}"
-        if self.serial is None and self.labgrid is not None:
-            return f"labgrid place {self.labgrid.place}"
+        if self.labgrid is not None:  # its exported port, once lab up has acquired it
+            place = f"labgrid place {self.labgrid.place}"
+            return place if self.serial is None else f"{self.serial} ({place})"
         return str(self.serial)
 
 
@@ -579,7 +567,7 @@ def _text(value: str, place: str, fail: _Fail) -> None:
 
 
 _EXAMPLE = {"serial": '"/dev/ttyUSB0" or "rfc2217://10.0.0.2:4000"', "address": '"10.0.0.5:6000"',
-            "labgrid": "atc18-rack2", "coordinator": '"10.0.0.9:20408"', "resource": "atc"}  # fmt: skip
+            "labgrid": "atc18-rack2", "coordinator": '"10.0.0.9:20408"', "resource": "serial0"}  # fmt: skip
 
 
 def _serial_url(text: str, place: str, fail: _Fail) -> str:

@@ -8,7 +8,8 @@ place `atc18` is made with `labgrid-client create` / `add-match`, and the lab fi
 `external: {labgrid: atc18, coordinator: ...}`. Then, each time from a real `lab up`:
 
 - the place held by another user (alice on bench2): `lab up` exits 3 naming her; with
-  `--wait-for-place --place-timeout` it gives up the same way after waiting;
+  `--wait-for-place --place-timeout` it gives up the same way after waiting; Ctrl-C while it
+  waits ends it (exit 130), her reservation untouched;
 - with `--wait-for-place` it waits, says so, and comes up when she releases it; a procedure runs
   against the lab, its route through the ATC reached through labgrid; `lab down` releases the place;
 - Ctrl-C (SIGINT) of `lab up` releases it; SIGKILL of `lab up`'s whole process group releases it
@@ -138,6 +139,16 @@ def main(tmp: Path) -> dict[str, Any]:
         timed_out = lab_up(lab_file, "--wait-for-place", "--place-timeout", "1")
         assert timed_out.returncode == 3, (timed_out.returncode, timed_out.stderr)
         assert "waiting" in timed_out.stderr and "held by bench2/alice" in timed_out.stderr
+        # Ctrl-C while it waits: it gives up at once (exit 130), her place untouched
+        said = tmp / "waiting.stderr"
+        with open(said, "w") as err:
+            waiting = subprocess.Popen(
+                [sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(lab_file),
+                 "--wait-for-place"], stdout=subprocess.DEVNULL, stderr=err,
+            )  # fmt: skip
+        wait_until("lab up waiting for her place", lambda: "; waiting" in said.read_text())
+        waiting.send_signal(signal.SIGINT)
+        assert waiting.wait(30) == 130, said.read_text()
         assert holder() == "bench2/alice"
         seen["held"] = held.stderr.strip().splitlines()[-1]
 
