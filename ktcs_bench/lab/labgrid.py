@@ -154,7 +154,10 @@ def serial_url(env_text: str, place: LabgridPlace) -> str | None:
         targets = env["targets"]
         target = targets.get(place.place) or next(iter(targets.values()))
         resources = target.get("resources") or []
-    except (yaml.YAMLError, TypeError, KeyError, AttributeError, StopIteration):
+        if not isinstance(resources, list):
+            raise TypeError("resources is not a list")
+    except (yaml.YAMLError, ValueError, TypeError, LookupError, AttributeError, StopIteration,
+            RecursionError):  # fmt: skip
         raise PeerError(f"labgrid place {place.place}: labgrid-client env gave no environment "
                         f"to read ({env_text[:200]!r})") from None  # fmt: skip
     ports: list[tuple[str, dict[str, object]]] = []

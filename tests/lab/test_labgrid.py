@@ -14,6 +14,9 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ktcs_bench.errors import ConfigError, PeerError
 from ktcs_bench.lab.labgrid import LabgridPlace, PlaceHeld, failure, serial_url
@@ -114,6 +117,50 @@ def test_the_acquired_places_serial_port_is_read_from_labgrid_env() -> None:
     )
     with pytest.raises(PeerError, match="no environment"):
         serial_url("labgrid-client: nothing", place)
+
+
+YAML_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.text(max_size=12),
+    lambda inner: (
+        st.lists(inner, max_size=3)
+        | st.dictionaries(
+            st.sampled_from(
+                [
+                    "targets",
+                    "atc18",
+                    "resources",
+                    "NetworkSerialPort",
+                    "name",
+                    "host",
+                    "port",
+                    "protocol",
+                    "x",
+                ]
+            ),
+            inner,
+            max_size=4,
+        )
+    ),  # fmt: skip
+    max_leaves=12,
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.text(max_size=80), YAML_VALUES.map(yaml.safe_dump)))
+def test_whatever_labgrid_env_prints_is_a_url_nothing_yet_or_a_peer_error(text: str) -> None:
+    """labgrid-client's output is another program's: any text, or any YAML shaped near an
+    environment, gives a URL, None (not served yet) or one PeerError -- never a traceback."""
+    try:
+        url = serial_url(text, LabgridPlace("atc18"))
+    except PeerError:
+        return
+    assert url is None or url.startswith(("rfc2217://", "socket://"))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(max_size=200))
+def test_whatever_labgrid_client_says_on_failure_is_one_peer_error(stderr: str) -> None:
+    assert isinstance(failure(LabgridPlace("atc18"), stderr, "acquire"), PeerError)
 
 
 def test_labgrids_refusals_become_typed_errors_naming_place_and_holder() -> None:
