@@ -482,7 +482,7 @@ class LabRunner:
         self.notices += await asyncio.to_thread(clean_up_after, self.lab.name)
         private_dir(self.dir / "logs")
         private_dir(self.dir / "captures")
-        self.token, self.token_file = server_token(self.dir / "token")
+        self.token, self.token_file = server_token(self.token_file or self.dir / "token")
         self._write_state()  # from now on, whatever kills this lab, the next one can clean up
         # the group processes need nothing of the others: they start beside the first step
         groups = {g for n in self.lab.devices if (g := self.group_of(n)) is not None}

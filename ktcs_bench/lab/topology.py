@@ -37,6 +37,7 @@ import serial
 from ktcs_bench import kinds
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
+from ktcs_bench.lab.hosts import HostSpec, device_address, parse_hosts
 from ktcs_bench.schema import Shape, convert, located
 from ktcs_bench.station.loader import load_line
 from ktcs_bench.station.model import Line
@@ -116,6 +117,7 @@ class Lab:
     ixl_mode: str = "center"
     timetable_file: Path | None = None  # the lab's one timetable: its trains, ARS's routes
     ars: ArsSpec | None = None  # None: no `ars:` section, the operator sets every route
+    hosts: dict[str, HostSpec] = field(default_factory=dict)  # `hosts:` (lab.hosts): spread labs
 
     def of_kind(self, kind: str) -> list[DeviceSpec]:
         return [d for d in self.devices.values() if d.kind == kind]
@@ -203,6 +205,7 @@ class _LabShape(Shape):
     type1: Any = None
     type2: Any = None
     console: Any = None
+    hosts: Any = None
 
 
 _SECTIONS = ("type1", "type2", "console")
@@ -224,6 +227,11 @@ def load_lab(path: str | Path | None = None) -> Lab:
     if not line_file.is_file():
         raise fail("line", f"no such line file: {line_file}")
     devices = _devices(top.devices, file, fail)
+    hosts = parse_hosts(top.hosts, file, fail)
+    for name, raw_device in top.devices.items():  # `host:` names one of `hosts:` (lab.hosts)
+        address = device_address(raw_device.get("host"), hosts, f"devices.{name}.host", fail)
+        if address is not None:
+            devices[str(name)] = replace(devices[str(name)], host=address)
     links = _links(top.links, devices, file, fail)
     t1 = convert(top.type1 or {}, _Type1Shape, file, "type1")
     t2 = convert(top.type2 or {}, _Type2Shape, file, "type2")
@@ -257,6 +265,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         console_origins=tuple(origins),
         ixl_mode=mode,
         timetable_file=timetable_file,
+        hosts=hosts,
     )
     _check_lab(lab, fail)
     lab = replace(lab, links=_neighbour_links(lab, fail))
