@@ -166,9 +166,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(status))
     else:
+        from ktcs_bench.lab.multihost import host_lines
         from ktcs_bench.lab.view import station_lines
 
-        print("\n".join([*station_lines(status, args.colour), *process_lines(status)]))
+        lines = [*station_lines(status, args.colour), *process_lines(status), *host_lines(status)]
+        print("\n".join(lines))
     return 0
 
 

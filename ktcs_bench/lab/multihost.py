@@ -322,7 +322,15 @@ class HostRunner(LabRunner):
 
     def part_map(self) -> list[LinkEntry]:
         """This host's link map, each row with its host; its RFC 2217 servers as rows too."""
-        rows: list[LinkEntry] = [{**e, "host": self.here} for e in self.link_map()]
+        rows: list[LinkEntry] = []
+        for entry in self.link_map():
+            row: LinkEntry = {**entry, "host": self.here}
+            real = [n for n in entry.get("external", []) if self.whole.devices[n].external]
+            if real:  # a device on another host is not external: it is the lab's, over there
+                row["external"] = real
+            else:
+                row.pop("external", None)
+            rows.append(row)
         for name, server in self.servers.items():
             lk = next(lk for lk in self.whole.links if lk.name == name)
             rows.append({"link": f"{name} rfc2217", "type": "rfc2217", "a": lk.b,
@@ -340,6 +348,24 @@ class HostRunner(LabRunner):
                       "a_end": f"(not reached: {answer.get('error')})"}
                      for lk in self.whole.links if self.place.tap_host(lk) == host]  # fmt: skip
         return rows
+
+
+def host_lines(status: dict[str, Any]) -> list[str]:
+    """The hosts of a spread lab's status (`lab status`), each reached or not, with its
+    devices; nothing for a lab on one machine."""
+    hosts = status.get("hosts")
+    if not isinstance(hosts, dict):
+        return []
+    out = ["hosts:"]
+    for name, host in hosts.items():
+        devices = [n for n, d in (status.get("devices") or {}).items() if d.get("host") == name]
+        state = "reached" if host.get("reached") else f"NOT REACHED ({host.get('error')})"
+        alive = [n if d.get("alive") else f"{n}(down)" for n in devices
+                 for d in [status["devices"][n]]]  # fmt: skip
+        out.append(f"  {name} {host.get('address')}: {state}; {' '.join(alive)}")
+    down = [n for n, lk in (status.get("links") or {}).items() if not lk.get("up")]
+    out.append(f"links down: {' '.join(down)}" if down else "every link up")
+    return out
 
 
 def host_runner(

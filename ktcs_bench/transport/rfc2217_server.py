@@ -29,6 +29,7 @@ REOPEN = 0.5  # s between attempts to open the line when it is not there (the de
 READ_TIMEOUT = 0.2  # s a read of the line waits, so the server notices stop and a new path
 ACCEPT_TIMEOUT = 0.5  # s, how long an accept waits before it checks for stop
 WRITE_TIMEOUT = 2.0  # s a write to the line may block (a device that stopped reading)
+SEND_TIMEOUT = 5.0  # s a send to the client may block before the client is dropped
 
 
 class PtyLine(serial.Serial):
@@ -102,6 +103,18 @@ class _Client:
             self.sock.close()
 
 
+def _tune(sock: socket.socket) -> None:
+    """A client's socket: no Nagle delay (a Type I frame is small and timed); a send that
+    cannot go on for SEND_TIMEOUT fails (a client whose network is cut is dropped, and connects
+    again when it is back); keepalive probes find a client that vanished while nothing flowed."""
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    sock.settimeout(SEND_TIMEOUT)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+    for option, value in (("TCP_KEEPIDLE", 5), ("TCP_KEEPINTVL", 2), ("TCP_KEEPCNT", 3)):
+        if hasattr(socket, option):
+            sock.setsockopt(socket.IPPROTO_TCP, getattr(socket, option), value)
+
+
 class Rfc2217Server:
     """Serve the serial line at `path()` over RFC 2217 on `listen` (HOST, PORT).
 
@@ -134,6 +147,7 @@ class Rfc2217Server:
             raise
         sock.settimeout(ACCEPT_TIMEOUT)
         self._sock = sock
+        self.listen = sock.getsockname()[:2]  # the port bound, when 0 asked for any free one
         for target in (self._accept_main, self._line_main):
             thread = threading.Thread(target=target, name=f"{self.name}-{target.__name__}",
                                       daemon=True)  # fmt: skip
@@ -168,8 +182,7 @@ class Rfc2217Server:
                 continue
             except OSError:
                 return  # closed by stop
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+            _tune(sock)
             old = self.client
             try:
                 client = _Client(sock, f"{addr[0]}:{addr[1]}", self.line)
@@ -189,6 +202,8 @@ class Rfc2217Server:
         while not self._stop.is_set():
             try:
                 data = client.sock.recv(4096)
+            except TimeoutError:
+                continue
             except OSError:
                 break
             if not data:
