@@ -37,7 +37,7 @@ import os
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from ktcs_bench import kinds
 from ktcs_bench.errors import KtcsError, UsageError
@@ -177,6 +177,26 @@ class Placement:
         )
 
 
+class HostState(TypedDict):
+    """A host in a spread lab's status: its address and ports, and whether its runner answered
+    (`error`: why not)."""
+
+    address: str
+    ports: dict[str, int]
+    reached: bool
+    error: str | None
+
+
+class LinkState(TypedDict):
+    """A link in a spread lab's status: the host that runs its tap, its ends, up or not."""
+
+    host: str
+    type: str
+    a: str
+    b: str
+    up: bool
+
+
 @dataclass
 class HostRunner(LabRunner):
     """The lab runner of one host of a spread lab: `lab` is that host's view
@@ -256,9 +276,7 @@ class HostRunner(LabRunner):
                 return await self._ask(owner, dict(obj), timeout=60.0)
         return await lab_command(self, obj)
 
-    async def _ask(
-        self, host: str, obj: dict[str, Any], timeout: float = PART_TIMEOUT
-    ) -> dict[str, Any]:
+    async def _ask(self, host: str, obj: JsonObject, timeout: float = PART_TIMEOUT) -> JsonObject:
         """A command to host `host`'s runner; {"ok": False, "error": ...} when it does not
         answer (its network cut, its part not up)."""
         spec = self.place.host(host)
@@ -270,24 +288,26 @@ class HostRunner(LabRunner):
             return {"ok": False, "error": f"host {host} ({spec.address}:{spec.control}): {why}"}
         return dict(answer)
 
-    async def _ask_others(self, obj: dict[str, Any]) -> dict[str, Any]:
+    async def _ask_others(self, obj: JsonObject) -> dict[str, JsonObject]:
         others = [h for h in self.whole.hosts if h != self.here]
         answers = await asyncio.gather(*(self._ask(h, obj) for h in others))
         return dict(zip(others, answers, strict=True))
 
-    async def part_status(self) -> dict[str, Any]:
+    async def part_status(self) -> JsonObject:
         """This host's part: its devices, and the links whose tap runs here, each up or not."""
         base = await LabRunner.status(self)
         mine = set(self.place.devices_on(self.here))
         statuses = {n: e.get("status") for n, e in base["devices"].items()}
+        links: dict[str, LinkState] = {
+            lk.name: {"host": self.here, "type": lk.type, "a": lk.a, "b": lk.b,
+                      "up": self._link_up(lk, statuses, base["taps"])}
+            for lk in self.lab.links
+        }  # fmt: skip
         return {
             "lab": self.whole.name, "host": self.here, "stations": base["stations"],
             "devices": {n: {**e, "host": self.here} for n, e in base["devices"].items()
                         if n in mine},
-            "taps": base["taps"],
-            "links": {lk.name: {"host": self.here, "type": lk.type, "a": lk.a, "b": lk.b,
-                                "up": self._link_up(lk, statuses, base["taps"])}
-                      for lk in self.lab.links},
+            "taps": base["taps"], "links": links,
             "servers": {n: s.status() for n, s in self.servers.items()},
         }  # fmt: skip
 
@@ -296,29 +316,36 @@ class HostRunner(LabRunner):
         own, others = await asyncio.gather(
             self.part_status(), self._ask_others({"cmd": "status", "part": True})
         )
-        parts = {self.here: {"ok": True, "status": own}, **others}
-        out: dict[str, Any] = {"lab": self.whole.name, "host": self.here, "stations": {},
-                               "devices": {}, "taps": {}, "links": {}, "hosts": {}}  # fmt: skip
+        parts: dict[str, JsonObject] = {self.here: {"ok": True, "status": own}, **others}
+        hosts: dict[str, HostState] = {}
+        stations: object = {}
+        devices: JsonObject = {}
+        taps: JsonObject = {}
+        links: JsonObject = {}
         for host, answer in parts.items():
-            spec, part = self.whole.hosts[host], answer.get("status")
+            part = answer.get("status")
             reached = bool(answer.get("ok")) and isinstance(part, dict)
-            out["hosts"][host] = {"address": spec.address, "ports": self.place.ports[host],
-                                  "reached": reached, "error": None if reached else answer.get("error")}  # fmt: skip
-            if not reached:
+            hosts[host] = {"address": self.whole.hosts[host].address, "ports": self.place.ports[host],
+                           "reached": reached, "error": None if reached else str(answer.get("error"))}  # fmt: skip
+            if not reached or not isinstance(part, dict):
                 continue
-            assert isinstance(part, dict)
-            out["stations"] = out["stations"] or part.get("stations") or {}
-            for key in ("devices", "taps", "links"):
-                out[key].update(part.get(key) or {})
+            stations = stations or part.get("stations") or {}
+            for key, into in (("devices", devices), ("taps", taps), ("links", links)):
+                got = part.get(key)
+                if isinstance(got, dict):
+                    into.update(got)
         for name in self.whole.devices:  # the devices of a host that did not answer
-            out["devices"].setdefault(name, {"alive": False, "crashed": None, "status": None,
-                                             "host": self.place.host_of(name), "unreachable": True})  # fmt: skip
+            devices.setdefault(name, {"alive": False, "crashed": None, "status": None,
+                                      "host": self.place.host_of(name), "unreachable": True})  # fmt: skip
         for lk in self.whole.links:
-            out["links"].setdefault(lk.name, {"host": self.place.tap_host(lk), "type": lk.type,
-                                              "a": lk.a, "b": lk.b, "up": False})  # fmt: skip
-        out["devices"] = {n: out["devices"][n] for n in self.whole.devices}
-        out["links"] = {lk.name: out["links"][lk.name] for lk in self.whole.links}
-        return out
+            down: LinkState = {"host": self.place.tap_host(lk), "type": lk.type, "a": lk.a,
+                               "b": lk.b, "up": False}  # fmt: skip
+            links.setdefault(lk.name, down)
+        return {
+            "lab": self.whole.name, "host": self.here, "stations": stations,
+            "devices": {n: devices[n] for n in self.whole.devices}, "taps": taps,
+            "links": {lk.name: links[lk.name] for lk in self.whole.links}, "hosts": hosts,
+        }  # fmt: skip
 
     def part_map(self) -> list[LinkEntry]:
         """This host's link map, each row with its host; its RFC 2217 servers as rows too."""
@@ -341,8 +368,9 @@ class HostRunner(LabRunner):
         others = await self._ask_others({"cmd": "map", "part": True})
         rows = self.part_map()
         for host, answer in others.items():
-            if answer.get("ok"):
-                rows += answer.get("links") or []
+            links = answer.get("links")
+            if answer.get("ok") and isinstance(links, list):
+                rows += links
                 continue
             rows += [{"link": lk.name, "type": lk.type, "a": lk.a, "b": lk.b, "host": host,
                       "a_end": f"(not reached: {answer.get('error')})"}
@@ -350,20 +378,19 @@ class HostRunner(LabRunner):
         return rows
 
 
-def host_lines(status: dict[str, Any]) -> list[str]:
+def host_lines(status: JsonObject) -> list[str]:
     """The hosts of a spread lab's status (`lab status`), each reached or not, with its
     devices; nothing for a lab on one machine."""
-    hosts = status.get("hosts")
-    if not isinstance(hosts, dict):
+    hosts, devices, links = status.get("hosts"), status.get("devices"), status.get("links")
+    if not isinstance(hosts, dict) or not isinstance(devices, dict) or not isinstance(links, dict):
         return []
     out = ["hosts:"]
     for name, host in hosts.items():
-        devices = [n for n, d in (status.get("devices") or {}).items() if d.get("host") == name]
         state = "reached" if host.get("reached") else f"NOT REACHED ({host.get('error')})"
-        alive = [n if d.get("alive") else f"{n}(down)" for n in devices
-                 for d in [status["devices"][n]]]  # fmt: skip
+        alive = [n if d.get("alive") else f"{n}(down)" for n, d in devices.items()
+                 if d.get("host") == name]  # fmt: skip
         out.append(f"  {name} {host.get('address')}: {state}; {' '.join(alive)}")
-    down = [n for n, lk in (status.get("links") or {}).items() if not lk.get("up")]
+    down = [n for n, lk in links.items() if not lk.get("up")]
     out.append(f"links down: {' '.join(down)}" if down else "every link up")
     return out
 
