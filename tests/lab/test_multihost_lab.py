@@ -231,6 +231,15 @@ def test_reference_lab_over_three_hosts_one_command_each(spread: Spread) -> None
     assert spread.device("ixl20", {"cmd": "status"})["status"]["links"]["east"]
     assert spread.device("ixl22", {"cmd": "status"})["status"]["links"]["west"]
 
+    # a device of another host restarted from central: west's runner does it, on a new pty that
+    # west's RFC 2217 server serves again, and the interval link comes back through it
+    before = spread.state("west")["devices"]["ixl20"]["pid"]
+    done = spread.cli("central", "lab", "restart", "ixl20", "--lab", NAME)
+    assert done.returncode == 0 and "ixl20: restarted" in done.stdout, done.stderr
+    assert spread.state("west")["devices"]["ixl20"]["pid"] != before
+    wait_until("the whole lab up again after ixl20's restart",
+               lambda: whole_lab_up(spread.whole("central")), timeout=RECOVER)  # fmt: skip
+
     def ctc_equals_ixl(st: int) -> bool:
         view = spread.device("ctc", {"cmd": "show", "station": st})
         ixl = spread.device(f"ixl{st}", {"cmd": "status"})["status"]["ctc_state"]
