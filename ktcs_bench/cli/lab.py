@@ -242,6 +242,9 @@ def _up(args: argparse.Namespace) -> int:
         runner = host_runner(
             lab, args.host, args.token_file, unpaced=args.unpaced, group=args.group
         )
+    elif lab.hosts:
+        raise UsageError(f"lab {lab.name} is spread over hosts ({', '.join(lab.hosts)}): start "
+                         "each host's part there with `ktcs-bench lab up LAB --host NAME`")  # fmt: skip
     elif args.token_file is not None:
         raise UsageError("lab up: --token-file goes with --host (a lab on one machine keeps its "
                          "token in its run folder)")  # fmt: skip

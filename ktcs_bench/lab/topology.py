@@ -12,6 +12,10 @@ it (the real IXL is set to connect there; its own Type I peers are its business,
 An external ATC or trackside is off the lab's rails unless `rails: true` says it joins them itself
 (then the track-circuit emulator needs a fixed port, so the device can be told where they are).
 
+A lab may spread over several computers (SPEC §10, docs/multihost.md): `hosts:` names them
+(NAME -> {address, control: PORT}, `lab.hosts`) and each device's `host:` names one (or gives
+one's address); `lab up --host NAME` runs the devices placed there (`lab.multihost`).
+
 Adjacent stations' IXLs are linked by a vital Type I link (SPEC §6.6), one per interval between
 them that is not a lab edge:
     - {name: iv1820, type: type1, a: ixl18, b: ixl20, tap: true}

@@ -130,6 +130,7 @@ def test_lab_up_host_usage_errors_exit_2(tmp_path: Path) -> None:
         ([str(spread_lab(tmp_path)), "--host", "a"], "--token-file"),
         ([str(single), "--token-file", "x"], "--token-file goes with --host"),
         ([str(single), "--host", "a", "--in-process"], "not with --in-process"),
+        ([str(spread_lab(tmp_path))], "--host NAME"),
     ):
         done = subprocess.run([sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", *args],
                               capture_output=True, text=True, timeout=60, env=env)  # fmt: skip
