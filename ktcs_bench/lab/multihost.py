@@ -33,7 +33,10 @@ reads from its own copy (`lab up --token-file`, or `hosts.NAME.token_file`).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
+import socket
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -46,7 +49,7 @@ from ktcs_bench.lab.runner import LabRunner, lab_command
 from ktcs_bench.lab.topology import External, Lab, LinkSpec
 from ktcs_bench.lab.view import LinkEntry
 from ktcs_bench.messages import JsonObject
-from ktcs_bench.runtime import TOKEN_ENV
+from ktcs_bench.runtime import TOKEN_ENV, server_token
 from ktcs_bench.transport import jsonlines
 from ktcs_bench.transport.rfc2217_server import Rfc2217Server
 
@@ -223,6 +226,9 @@ class HostRunner(LabRunner):
     async def up(self) -> None:
         """The links to other hosts first (the rails' address, a pty served over RFC 2217 for
         each Type I end here whose tap is elsewhere), then the lab runner's start."""
+        self._check_address()
+        self.token, self.token_file = server_token(self.token_file)
+        await self._serve_control()  # first: a port taken fails before any device starts
         rails = next((d for d in self.whole.of_kind(kinds.TRACKCIRCUIT)), None)
         if rails is not None and rails.name not in self.lab.devices:
             host, port = self.place.service(RAILS)
@@ -234,9 +240,36 @@ class HostRunner(LabRunner):
             self.endpoints.setdefault(lk.b, {})[role] = "pty"
             address = self.place.service(rfc2217_service(lk.name))
             server = Rfc2217Server(address, self._pty_of(lk.b, role), name=lk.name)
-            server.start()
+            with self._serving(f"the RFC 2217 line of link {lk.name}", address):
+                server.start()
             self.servers[lk.name] = server
         await super().up()
+
+    def _check_address(self) -> None:
+        """This machine has host `here`'s address (a UsageError if not: the wrong --host)."""
+        address = self.place.host(self.here).address
+        family = socket.AF_INET6 if ":" in address else socket.AF_INET
+        with socket.socket(family) as probe:
+            try:
+                probe.bind((address, 0))
+            except OSError as exc:
+                raise UsageError(
+                    f"host {self.here} of lab {self.whole.name} is at {address}, which is not an "
+                    f"address of this machine ({exc.strerror}): run `lab up --host {self.here}` "
+                    "on that host"
+                ) from None
+
+    @contextlib.contextmanager
+    def _serving(self, what: str, address: tuple[str, int]) -> Iterator[None]:
+        """A port of this host's that the lab file fixes: a UsageError if it cannot be served."""
+        try:
+            yield
+        except OSError as exc:
+            raise UsageError(
+                f"host {self.here} cannot serve {what} on {address[0]}:{address[1]}: "
+                f"{exc.strerror or exc} (is another lab up here, or another program on the "
+                f"port? {self.whole.file} fixes the ports from hosts.{self.here}.control)"
+            ) from None
 
     def _pty_of(self, device: str, role: str) -> Any:
         def path() -> str | None:
@@ -246,9 +279,12 @@ class HostRunner(LabRunner):
         return path
 
     async def _serve_control(self) -> None:
+        if getattr(self, "_control", None) is not None:
+            return  # served already, before the devices started
         spec = self.place.host(self.here)
-        self._control = await jsonlines.serve(spec.address, spec.control, self._handle,
-                                              token=self.token)  # fmt: skip
+        with self._serving("the lab control", (spec.address, spec.control)):
+            self._control = await jsonlines.serve(spec.address, spec.control, self._handle,
+                                                  token=self.token)  # fmt: skip
         self.control_address = f"{spec.address}:{spec.control}"
 
     async def down(self) -> None:

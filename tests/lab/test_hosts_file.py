@@ -5,6 +5,7 @@ ConfigError naming the file and key path; where a spread lab's taps and services
 from __future__ import annotations
 
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -119,6 +120,30 @@ def test_placement_refuses_what_it_cannot_do(
     crowded = spread_lab(tmp_path, HOSTS.replace("control: 7800", "control: 65534"))
     with pytest.raises(UsageError, match="past 65535"):
         _ = Placement(load_lab(crowded)).ports
+
+
+def test_lab_up_on_the_wrong_host_or_a_taken_port_is_a_usage_error(tmp_path: Path) -> None:
+    """`lab up --host a` where a's address is not this machine's, or where a's control port is
+    taken: exit 2 saying so, before any device starts."""
+    env = {**os.environ, "KTCS_BENCH_RUN_DIR": str(tmp_path / "run")}
+    token = ["--token-file", str(tmp_path / "lab.token")]
+    lab = spread_lab(tmp_path, HOSTS.replace("10.0.0.1", "192.0.2.1"))  # TEST-NET-1: not ours
+    done = subprocess.run([sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up", str(lab),
+                           "--host", "a", *token], capture_output=True, text=True, timeout=60,
+                          env=env)  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert "192.0.2.1, which is not an address of this machine" in done.stderr, done.stderr
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        hosts = HOSTS.replace("10.0.0.1, control: 7700", f"127.0.0.1, control: {port}")
+        done = subprocess.run([sys.executable, "-m", "ktcs_bench.cli.main", "lab", "up",
+                               str(spread_lab(tmp_path, hosts)), "--host", "a", *token],
+                              capture_output=True, text=True, timeout=60, env=env)  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert f"cannot serve the lab control on 127.0.0.1:{port}" in done.stderr, done.stderr
+    assert not list((tmp_path / "run").glob("labs/*/logs/*.log")), "a device was started"
 
 
 def test_lab_up_host_usage_errors_exit_2(tmp_path: Path) -> None:
