@@ -187,6 +187,7 @@ class HostState(TypedDict):
     address: str
     ports: dict[str, int]
     reached: bool
+    up: bool  # its every device started (reached but not up: still starting)
     error: str | None
 
 
@@ -208,6 +209,7 @@ class HostRunner(LabRunner):
     placement: Placement | None = None
     here: str = ""
     servers: dict[str, Rfc2217Server] = field(default_factory=dict)  # link -> RFC 2217 server
+    started: bool = False  # every device of this host started (its control answers before)
 
     @property
     def place(self) -> Placement:
@@ -244,6 +246,7 @@ class HostRunner(LabRunner):
                 server.start()
             self.servers[lk.name] = server
         await super().up()
+        self.started = True
 
     def _check_address(self) -> None:
         """This machine has host `here`'s address (a UsageError if not: the wrong --host)."""
@@ -340,7 +343,8 @@ class HostRunner(LabRunner):
             for lk in self.lab.links
         }  # fmt: skip
         return {
-            "lab": self.whole.name, "host": self.here, "stations": base["stations"],
+            "lab": self.whole.name, "host": self.here, "up": self.started,
+            "stations": base["stations"],
             "devices": {n: {**e, "host": self.here} for n, e in base["devices"].items()
                         if n in mine},
             "taps": base["taps"], "links": links,
@@ -362,7 +366,8 @@ class HostRunner(LabRunner):
             part = answer.get("status")
             reached = bool(answer.get("ok")) and isinstance(part, dict)
             hosts[host] = {"address": self.whole.hosts[host].address, "ports": self.place.ports[host],
-                           "reached": reached, "error": None if reached else str(answer.get("error"))}  # fmt: skip
+                           "reached": reached, "up": reached and bool(isinstance(part, dict) and part.get("up")),
+                           "error": None if reached else str(answer.get("error"))}  # fmt: skip
             if not reached or not isinstance(part, dict):
                 continue
             stations = stations or part.get("stations") or {}
@@ -422,7 +427,8 @@ def host_lines(status: JsonObject) -> list[str]:
         return []
     out = ["hosts:"]
     for name, host in hosts.items():
-        state = "reached" if host.get("reached") else f"NOT REACHED ({host.get('error')})"
+        state = "up" if host.get("up") else "starting" if host.get("reached") else \
+            f"NOT REACHED ({host.get('error')})"  # fmt: skip
         alive = [n if d.get("alive") else f"{n}(down)" for n, d in devices.items()
                  if d.get("host") == name]  # fmt: skip
         out.append(f"  {name} {host.get('address')}: {state}; {' '.join(alive)}")

@@ -167,13 +167,13 @@ def spread(tmp_path: Path) -> Iterator[Spread]:
 
 
 def whole_lab_up(status: dict[str, Any] | None) -> bool:
-    """Every host reached, every device alive, every link up, every station synced at the CTC
+    """Every host reached and done starting, every device alive, every link up, every station synced at the CTC
     in center mode with every point detected."""
     if status is None:
         return False
     stations = status.get("stations") or {}
     return (
-        all(h["reached"] for h in status["hosts"].values())
+        all(h["reached"] and h["up"] for h in status["hosts"].values())
         and all(d["alive"] for d in status["devices"].values())
         and all(lk["up"] for lk in status["links"].values())
         and sorted(map(int, stations)) == [18, 20, 22]
@@ -300,10 +300,13 @@ def test_lab_status_across_hosts_needs_the_same_token(spread: Spread, tmp_path: 
     assert read_token(spread.run_dir("west") / "lab.token") != spread.token
     for host in ("central", "west"):
         spread.up(host)
-    status = wait_until(
-        "central's lab up, west's answer refused",
-        lambda: (s := spread.whole("central")) and s["hosts"]["central"]["reached"] and s,
-        timeout=START,
-    )
-    assert not status["hosts"]["west"]["reached"], status["hosts"]
-    assert "token" in str(status["hosts"]["west"]["error"]), status["hosts"]["west"]
+
+    def refused() -> dict[str, Any] | None:
+        """Central's view once west's runner answers it and refuses its token."""
+        status = spread.whole("central")
+        west = None if status is None else status["hosts"]["west"]["error"]
+        return status if "wrong token" in str(west) else None
+
+    status = wait_until("west's runner refusing central's token", refused, timeout=START)
+    assert status["hosts"]["central"]["reached"] and not status["hosts"]["west"]["reached"]
+    assert not any(d["alive"] for n, d in status["devices"].items() if host_of(n) == "west")
