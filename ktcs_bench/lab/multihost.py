@@ -36,7 +36,7 @@ import asyncio
 import contextlib
 import os
 import socket
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -274,7 +274,9 @@ class HostRunner(LabRunner):
                 f"port? {self.whole.file} fixes the ports from hosts.{self.here}.control)"
             ) from None
 
-    def _pty_of(self, device: str, role: str) -> Any:
+    def _pty_of(self, device: str, role: str) -> Callable[[], str | None]:
+        """Where device `device`'s pty for `role` is now (None: not started yet)."""
+
         def path() -> str | None:
             child = self.children.get(device)
             return None if child is None else (child.ready.get("ptys") or {}).get(role)
