@@ -88,8 +88,11 @@ class Placement:
         return self.host_of(link.a)
 
     def crosses(self, link: LinkSpec) -> bool:
-        """A Type I link between two hosts: served over RFC 2217 from end b's host."""
-        return link.type == kinds.TYPE1 and self.host_of(link.a) != self.host_of(link.b)
+        """A Type I link between devices of the lab on two hosts: served over RFC 2217 from end
+        b's host. (A real device's line the tap opens itself, wherever its `host:` says.)"""
+        a, b = self.lab.devices[link.a], self.lab.devices[link.b]
+        return (link.type == kinds.TYPE1 and a.external is None and b.external is None
+                and a.host != b.host)  # fmt: skip
 
     def devices_on(self, host: str) -> list[str]:
         return [n for n in self.lab.devices if self.host_of(n) == host]
@@ -337,7 +340,10 @@ class HostRunner(LabRunner):
     async def part_status(self) -> JsonObject:
         """This host's part: its devices, and the links whose tap runs here, each up or not."""
         base = await LabRunner.status(self)
-        mine = set(self.place.devices_on(self.here))
+        # ours here, and the real devices this host's taps reach (alive: their links here up)
+        real = {n for n, d in self.whole.devices.items() if d.external is not None}
+        mine = set(self.place.devices_on(self.here)) - real
+        mine |= {n for lk in self.lab.links for n in (lk.a, lk.b) if n in real}
         statuses = {n: e.get("status") for n, e in base["devices"].items()}
         links: dict[str, LinkState] = {
             lk.name: {"host": self.here, "type": lk.type, "a": lk.a, "b": lk.b,
@@ -347,8 +353,8 @@ class HostRunner(LabRunner):
         return {
             "lab": self.whole.name, "host": self.here, "up": self.started,
             "stations": base["stations"],
-            "devices": {n: {**e, "host": self.here} for n, e in base["devices"].items()
-                        if n in mine},
+            "devices": {n: {**e, "host": self.place.host_of(n)}
+                        for n, e in base["devices"].items() if n in mine},
             "taps": base["taps"], "links": links,
             "servers": {n: s.status() for n, s in self.servers.items()},
         }  # fmt: skip
@@ -373,10 +379,18 @@ class HostRunner(LabRunner):
             if not reached or not isinstance(part, dict):
                 continue
             stations = stations or part.get("stations") or {}
-            for key, into in (("devices", devices), ("taps", taps), ("links", links)):
+            for key, into in (("taps", taps), ("links", links)):
                 got = part.get(key)
                 if isinstance(got, dict):
                     into.update(got)
+            got = part.get("devices")
+            for name, entry in (got if isinstance(got, dict) else {}).items():
+                seen = devices.get(name)
+                if isinstance(seen, dict) and isinstance(entry, dict):  # a real device reached
+                    entry = {**seen, **entry,  # from several hosts: alive if all its links are
+                             "alive": bool(seen.get("alive") and entry.get("alive")),
+                             "links": {**(seen.get("links") or {}), **(entry.get("links") or {})}}  # fmt: skip
+                devices[name] = entry
         for name in self.whole.devices:  # the devices of a host that did not answer
             devices.setdefault(name, {"alive": False, "crashed": None, "status": None,
                                       "host": self.place.host_of(name), "unreachable": True})  # fmt: skip

@@ -69,6 +69,19 @@ def test_devices_are_placed_on_named_hosts(tmp_path: Path) -> None:
     assert set(view.devices) == {"atc18", "ixl20", "ctc"}
 
 
+def test_a_real_device_on_another_host_is_opened_by_the_tap_not_served(tmp_path: Path) -> None:
+    """An external ATC (behind a serial server) whose `host:` is not its IXL's: the tap on the
+    IXL's host opens its own URL; no host serves it over RFC 2217."""
+    devices = DEVICES.replace(
+        "atc18: {kind: atc, station: 18, host: 10.0.0.2}",
+        "atc18: {kind: atc, station: 18, host: b, external: {serial: 'rfc2217://10.0.0.9:4000'}}",
+    )
+    place = Placement(load_lab(spread_lab(tmp_path, devices=devices)))
+    assert "rfc2217 st18-atc" not in place.ports["b"]
+    atc18 = place.view("a").devices["atc18"].external
+    assert atc18 is not None and atc18.serial == "rfc2217://10.0.0.9:4000"
+
+
 @pytest.mark.parametrize(
     ("hosts", "devices", "place", "words"),
     [
