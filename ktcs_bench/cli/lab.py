@@ -229,6 +229,7 @@ def _down(lab_name: str, everywhere: bool = False) -> int:
 def _up(args: argparse.Namespace) -> int:
     import logging
 
+    from ktcs_bench.lab.multihost import host_lines
     from ktcs_bench.lab.runner import LabRunner
     from ktcs_bench.lab.view import RED, RESET, link_map_text, station_lines
 
@@ -289,7 +290,8 @@ def _up(args: argparse.Namespace) -> int:
                 if args.json:
                     print(json.dumps({"status": status}), flush=True)
                 else:
-                    text = "\n".join([*station_lines(status, colour), *process_lines(status)])
+                    text = "\n".join([*station_lines(status, colour), *process_lines(status),
+                                      *host_lines(status)])  # fmt: skip
                     if text != last:
                         print(("\x1b[2J\x1b[H" + link_map_text(runner.link_map(), colour) + "\n\n"
                                if colour else "") + text, flush=True)  # fmt: skip
