@@ -27,7 +27,7 @@ from ktcs_bench.schema import Shape, convert
 from ktcs_bench.transport.endpoints import PORT_MAX, check_port
 
 _Fail = Callable[[str, str], ConfigError]
-_ADDRESS = re.compile(r"[A-Za-z0-9._-]+|[0-9A-Fa-f:]+")  # a name, an IPv4 or IPv6 address
+_ADDRESS = re.compile(r"[A-Za-z0-9._-]+")  # a host name or an IPv4 address
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,12 @@ def parse_hosts(section: object, file: Path, fail: _Fail) -> dict[str, HostSpec]
             raise fail(place, "must be a mapping {address: ADDRESS, control: PORT}")
         shape = convert(spec, _HostShape, file, place)
         address = shape.address.strip()
+        if _ADDRESS.fullmatch(address.rpartition(":")[0]) and address.rpartition(":")[2].isdigit():
+            raise fail(f"{place}.address", f"the address alone, not {excerpt(address)} (the "
+                       "host's ports follow from its `control`)")  # fmt: skip
+        if ":" in address and _ADDRESS.fullmatch(address.replace(":", "")):
+            raise fail(f"{place}.address", "an IPv6 address is not taken here (the lab writes "
+                       "HOST:PORT endpoints): give a host name that resolves to it")  # fmt: skip
         if not _ADDRESS.fullmatch(address):
             raise fail(f"{place}.address", f"a host name or IP address, not {excerpt(address)}")
         try:

@@ -254,8 +254,7 @@ class HostRunner(LabRunner):
     def _check_address(self) -> None:
         """This machine has host `here`'s address (a UsageError if not: the wrong --host)."""
         address = self.place.host(self.here).address
-        family = socket.AF_INET6 if ":" in address else socket.AF_INET
-        with socket.socket(family) as probe:
+        with socket.socket() as probe:
             try:
                 probe.bind((address, 0))
             except OSError as exc:
