@@ -91,6 +91,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                     "until it is released (default: exit 3 naming the holder); Ctrl-C gives up")  # fmt: skip
     up.add_argument("--place-timeout", type=duration, metavar="SECONDS",
                     help="with --wait-for-place: give up after this long (exit 3)")  # fmt: skip
+    up.add_argument("--host", metavar="NAME",
+                    help="run only the devices the lab file places on host NAME (`hosts:`), "
+                    "linked to the other hosts' over TCP and RFC 2217 (docs/multihost.md)")  # fmt: skip
+    up.add_argument("--token-file", metavar="FILE",
+                    help="with --host: the lab's token, the same file copied to every host "
+                    "(made here if missing; default: hosts.NAME.token_file, $KTCS_BENCH_TOKEN_FILE)")  # fmt: skip
     up.add_argument("--speed", type=_speed, default=None,
                     help=f"with --in-process: the clock's speed, times real time (default 1, at "
                     f"most {MAX_SPEED:g}; a warning says when this machine does not keep up)")  # fmt: skip
@@ -121,6 +127,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         q = lsub.add_parser(name, help=text)
         q.add_argument("lab", nargs="?", help="lab name (default: reference)")
         q.add_argument("--json", action="store_true")
+        if name == "down":
+            q.add_argument("--all", action="store_true",
+                           help="a lab spread over hosts: stop every host's part, not only this one's")  # fmt: skip
     for name, text in (("restart", "restart one device (a full resync follows)"),
                        ("kill", "kill one device with SIGKILL, as a crash would")):  # fmt: skip
         q = lsub.add_parser(name, help=text)
@@ -137,13 +146,16 @@ def run(args: argparse.Namespace) -> int:
         if args.place_timeout is not None and not args.wait_for_place:
             raise UsageError("lab up: --place-timeout is how long --wait-for-place waits: give "
                              "--wait-for-place too")  # fmt: skip
+        if args.in_process and args.host is not None:
+            raise UsageError("lab up: --host runs a host's part of a lab as processes; "
+                             "not with --in-process")  # fmt: skip
         return _up_in_process(args) if args.in_process else _up(args)
     if args.lab_command == "simulate":
         return _simulate(args)
     lab_name = getattr(args, "lab", None) or "reference"
     lab_name = load_lab(resolve_lab_path(lab_name)).name if lab_name.endswith(".yaml") else lab_name
     if args.lab_command == "down":
-        return _down(lab_name)
+        return _down(lab_name, everywhere=args.all)
     if args.lab_command in ("restart", "kill"):
         answer = _request(lab_name, {"cmd": args.lab_command, "device": args.device})
         if not answer.get("ok"):
@@ -163,9 +175,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(status))
     else:
+        from ktcs_bench.lab.multihost import host_lines
         from ktcs_bench.lab.view import station_lines
 
-        print("\n".join([*station_lines(status, args.colour), *process_lines(status)]))
+        lines = [*station_lines(status, args.colour), *process_lines(status), *host_lines(status)]
+        print("\n".join(lines))
     return 0
 
 
@@ -197,8 +211,9 @@ def _request(lab_name: str, obj: dict[str, Any]) -> dict[str, Any]:
         raise PeerError(f"lab {lab_name} does not answer on {host}:{port}: {exc}") from None
 
 
-def _down(lab_name: str) -> int:
-    """Stop a running lab and wait until it has stopped; clean up after one that died."""
+def _down(lab_name: str, everywhere: bool = False) -> int:
+    """Stop a running lab and wait until it has stopped; clean up after one that died.
+    `everywhere`: a lab spread over hosts asks every host's part to stop too."""
     from ktcs_bench.lab.processes import wait_for
     from ktcs_bench.lab.state import clean_up_after, is_alive, read_state
     from ktcs_bench.runtime import process_alive
@@ -208,7 +223,9 @@ def _down(lab_name: str) -> int:
         for line in clean_up_after(lab_name):
             print(line)
         return 0
-    _request(lab_name, {"cmd": "down"})
+    answer = _request(lab_name, {"cmd": "down", **({"all": True} if everywhere else {})})
+    for host, what in (answer.get("hosts") or {}).items():
+        print(f"lab {lab_name} on host {host}: {what}", flush=True)
     assert state is not None
     pid, started = int(state["pid"]), state.get("started")
     print(f"lab {lab_name}: stopping", flush=True)
@@ -221,13 +238,28 @@ def _down(lab_name: str) -> int:
 def _up(args: argparse.Namespace) -> int:
     import logging
 
+    from ktcs_bench.lab.multihost import host_lines
     from ktcs_bench.lab.runner import LabRunner
     from ktcs_bench.lab.view import RED, RESET, link_map_text, station_lines
 
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr)
     lab = load_lab(resolve_lab_path(args.lab))
     colour = args.colour
-    runner = LabRunner(lab, unpaced=args.unpaced, group=args.group)
+    runner: LabRunner
+    if args.host is not None:
+        from ktcs_bench.lab.multihost import host_runner
+
+        runner = host_runner(
+            lab, args.host, args.token_file, unpaced=args.unpaced, group=args.group
+        )
+    elif lab.hosts:
+        raise UsageError(f"lab {lab.name} is spread over hosts ({', '.join(lab.hosts)}): start "
+                         "each host's part there with `ktcs-bench lab up LAB --host NAME`")  # fmt: skip
+    elif args.token_file is not None:
+        raise UsageError("lab up: --token-file goes with --host (a lab on one machine keeps its "
+                         "token in its run folder)")  # fmt: skip
+    else:
+        runner = LabRunner(lab, unpaced=args.unpaced, group=args.group)
     if args.wait_for_place:
         runner.wait_for_place = math.inf if args.place_timeout is None else args.place_timeout
 
@@ -271,7 +303,8 @@ def _up(args: argparse.Namespace) -> int:
                 if args.json:
                     print(json.dumps({"status": status}), flush=True)
                 else:
-                    text = "\n".join([*station_lines(status, colour), *process_lines(status)])
+                    text = "\n".join([*station_lines(status, colour), *process_lines(status),
+                                      *host_lines(status)])  # fmt: skip
                     if text != last:
                         print(("\x1b[2J\x1b[H" + link_map_text(runner.link_map(), colour) + "\n\n"
                                if colour else "") + text, flush=True)  # fmt: skip

@@ -487,7 +487,7 @@ class LabRunner:
         self.notices += await asyncio.to_thread(clean_up_after, self.lab.name)
         private_dir(self.dir / "logs")
         private_dir(self.dir / "captures")
-        self.token, self.token_file = server_token(self.dir / "token")
+        self.token, self.token_file = server_token(self.token_file or self.dir / "token")
         self.places = Places(self.dir / "logs", self.wait_for_place)  # shared real devices first
         self.lab = await self.places.acquire(self.lab, self.stop_requested)
         if self.stop_requested.is_set():  # stopped while it waited for a place

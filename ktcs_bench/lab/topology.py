@@ -14,6 +14,10 @@ it (the real IXL is set to connect there; its own Type I peers are its business,
 An external ATC or trackside is off the lab's rails unless `rails: true` says it joins them itself
 (then the track-circuit emulator needs a fixed port, so the device can be told where they are).
 
+A lab may spread over several computers (SPEC §10, docs/multihost.md): `hosts:` names them
+(NAME -> {address, control: PORT}, `lab.hosts`) and each device's `host:` names one (or gives
+one's address); `lab up --host NAME` runs the devices placed there (`lab.multihost`).
+
 Adjacent stations' IXLs are linked by a vital Type I link (SPEC §6.6), one per interval between
 them that is not a lab edge:
     - {name: iv1820, type: type1, a: ixl18, b: ixl20, tap: true}
@@ -39,6 +43,7 @@ import serial
 from ktcs_bench import kinds
 from ktcs_bench.datafiles import data_dir, load_mapping
 from ktcs_bench.errors import ConfigError, UsageError, excerpt
+from ktcs_bench.lab.hosts import HostSpec, device_address, parse_hosts
 from ktcs_bench.lab.labgrid import LABGRID_PORT, LabgridPlace
 from ktcs_bench.schema import Shape, convert, located
 from ktcs_bench.station.loader import load_line
@@ -124,6 +129,7 @@ class Lab:
     ixl_mode: str = "center"
     timetable_file: Path | None = None  # the lab's one timetable: its trains, ARS's routes
     ars: ArsSpec | None = None  # None: no `ars:` section, the operator sets every route
+    hosts: dict[str, HostSpec] = field(default_factory=dict)  # `hosts:` (lab.hosts): spread labs
 
     def of_kind(self, kind: str) -> list[DeviceSpec]:
         return [d for d in self.devices.values() if d.kind == kind]
@@ -211,6 +217,7 @@ class _LabShape(Shape):
     type1: Any = None
     type2: Any = None
     console: Any = None
+    hosts: Any = None
 
 
 _SECTIONS = ("type1", "type2", "console")
@@ -232,6 +239,11 @@ def load_lab(path: str | Path | None = None) -> Lab:
     if not line_file.is_file():
         raise fail("line", f"no such line file: {line_file}")
     devices = _devices(top.devices, file, fail)
+    hosts = parse_hosts(top.hosts, file, fail)
+    for name, raw_device in top.devices.items():  # `host:` names one of `hosts:` (lab.hosts)
+        address = device_address(raw_device.get("host"), hosts, f"devices.{name}.host", fail)
+        if address is not None:
+            devices[str(name)] = replace(devices[str(name)], host=address)
     links = _links(top.links, devices, file, fail)
     t1 = convert(top.type1 or {}, _Type1Shape, file, "type1")
     t2 = convert(top.type2 or {}, _Type2Shape, file, "type2")
@@ -265,6 +277,7 @@ def load_lab(path: str | Path | None = None) -> Lab:
         console_origins=tuple(origins),
         ixl_mode=mode,
         timetable_file=timetable_file,
+        hosts=hosts,
     )
     _check_lab(lab, fail)
     lab = replace(lab, links=_neighbour_links(lab, fail))

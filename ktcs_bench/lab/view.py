@@ -33,6 +33,7 @@ class LinkEntry(TypedDict, total=False):
     tap: str
     capture: str
     external: list[str]
+    host: str  # a lab spread over hosts (lab.multihost): the host that runs it
 
 
 def link_map_text(entries: list[LinkEntry], colour: bool) -> str:
@@ -43,7 +44,8 @@ def link_map_text(entries: list[LinkEntry], colour: bool) -> str:
             ends += f"  <->  {e.get('b', '')} {e['b_end']}"
         tap = f"  tap {e['tap']}" if e.get("tap") else ""
         real = f"  external: {', '.join(e['external'])}" if e.get("external") else ""
-        rows.append(f"  {e['link']:<18} {e['type']:<12} {ends}{tap}{real}")
+        host = f"  on {e['host']}" if e.get("host") else ""
+        rows.append(f"  {e['link']:<18} {e['type']:<12} {ends}{tap}{real}{host}")
     return "\n".join(rows)
 
 

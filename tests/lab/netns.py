@@ -1,5 +1,7 @@
-"""Two hosts on one machine, for the tests of devices on another host (`test_ser2net.py`,
-`test_labgrid.py`): Linux namespaces made without root where user namespaces are allowed.
+"""Hosts on one machine, for the tests of devices on other hosts, as Linux namespaces.
+
+Two hosts (`test_ser2net.py`, `test_labgrid.py`), made without root where user namespaces are
+allowed:
 
 A test runs its driver module as `UNSHARE python -m tests.lab.DRIVER TMP` (`run_driver`): in
 there the driver is the lab's host -- a network namespace of its own (`LAB_IP`) and pid 1 of a pid
@@ -10,7 +12,11 @@ or prints why it failed and exits 1 (`driver_main`).
 
 These tests are never skipped: the tools are part of the set-up (`.ci/system-deps`, `make
 setup`), and a machine that lacks them or refuses the namespaces fails, saying so
-(`require_namespaces`)."""
+(`require_namespaces`).
+
+Several hosts on a bridge (`test_multihost.py`, `test_multihost_lab.py`; `Net`), each a network
+namespace on an address of its own, cut off and reconnected by taking its veth down and up. They
+need root and iproute2; without them the test fails (`require_netns`)."""
 
 from __future__ import annotations
 
@@ -22,6 +28,7 @@ import socket
 import subprocess
 import sys
 import traceback
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -30,6 +37,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 LAB_IP, DEVICE_IP = "10.99.0.1", "10.99.0.2"
+SUBNET = "10.77.{}"  # `Net`: a bridge's /24
 # a user namespace (root inside, no privilege outside), a network namespace (the lab's host) and
 # a pid namespace whose pid 1 is the driver: when it ends, the kernel ends all it started
 UNSHARE = ["unshare", "--user", "--map-root-user", "--net", "--pid", "--fork", "--kill-child",
@@ -157,3 +165,60 @@ def emulated_atc(
     )  # fmt: skip
     assert atc.stdout is not None
     return atc, json.loads(atc.stdout.readline())
+
+
+def require_netns() -> None:
+    """Fail (not skip) the calling test when this machine cannot make network namespaces."""
+    missing = []
+    if shutil.which("ip") is None:
+        missing.append("iproute2's `ip` is not installed (`make setup` installs it, as root)")
+    if os.geteuid() != 0:
+        missing.append(f"the tests run as uid {os.geteuid()}, not root")
+    if missing:
+        pytest.fail(
+            "the multi-host tests stand hosts up as network namespaces, which need root and "
+            f"iproute2: {'; '.join(missing)}. CI runs them as root; this test is not skipped"
+        )
+
+
+class Net:
+    """A bridge in the root namespace and one namespace per host, each on its own address."""
+
+    def __init__(self) -> None:
+        tag = uuid.uuid4().hex[:5]
+        self.bridge = f"kb{tag}"
+        self.hosts: dict[str, tuple[str, str, str]] = {}  # name -> (netns, veth outside, address)
+        self.net = SUBNET.format(int(tag, 16) % 200 + 20)
+        sh("ip", "link", "add", self.bridge, "type", "bridge")
+        sh("ip", "addr", "add", f"{self.net}.254/24", "dev", self.bridge)
+        sh("ip", "link", "set", self.bridge, "up")
+        self.tag = tag
+
+    def host(self, name: str, last: int) -> str:
+        """A new host `name` at address NET.`last`; its address."""
+        ns, out, inside = f"k{self.tag}{name}", f"k{self.tag}{name}o", f"k{self.tag}{name}i"
+        address = f"{self.net}.{last}"
+        sh("ip", "netns", "add", ns)
+        self.hosts[name] = (ns, out, address)
+        sh("ip", "link", "add", out, "type", "veth", "peer", "name", inside)
+        sh("ip", "link", "set", inside, "netns", ns)
+        sh("ip", "link", "set", out, "master", self.bridge)
+        sh("ip", "link", "set", out, "up")
+        sh("ip", "netns", "exec", ns, "ip", "addr", "add", f"{address}/24", "dev", inside)
+        sh("ip", "netns", "exec", ns, "ip", "link", "set", inside, "up")
+        sh("ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up")
+        return address
+
+    def inside(self, name: str, *argv: str) -> list[str]:
+        """The command line that runs `argv` on host `name`."""
+        return ["ip", "netns", "exec", self.hosts[name][0], *argv]
+
+    def cut(self, name: str, up: bool) -> None:
+        """Host `name`'s network cable out (up=False) or back in."""
+        sh("ip", "link", "set", self.hosts[name][1], "up" if up else "down")
+
+    def close(self) -> None:
+        for ns, out, _ in self.hosts.values():
+            subprocess.run(["ip", "link", "del", out], capture_output=True)
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+        subprocess.run(["ip", "link", "del", self.bridge], capture_output=True)

@@ -7,65 +7,18 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
-import uuid
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
 
 from .conftest import request, wait_until
+from .netns import Net, require_netns
 
-pytestmark = pytest.mark.skipif(
-    os.geteuid() != 0 or shutil.which("ip") is None,
-    reason="network namespaces need root and iproute2 (CI runs as root)",
-)
-SUBNET = "10.77.{}"
 STATIONS = (18, 20, 22)
-
-
-def sh(*args: str) -> None:
-    subprocess.run(args, check=True, capture_output=True, timeout=30)
-
-
-class Net:
-    """A bridge in the root namespace and one namespace per host, each on its own address."""
-
-    def __init__(self) -> None:
-        tag = uuid.uuid4().hex[:5]
-        self.bridge = f"kb{tag}"
-        self.hosts: dict[str, tuple[str, str, str]] = {}  # name -> (netns, veth outside, address)
-        self.net = SUBNET.format(int(tag, 16) % 200 + 20)
-        sh("ip", "link", "add", self.bridge, "type", "bridge")
-        sh("ip", "addr", "add", f"{self.net}.254/24", "dev", self.bridge)
-        sh("ip", "link", "set", self.bridge, "up")
-        self.tag = tag
-
-    def host(self, name: str, last: int) -> str:
-        ns, out, inside = f"k{self.tag}{name}", f"k{self.tag}{name}o", f"k{self.tag}{name}i"
-        address = f"{self.net}.{last}"
-        sh("ip", "netns", "add", ns)
-        sh("ip", "link", "add", out, "type", "veth", "peer", "name", inside)
-        sh("ip", "link", "set", inside, "netns", ns)
-        sh("ip", "link", "set", out, "master", self.bridge)
-        sh("ip", "link", "set", out, "up")
-        sh("ip", "netns", "exec", ns, "ip", "addr", "add", f"{address}/24", "dev", inside)
-        sh("ip", "netns", "exec", ns, "ip", "link", "set", inside, "up")
-        sh("ip", "netns", "exec", ns, "ip", "link", "set", "lo", "up")
-        self.hosts[name] = (ns, out, address)
-        return address
-
-    def cut(self, name: str, up: bool) -> None:
-        sh("ip", "link", "set", self.hosts[name][1], "up" if up else "down")
-
-    def close(self) -> None:
-        for ns, out, _ in self.hosts.values():
-            subprocess.run(["ip", "link", "del", out], capture_output=True)
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
-        subprocess.run(["ip", "link", "del", self.bridge], capture_output=True)
 
 
 class Hosts:
@@ -114,6 +67,7 @@ class Hosts:
 
 @pytest.fixture
 def multihost() -> Iterator[Hosts]:
+    require_netns()  # fails, never skips, without root or iproute2
     net = Net()
     hosts = Hosts(net)
     try:
