@@ -108,6 +108,11 @@ class ProcedureFailed(Exception):
 
 
 class ProcedureItem(pytest.Item):
+    fixturenames: tuple[str, ...] = ()
+    """None: a procedure sets its lab up itself. Plugins that read every item's fixture names as
+    a test function's (labgrid's pytest plugin, on every machine the bench's test extra is
+    installed on) find the empty list rather than an AttributeError."""
+
     def __init__(self, *, procedure: Any, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.procedure = procedure

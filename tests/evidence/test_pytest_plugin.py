@@ -69,6 +69,18 @@ def test_procedures_run_as_items_with_requirements_and_the_failed_step(tmp_path:
     assert cases["route-set"].find("failure") is None
 
 
+def test_a_procedure_runs_beside_labgrids_pytest_plugin(tmp_path: Path) -> None:
+    """labgrid (the test extra installs it) registers a pytest plugin that reads every item's
+    fixture names; outside this project's own configuration (`-p no:labgrid`) it is loaded, as it
+    is here (`-c /dev/null`)."""
+    run = pytest_run(str(PROCEDURES / "route_set.yaml"), cwd=tmp_path)
+    assert "labgrid" in next(
+        line for line in run.stdout.splitlines() if line.startswith("plugins:")
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "1 passed" in run.stdout
+
+
 def test_a_procedure_naming_an_unknown_requirement_is_a_collection_error(tmp_path: Path) -> None:
     folder = tmp_path / "procedures"
     folder.mkdir()
