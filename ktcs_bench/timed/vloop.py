@@ -193,7 +193,8 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
     ) -> asyncio.TimerHandle:  # fmt: skip
         if when is None:
             raise TypeError("when cannot be None")
-        self._check_closed()  # type: ignore[attr-defined]
+        if self._closed:  # type: ignore[attr-defined]  # `_check_closed`, inline
+            raise RuntimeError("Event loop is closed")
         if self._debug:  # type: ignore[attr-defined]
             self._check_thread()  # type: ignore[attr-defined]
             self._check_callback(callback, "call_at")  # type: ignore[attr-defined]

@@ -102,7 +102,8 @@ class LinkRunner:
             self._data(data)
 
     def _data(self, data: bytes) -> None:
-        now = self._require_loop().time()
+        loop = self._loop
+        now = (loop if loop is not None else self._require_loop()).time()
         self._after(self.link.receive_data(data, now), now)
 
     def _reader(self) -> None:
@@ -124,11 +125,13 @@ class LinkRunner:
             except TransportClosed as exc:
                 self._fail(exc)
                 return
-        for event in events:
-            if self.on_event is not None:
-                self.on_event(now, event)
-            else:
-                self.events.put_nowait((now, event))
+        if events:
+            on_event = self.on_event
+            for event in events:
+                if on_event is not None:
+                    on_event(now, event)
+                else:
+                    self.events.put_nowait((now, event))
         self.timer.poke()
 
     def _fail(self, exc: BaseException) -> None:
