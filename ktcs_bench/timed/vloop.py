@@ -33,7 +33,7 @@ import contextvars
 import heapq
 import selectors
 import time
-from asyncio import base_events, events
+from asyncio import base_events, events, format_helpers
 from collections.abc import Callable
 from typing import Any
 
@@ -80,10 +80,7 @@ class _VirtualSelector(selectors.BaseSelector):
         assert loop is not None
         loop._wall_chores()
         if timeout is None:
-            raise VirtualDeadlock(
-                f"nothing is ready and nothing is scheduled at virtual time {loop.time():.6f} s: "
-                "every task waits for something that cannot come"
-            )
+            raise _deadlock(loop)
         if timeout > 0:
             loop._advance(timeout)
         return []
@@ -93,6 +90,22 @@ class _VirtualSelector(selectors.BaseSelector):
 
     def get_map(self) -> Any:
         return self._keys
+
+
+def _deadlock(loop: VirtualTimeLoop) -> VirtualDeadlock:
+    return VirtualDeadlock(
+        f"nothing is ready and nothing is scheduled at virtual time {loop.time():.6f} s: "
+        "every task waits for something that cannot come"
+    )
+
+
+def _report(handle: Any, exc: BaseException) -> None:
+    """What `Handle._run` does with an exception its callback raised."""
+    cb = format_helpers._format_callback_source(handle._callback, handle._args)  # type: ignore[attr-defined]
+    context = {"message": f"Exception in callback {cb}", "exception": exc, "handle": handle}
+    if handle._source_traceback:
+        context["source_traceback"] = handle._source_traceback
+    handle._loop.call_exception_handler(context)
 
 
 def _fd(fileobj: Any) -> int:
@@ -235,9 +248,15 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
         if self._ready or self._stopping:
             timeout = 0
         elif sched:
-            timeout = min(max(0, sched[0] - self.time()), _MAX_SELECT)
-        self._process_events(self._selector.select(timeout))  # type: ignore[attr-defined]
-        end_time = self.time() + self._clock_resolution
+            timeout = min(max(0, sched[0] - self._virtual_now), _MAX_SELECT)
+        # `_VirtualSelector.select`, inline (it reports no I/O: nothing to process)
+        if self._chores:
+            self._wall_chores()
+        if timeout is None:
+            raise _deadlock(self)
+        if timeout > 0:
+            self._advance(timeout)
+        end_time = self._virtual_now + self._clock_resolution
         ready = self._ready
         while sched and sched[0] < end_time:
             due = heapq.heappop(sched).handle
@@ -254,8 +273,13 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
                     handle._run()
                 finally:
                     self._current_handle = None
-            else:
-                handle._run()
+            else:  # `Handle._run`, inline: a lab's loop runs a handle for every piece of a frame
+                try:
+                    handle._context.run(handle._callback, *handle._args)
+                except (SystemExit, KeyboardInterrupt):
+                    raise
+                except BaseException as exc:
+                    _report(handle, exc)
         handle = None  # no cycle through the handle when a callback raised
 
     def _advance(self, timeout: float) -> None:

@@ -141,10 +141,11 @@ class Type1Link:
         if not self._started:
             self._start(now)
         events: list[LinkEvent] = []
-        records = self._decoder.feed(data)
+        decoder = self._decoder
+        records = decoder.feed(data)
         if records:
             self._records(records, now, events)
-        if not self._decoder.pending:
+        if not decoder.pending:
             self._rx_pending_since = None
         elif self._rx_pending_since is None or records:
             self._rx_pending_since = now  # a new frame has begun
