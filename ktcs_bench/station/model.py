@@ -10,6 +10,7 @@ reads files: `loader.py` builds these objects and checks them.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 Direction = Literal["up", "down"]
@@ -258,17 +259,18 @@ class StationView:
     def number(self) -> int:
         return self.station.number
 
-    @property
+    # worked out once a view (the line is frozen): an ATC asks its intervals for every code
+    @cached_property
     def plain_track_circuits(self) -> tuple[TrackCircuit, ...]:
         return tuple(t for t in self.line.track_circuits if t.station == self.number)
 
-    @property
+    @cached_property
     def track_circuits(self) -> tuple[TrackCircuit, ...]:
         """Every track circuit this station's IXL and ATC handle, in chainage order."""
         tcs = self.station.track_circuits + self.plain_track_circuits
         return tuple(sorted(tcs, key=lambda t: (t.from_m, t.name)))
 
-    @property
+    @cached_property
     def intervals(self) -> tuple[Interval, ...]:
         """Adjacent intervals, west first."""
         west = [i for i in self.line.intervals if i.east == self.number]
