@@ -214,6 +214,10 @@ class Line:
     service_brake_mps2: float = 0.5  # the code steps' braking rate on the level
     brake_build_up_s: float = 1.0  # the code steps' run-on before that braking (atc.*)
     tag_spacing_m: float = 100.0
+    # each station's view, made once (`view`: what it works out, it keeps)
+    _views: dict[int, StationView] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     def station(self, number: int) -> Station:
         return self.stations[number]
@@ -225,7 +229,10 @@ class Line:
         return tuple(sorted(tcs, key=lambda t: (t.from_m, t.name)))
 
     def view(self, number: int) -> StationView:
-        return StationView(self, self.stations[number])
+        view = self._views.get(number)
+        if view is None:
+            view = self._views[number] = StationView(self, self.stations[number])
+        return view
 
     def gradient_between(self, a_m: float, b_m: float) -> float:
         """The lowest gradient (‰, up sense) over [a, b]; 0 where the table is silent."""
