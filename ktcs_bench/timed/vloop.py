@@ -101,7 +101,7 @@ def _deadlock(loop: VirtualTimeLoop) -> VirtualDeadlock:
 
 def _report(handle: Any, exc: BaseException) -> None:
     """What `Handle._run` does with an exception its callback raised."""
-    cb = format_helpers._format_callback_source(handle._callback, handle._args)  # type: ignore[attr-defined]
+    cb = format_helpers._format_callback_source(handle._callback, handle._args)
     context = {"message": f"Exception in callback {cb}", "exception": exc, "handle": handle}
     if handle._source_traceback:
         context["source_traceback"] = handle._source_traceback
