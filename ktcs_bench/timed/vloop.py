@@ -135,6 +135,8 @@ class _WallChores:
 
 
 _MAX_SELECT: float = base_events.MAXIMUM_SELECT_TIMEOUT  # type: ignore[attr-defined]
+_MIN_SCHEDULED: int = base_events._MIN_SCHEDULED_TIMER_HANDLES  # type: ignore[attr-defined]
+_MIN_CANCELLED_FRACTION: float = base_events._MIN_CANCELLED_TIMER_HANDLES_FRACTION  # type: ignore[attr-defined]
 
 
 class _When(float):
@@ -226,11 +228,7 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
         """`BaseEventLoop._run_once` (Python 3.11) on the heap of `_When`s."""
         sched = self._scheduled
         count = len(sched)
-        if (
-            count > base_events._MIN_SCHEDULED_TIMER_HANDLES  # type: ignore[attr-defined]
-            and self._timer_cancelled_count / count
-            > base_events._MIN_CANCELLED_TIMER_HANDLES_FRACTION  # type: ignore[attr-defined]
-        ):
+        if count > _MIN_SCHEDULED and self._timer_cancelled_count / count > _MIN_CANCELLED_FRACTION:
             kept = []
             for key in sched:
                 if key.handle._cancelled:
@@ -254,8 +252,13 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
             self._wall_chores()
         if timeout is None:
             raise _deadlock(self)
-        if timeout > 0:
-            self._advance(timeout)
+        if timeout > 0:  # `_advance`, inline
+            now = self._virtual_now
+            target = now + timeout
+            if sched and sched[0].handle._when <= target:
+                target = sched[0].handle._when
+            if target > now:
+                self._virtual_now = target
         end_time = self._virtual_now + self._clock_resolution
         ready = self._ready
         while sched and sched[0] < end_time:
