@@ -26,10 +26,12 @@ set and nothing was compiled, every device process compiles its ~130 modules fro
 0.4 s of CPU each.
 
 Virtual time: the same lab in one process on the virtual clock, as `lab simulate` runs it (issue 15
-§2): VIRTUAL_S of virtual time against the wall, start-up included (goal: >= 50x real time at 20
-stations).
+§2): VIRTUAL_S of virtual time against the wall and against this process's CPU time, start-up
+included, for each line of the table and for the lines of `--virtual` (default 43 stations, the
+goal of issue 26 §4: >= 50x real time), each printed with the load average beside it.
 
-Run: python benchmarks/scale.py [--stations 3 10 20] [--groups none station] [--timeout 300]
+Run: python benchmarks/scale.py [--stations 3 10 20] [--groups none station] [--virtual 43]
+                                [--timeout 300]
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ from ktcs_bench.station.generate import LAB_FILE
 from ktcs_bench.transport import jsonlines
 
 GOAL_STATIONS = 20
+VIRTUAL_GOAL = (43, 50.0)  # issue 26 §4: a generated 43-station line >= 50x real time (by CPU)
 GOALS = {"none": (20.0, 1.5e9), "station": (8.0, 1.0e9)}  # --group: (ready within s, RSS bytes)
 VIRTUAL_S = 600.0  # virtual seconds of each generated lab in one process
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -254,10 +257,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--stations", type=int, nargs="+", default=[3, 10, 20])
+    ap.add_argument("--stations", type=int, nargs="*", default=[3, 10, 20])
     ap.add_argument("--groups", nargs="+", choices=tuple(GOALS), default=list(GOALS),
                     help="lab up --group of each live run (default: both, one row each)")  # fmt: skip
     ap.add_argument("--timeout", type=float, default=300.0, help="give up on a lab after (s)")
+    ap.add_argument("--virtual", type=int, nargs="*", default=[VIRTUAL_GOAL[0]],
+                    help="stations of further lines measured in one process on the virtual "
+                         f"clock only (default {VIRTUAL_GOAL[0]}; none: --virtual)")  # fmt: skip
     args = ap.parse_args()
     compileall.compile_dir(Path(ktcs_bench.__file__).parent, quiet=1)  # as pip install would
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start")
@@ -272,7 +278,8 @@ def main() -> None:
             rows.append(r)
             print(f"{n:>8} {group:>7} {r['devices']:>7} {r['processes']:>5} {r['up_s']:>10.1f}s "
                   f"{r['ready_s']:>6.1f}s {r['rss_bytes'] / 1e6:>7.0f}MB {r['pss_bytes'] / 1e6:>7.0f}MB "
-                  f"{f'{v:.0f}x':>9} {f'{v_cpu:.0f}x':>9}", flush=True)  # fmt: skip
+                  f"{f'{v:.0f}x':>9} {f'{v_cpu:.0f}x':>9}  load {os.getloadavg()[0]:.1f}",
+                  flush=True)  # fmt: skip
     print(f"virtual: {VIRTUAL_S:.0f} s of the lab in one process on the virtual clock (lab simulate), "
           "speed-up against the wall (and against the CPU time it used), start-up included")  # fmt: skip
     for r in rows:
@@ -286,6 +293,12 @@ def main() -> None:
               f"CPU used until ready, {r['cpu_total_s']:.1f} s in all, a process by kind: {cpu}")  # fmt: skip
         print(f"{what}: a device's data load (lab file + line, YAML): "
               f"{r['data_load_s']:.2f} s; the ready lab idling uses {r['idle_cpu']:.2f} CPU")  # fmt: skip
+    for n in args.virtual:
+        v, v_cpu = virtual_speed_up(n)
+        goal = (f" (goal >= {VIRTUAL_GOAL[1]:g}x: {'met' if v_cpu >= VIRTUAL_GOAL[1] else 'NOT met'})"
+                if n == VIRTUAL_GOAL[0] else "")  # fmt: skip
+        print(f"virtual, {n} stations: {v:.1f}x real time by the wall, {v_cpu:.1f}x by CPU{goal}, "
+              f"load average {os.getloadavg()[0]:.1f}", flush=True)  # fmt: skip
     for big in (r for r in rows if r["stations"] == GOAL_STATIONS):
         goal_s, goal_bytes = GOALS[big["group"]]
         t_ok, m_ok = big["ready_s"] <= goal_s, big["rss_bytes"] <= goal_bytes

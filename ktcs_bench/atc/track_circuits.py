@@ -21,7 +21,7 @@ blades in, no clock.
 
 from __future__ import annotations
 
-from bisect import bisect_left
+from bisect import bisect_left, bisect_right
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Literal
@@ -246,11 +246,14 @@ class TrackCircuitModel:
         if known is not None and known[0] == t.head_m and known[1] == up and known[2] == track:
             return known[3]
         found: str | None = None
-        for tc in self.tcs:
-            if not self.geometry.carries(tc, track):
-                continue
-            inside = tc.from_m <= t.head_m < tc.to_m if up else tc.from_m < t.head_m <= tc.to_m
-            if inside:
+        head, carries, by_from = t.head_m, self.geometry.carries, self._by_from
+        # the first of `tcs` (chainage order, as `_by_from`) that holds the head: only those
+        # starting at most the longest circuit (and a metre for rounding) below it can
+        lo = bisect_left(self._froms, head - self._longest - 1.0)
+        for i in range(lo, bisect_right(self._froms, head)):
+            tc = by_from[i]
+            inside = tc.from_m <= head < tc.to_m if up else tc.from_m < head <= tc.to_m
+            if inside and carries(tc, track):
                 found = tc.name
                 break
         self._antenna[train] = (t.head_m, up, track, found)

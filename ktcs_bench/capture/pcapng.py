@@ -86,11 +86,15 @@ def enhanced_packet(
 
 
 def _checksum(data: bytes) -> int:
+    """The Internet checksum (RFC 1071). The one's-complement sum of the 16-bit words is the
+    data read as one big-endian number modulo 0xFFFF (2**16 = 1 modulo 0xFFFF), in C, save
+    that a sum of words that are not all zero folds to 0xFFFF, never 0."""
     if len(data) % 2:
         data += b"\0"
-    total: int = sum(struct.unpack(f"!{len(data) // 2}H", data))
-    while total >> 16:
-        total = (total & 0xFFFF) + (total >> 16)
+    number = int.from_bytes(data, "big")
+    total = number % 0xFFFF
+    if not total and number:
+        total = 0xFFFF
     return ~total & 0xFFFF
 
 

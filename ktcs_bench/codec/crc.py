@@ -9,6 +9,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
 
 import crcmod
 
@@ -41,13 +42,23 @@ class CrcSpec:
     def kernel(self) -> tuple[Callable[[object, int, bytes], int], int, bytes, int]:
         """(C function, register init, table, xor_out) for hot loops: crc = xor_out ^ fn(data,
         xor_out ^ init, table). crcmod wraps that C call in a Python closure; calling it directly
-        saves a Python frame per frame decoded. Falls back to the closure if crcmod changes."""
+        saves a Python frame per frame decoded. Falls back to the closure if crcmod changes.
+        Made once per spec: crcmod builds its table in Python (every decoder a lab makes, a
+        recorder's after each idle flush included, asks for one)."""
+        return _kernel(self)
+
+    def _kernel(self) -> tuple[Callable[[object, int, bytes], int], int, bytes, int]:
         fn = self.function()
         defaults = getattr(fn, "__defaults__", None)
         if defaults and len(defaults) == 3 and callable(defaults[2]):
             crc, table, raw = defaults
             return raw, crc ^ self.xor_out, table, self.xor_out
         return (lambda data, _crc, _table: fn(data)), 0, b"", 0  # noqa: E731 -- crcmod changed
+
+
+@cache
+def _kernel(spec: CrcSpec) -> tuple[Callable[[object, int, bytes], int], int, bytes, int]:
+    return spec._kernel()
 
 
 CRC16_ARC = CrcSpec("crc-16/arc", 0x18005, True, 0x0000, 0x0000, 0xBB3D)

@@ -78,8 +78,8 @@ class FrameCodec:
         self._crc_to_header = None if p.crc_last == "data" else sum(p.offset_of(p.crc_last))
         self.seq_modulo = 1 << (8 * dict(p.header)["seq"])
         # frames without DATA (ACK, LINK_TEST, ...) by (seq, op, sub): a link sends the same
-        # few again and again (bounded: `EMPTY_FRAMES`)
-        self._empty: dict[tuple[int, int, int | None], bytes] = {}
+        # few again and again, and so do the other links of its profile (bounded: `EMPTY_FRAMES`)
+        self._empty = p.empty_frames
 
     def encode(self, seq: int, op: int, data: bytes = b"", sub: int | None = None) -> bytes:
         """One complete frame. Raises UsageError for values that do not fit the profile."""

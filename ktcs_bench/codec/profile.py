@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -47,6 +47,12 @@ class FrameProfile:
     crc_pad: int
     opcodes: OpcodeTable
     nak_reasons: Mapping[int, str]
+    # frames without DATA by (seq, op, sub), made by any codec of this profile (`FrameCodec`):
+    # every link of a lab sends its ACKs and LINK_TESTs, one per SEQ, the same for all of them.
+    # Not an argument: `dataclasses.replace` gives a changed profile a cache of its own
+    empty_frames: dict[tuple[int, int, int | None], bytes] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     # -- derived layout (computed once, used by the hot path) --
     @property

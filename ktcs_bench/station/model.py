@@ -10,6 +10,7 @@ reads files: `loader.py` builds these objects and checks them.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 Direction = Literal["up", "down"]
@@ -213,6 +214,10 @@ class Line:
     service_brake_mps2: float = 0.5  # the code steps' braking rate on the level
     brake_build_up_s: float = 1.0  # the code steps' run-on before that braking (atc.*)
     tag_spacing_m: float = 100.0
+    # each station's view, made once (`view`: what it works out, it keeps)
+    _views: dict[int, StationView] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     def station(self, number: int) -> Station:
         return self.stations[number]
@@ -224,7 +229,10 @@ class Line:
         return tuple(sorted(tcs, key=lambda t: (t.from_m, t.name)))
 
     def view(self, number: int) -> StationView:
-        return StationView(self, self.stations[number])
+        view = self._views.get(number)
+        if view is None:
+            view = self._views[number] = StationView(self, self.stations[number])
+        return view
 
     def gradient_between(self, a_m: float, b_m: float) -> float:
         """The lowest gradient (‰, up sense) over [a, b]; 0 where the table is silent."""
@@ -258,17 +266,18 @@ class StationView:
     def number(self) -> int:
         return self.station.number
 
-    @property
+    # worked out once a view (the line is frozen): an ATC asks its intervals for every code
+    @cached_property
     def plain_track_circuits(self) -> tuple[TrackCircuit, ...]:
         return tuple(t for t in self.line.track_circuits if t.station == self.number)
 
-    @property
+    @cached_property
     def track_circuits(self) -> tuple[TrackCircuit, ...]:
         """Every track circuit this station's IXL and ATC handle, in chainage order."""
         tcs = self.station.track_circuits + self.plain_track_circuits
         return tuple(sorted(tcs, key=lambda t: (t.from_m, t.name)))
 
-    @property
+    @cached_property
     def intervals(self) -> tuple[Interval, ...]:
         """Adjacent intervals, west first."""
         west = [i for i in self.line.intervals if i.east == self.number]

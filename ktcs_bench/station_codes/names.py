@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
+from functools import cache
 
 
 class Function(StrEnum):
@@ -115,8 +116,16 @@ class CodeName:
         return self.text
 
 
+@cache
 def _on(function: Function, st: int, obj: str = "", aspect: str = "") -> str:
+    """A station code's name, spelt once (the devices ask for the same few hundred names on
+    every status, code and route check)."""
     return CodeName(function, st, obj, aspect).text
+
+
+@cache
+def _of_interval(function: Function, interval: str) -> str:
+    return CodeName(function, None, interval).text
 
 
 # station mode (Table 3)
@@ -254,32 +263,32 @@ def rli(st: int, r: str) -> str:
 # intervals
 def tdu(interval: str) -> str:
     """Traffic direction up established in the interval."""
-    return CodeName(Function.TDU, None, interval).text
+    return _of_interval(Function.TDU, interval)
 
 
 def tdd(interval: str) -> str:
-    return CodeName(Function.TDD, None, interval).text
+    return _of_interval(Function.TDD, interval)
 
 
 def izc(interval: str) -> str:
-    return CodeName(Function.IZC, None, interval).text
+    return _of_interval(Function.IZC, interval)
 
 
 def phi(interval: str) -> str:
     """The sender holds the interval's traffic permission (IXL -> IXL, IXL -> CTC)."""
-    return CodeName(Function.PHI, None, interval).text
+    return _of_interval(Function.PHI, interval)
 
 
 def prq(interval: str) -> str:
     """The sender asks its neighbour for the interval's permission (IXL -> IXL, IXL -> CTC)."""
-    return CodeName(Function.PRQ, None, interval).text
+    return _of_interval(Function.PRQ, interval)
 
 
 def drl(interval: str) -> str:
     """A departure route of the sender's into the interval is locked (IXL -> IXL)."""
-    return CodeName(Function.DRL, None, interval).text
+    return _of_interval(Function.DRL, interval)
 
 
 def drc(interval: str) -> str:
     """CTC -> IXL: ask the neighbour for the interval's permission ahead of a route."""
-    return CodeName(Function.DRC, None, interval).text
+    return _of_interval(Function.DRC, interval)

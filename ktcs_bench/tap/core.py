@@ -85,6 +85,7 @@ def record_event(record: CaptureRecord) -> TapEvent:
 class TapOutput:
     deliveries: list[tuple[str, bytes]] = field(default_factory=list)
     records: list[CaptureRecord] = field(default_factory=list)
+    # what subscribers are sent (a frame's record event only while there are any)
     events: list[TapEvent] = field(default_factory=list)
     link_cut: bool = False  # the whole link was cut: an adapter that carries connections drops them
 
@@ -141,6 +142,21 @@ class TapCore:
         self._subscriptions: list[Subscription] = []
 
     # -- what comes in -------------------------------------------------------------------------
+    def passed(self, direction: str, data: bytes, now: float) -> list[CaptureRecord] | None:
+        """`receive` for an adapter that carries bytes on a clean link with nobody subscribed
+        (a lab's every idle Type I link): when that holds, `data` goes on unchanged to the other
+        end and this is what the output's records would be (written to the captures), nothing
+        else; None when it does not (ask `receive`)."""
+        if not (data and self._clean) or self._subscriptions:
+            return None
+        stats = self.injectors[direction].stats
+        stats.bytes_in += len(data)
+        stats.bytes_out += len(data)
+        records = self.recorder.passed(direction, data, now)
+        if records:
+            self.history.extend(records)
+        return records
+
     def receive(self, direction: str, data: bytes, now: float) -> TapOutput:
         """`data` written by the sending end of `direction` ("a>b")."""
         if data and self._clean:
@@ -269,10 +285,11 @@ class TapCore:
         return out
 
     def _publish(self, out: TapOutput, records: list[CaptureRecord]) -> None:
-        for r in records:
-            self.history.append(r)
-            out.records.append(r)
-            self._emit(out, record_event(r))
+        out.records += records
+        self.history.extend(records)
+        if self._subscriptions:  # a frame's event is streamed only (a tap's frames go unwatched)
+            for r in records:
+                self._emit(out, record_event(r))
 
     def _emit(self, out: TapOutput, event: TapEvent) -> None:
         out.events.append(event)

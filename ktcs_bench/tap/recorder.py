@@ -52,11 +52,13 @@ class Recorder:
         d = self._dirs.get(direction) or self._get(direction)  # `feed`, inline
         d.last = now
         d.total += len(data)
-        records = d.decoder.feed(data)
-        d.buffered = d.decoder.buffered > 0
+        decoder = d.decoder
+        records = decoder.feed(data)
+        d.buffered = decoder.buffered > 0
         out = [CaptureRecord(now, direction, r.raw) for r in records] if records else []
-        for name, d in self._dirs.items():
-            if name != direction and d.buffered and now >= d.last + self.idle_flush:
+        idle_flush = self.idle_flush
+        for other in self._dirs.values():
+            if other is not d and other.buffered and now >= other.last + idle_flush:
                 out += self.handle_timer(now)
                 break
         return out

@@ -50,8 +50,21 @@ class WireTap(Tap):
             self._to[f"{other}>{end}"] = se  # what goes that way is delivered at this end
 
     def _line(self, direction: str, data: bytes, now: float) -> None:
-        """What a device's line delivered (`_on_data`, on the tap's own clock)."""
-        self._apply(self.core.receive(direction, data, self.timer.now()))
+        """What a device's line delivered (`_on_data`, on the tap's own clock). On a clean link
+        the bytes pass as `_apply` would pass them, without an output to build and read."""
+        now = self.timer.now()
+        records = self.core.passed(direction, data, now)
+        if records is None:
+            self._apply(self.core.receive(direction, data, now))
+            return
+        end = self._to.get(direction)
+        if end is not None:
+            end.deliver(data)
+        for r in records:
+            for w in self._writers:
+                w.write(r)
+        if not self._closing:
+            self.timer.poke()
 
     def _deliver(self, direction: str, data: bytes) -> None:
         end = self._to.get(direction)

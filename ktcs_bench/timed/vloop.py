@@ -33,7 +33,7 @@ import contextvars
 import heapq
 import selectors
 import time
-from asyncio import base_events, events
+from asyncio import base_events, events, format_helpers
 from collections.abc import Callable
 from typing import Any
 
@@ -80,10 +80,7 @@ class _VirtualSelector(selectors.BaseSelector):
         assert loop is not None
         loop._wall_chores()
         if timeout is None:
-            raise VirtualDeadlock(
-                f"nothing is ready and nothing is scheduled at virtual time {loop.time():.6f} s: "
-                "every task waits for something that cannot come"
-            )
+            raise _deadlock(loop)
         if timeout > 0:
             loop._advance(timeout)
         return []
@@ -93,6 +90,22 @@ class _VirtualSelector(selectors.BaseSelector):
 
     def get_map(self) -> Any:
         return self._keys
+
+
+def _deadlock(loop: VirtualTimeLoop) -> VirtualDeadlock:
+    return VirtualDeadlock(
+        f"nothing is ready and nothing is scheduled at virtual time {loop.time():.6f} s: "
+        "every task waits for something that cannot come"
+    )
+
+
+def _report(handle: Any, exc: BaseException) -> None:
+    """What `Handle._run` does with an exception its callback raised."""
+    cb = format_helpers._format_callback_source(handle._callback, handle._args)
+    context = {"message": f"Exception in callback {cb}", "exception": exc, "handle": handle}
+    if handle._source_traceback:
+        context["source_traceback"] = handle._source_traceback
+    handle._loop.call_exception_handler(context)
 
 
 def _fd(fileobj: Any) -> int:
@@ -122,6 +135,8 @@ class _WallChores:
 
 
 _MAX_SELECT: float = base_events.MAXIMUM_SELECT_TIMEOUT  # type: ignore[attr-defined]
+_MIN_SCHEDULED: int = base_events._MIN_SCHEDULED_TIMER_HANDLES  # type: ignore[attr-defined]
+_MIN_CANCELLED_FRACTION: float = base_events._MIN_CANCELLED_TIMER_HANDLES_FRACTION  # type: ignore[attr-defined]
 
 
 class _When(float):
@@ -193,7 +208,8 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
     ) -> asyncio.TimerHandle:  # fmt: skip
         if when is None:
             raise TypeError("when cannot be None")
-        self._check_closed()  # type: ignore[attr-defined]
+        if self._closed:  # type: ignore[attr-defined]  # `_check_closed`, inline
+            raise RuntimeError("Event loop is closed")
         if self._debug:  # type: ignore[attr-defined]
             self._check_thread()  # type: ignore[attr-defined]
             self._check_callback(callback, "call_at")  # type: ignore[attr-defined]
@@ -212,11 +228,7 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
         """`BaseEventLoop._run_once` (Python 3.11) on the heap of `_When`s."""
         sched = self._scheduled
         count = len(sched)
-        if (
-            count > base_events._MIN_SCHEDULED_TIMER_HANDLES  # type: ignore[attr-defined]
-            and self._timer_cancelled_count / count
-            > base_events._MIN_CANCELLED_TIMER_HANDLES_FRACTION  # type: ignore[attr-defined]
-        ):
+        if count > _MIN_SCHEDULED and self._timer_cancelled_count / count > _MIN_CANCELLED_FRACTION:
             kept = []
             for key in sched:
                 if key.handle._cancelled:
@@ -234,9 +246,20 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
         if self._ready or self._stopping:
             timeout = 0
         elif sched:
-            timeout = min(max(0, sched[0] - self.time()), _MAX_SELECT)
-        self._process_events(self._selector.select(timeout))  # type: ignore[attr-defined]
-        end_time = self.time() + self._clock_resolution
+            timeout = min(max(0, sched[0] - self._virtual_now), _MAX_SELECT)
+        # `_VirtualSelector.select`, inline (it reports no I/O: nothing to process)
+        if self._chores:
+            self._wall_chores()
+        if timeout is None:
+            raise _deadlock(self)
+        if timeout > 0:  # `_advance`, inline
+            now = self._virtual_now
+            target = now + timeout
+            if sched and sched[0].handle._when <= target:
+                target = sched[0].handle._when
+            if target > now:
+                self._virtual_now = target
+        end_time = self._virtual_now + self._clock_resolution
         ready = self._ready
         while sched and sched[0] < end_time:
             due = heapq.heappop(sched).handle
@@ -253,8 +276,13 @@ class VirtualTimeLoop(_WallChores, asyncio.SelectorEventLoop):
                     handle._run()
                 finally:
                     self._current_handle = None
-            else:
-                handle._run()
+            else:  # `Handle._run`, inline: a lab's loop runs a handle for every piece of a frame
+                try:
+                    handle._context.run(handle._callback, *handle._args)
+                except (SystemExit, KeyboardInterrupt):
+                    raise
+                except BaseException as exc:
+                    _report(handle, exc)
         handle = None  # no cycle through the handle when a callback raised
 
     def _advance(self, timeout: float) -> None:

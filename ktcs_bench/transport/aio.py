@@ -35,7 +35,8 @@ class LinkRunner:
         self.events: asyncio.Queue[tuple[float, LinkEvent]] = asyncio.Queue()
         self.error: BaseException | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self.timer = LoopTimer(link, lambda now, events: self._after(events, now))
+        # the timer re-arms itself after its sink: `_after` need not
+        self.timer = LoopTimer(link, lambda now, events: self._after(events, now, poke=False))
         self._done: asyncio.Future[None] | None = None
         self._thread: threading.Thread | None = None
         self._stop_thread = threading.Event()
@@ -102,7 +103,8 @@ class LinkRunner:
             self._data(data)
 
     def _data(self, data: bytes) -> None:
-        now = self._require_loop().time()
+        loop = self._loop
+        now = (loop if loop is not None else self._require_loop()).time()
         self._after(self.link.receive_data(data, now), now)
 
     def _reader(self) -> None:
@@ -116,7 +118,7 @@ class LinkRunner:
             if data:
                 loop.call_soon_threadsafe(self._data, data)
 
-    def _after(self, events: list[LinkEvent], now: float) -> None:
+    def _after(self, events: list[LinkEvent], now: float, poke: bool = True) -> None:
         out = self.link.data_to_send(now)
         if out:
             try:
@@ -124,12 +126,15 @@ class LinkRunner:
             except TransportClosed as exc:
                 self._fail(exc)
                 return
-        for event in events:
-            if self.on_event is not None:
-                self.on_event(now, event)
-            else:
-                self.events.put_nowait((now, event))
-        self.timer.poke()
+        if events:
+            on_event = self.on_event
+            for event in events:
+                if on_event is not None:
+                    on_event(now, event)
+                else:
+                    self.events.put_nowait((now, event))
+        if poke:
+            self.timer.poke()
 
     def _fail(self, exc: BaseException) -> None:
         self.error = exc

@@ -84,7 +84,8 @@ class VirtualWire:
 
     def handle_timer(self, now: float) -> bytes:
         """The bytes that have arrived at the receiver by `now`."""
-        self._release(now)
+        if self.faults is not None:
+            self._release(now)
         flight = self._flight
         if not flight or flight[0][0] > now:
             return b""

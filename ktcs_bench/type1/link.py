@@ -94,6 +94,8 @@ class Type1Link:
             n: self._opcode(n) for n in ("REQUEST_ALL", "ALL_INFO", "LINK_TEST", "ACK", "NAK")
         }
         self._ack_op = self._op["ACK"].op
+        # the LINK_TEST an idle link sends every period (a message is immutable: one will do)
+        self._link_test = Message(self._op["LINK_TEST"].op, b"", "LINK_TEST")
         self._nak_op = self._op["NAK"].op
         self._nak_reason = {
             meaning: self.profile.nak_reason(meaning)
@@ -141,10 +143,11 @@ class Type1Link:
         if not self._started:
             self._start(now)
         events: list[LinkEvent] = []
-        records = self._decoder.feed(data)
+        decoder = self._decoder
+        records = decoder.feed(data)
         if records:
             self._records(records, now, events)
-        if not self._decoder.pending:
+        if not decoder.pending:
             self._rx_pending_since = None
         elif self._rx_pending_since is None or records:
             self._rx_pending_since = now  # a new frame has begun
@@ -188,7 +191,7 @@ class Type1Link:
             self._silenced = True
             events.append(LinkDown("silence", self._hold(self._sender.discard())))
         if self._idle and now >= self._tx_free_at + t.link_test_period:
-            self._sender.push(Message(self._op["LINK_TEST"].op, b"", "LINK_TEST"))
+            self._sender.push(self._link_test)
         return events
 
     def next_deadline(self) -> float | None:
@@ -297,16 +300,15 @@ class Type1Link:
         acceptance = self._receiver.accept(seq, now)
         self._control.append(self._codec.encode(seq, self._ack_op))
         events.append(AckSent(seq))
-        message = Message(op, data, opcode.name)
         if acceptance.duplicate:
-            events.append(DuplicateReceived(seq, message))
+            events.append(DuplicateReceived(seq, Message(op, data, opcode.name)))
             return
         if acceptance.gap_expected is not None:
             events.append(SequenceGap(acceptance.gap_expected, seq))
             self._request_all(now)
-        if opcode is self._op["LINK_TEST"]:
+        if opcode is self._op["LINK_TEST"]:  # answered by its ACK, nothing to deliver
             return
-        events.append(MessageReceived(seq, message, fields))
+        events.append(MessageReceived(seq, Message(op, data, opcode.name), fields))
         if opcode is self._op["REQUEST_ALL"]:
             self._answer_request_all(fields, now)
 

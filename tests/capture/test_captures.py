@@ -8,10 +8,12 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ktcs_bench.capture import CaptureRecord, open_writer, read_capture
 from ktcs_bench.capture.hexlog import format_line, parse_hex_log
-from ktcs_bench.capture.pcapng import PcapngEncoder, parse_pcapng
+from ktcs_bench.capture.pcapng import PcapngEncoder, _checksum, parse_pcapng
 from ktcs_bench.codec import FrameCodec, get_profile
 
 T0 = 1_712_345_678.125
@@ -140,3 +142,20 @@ def test_tshark_reads_type2_pcapng_as_tcp(tmp_path: Path) -> None:
            "ip.check_checksum:TRUE", "-Y", "tcp.checksum.status == 0 || ip.checksum.status == 0"]  # fmt: skip
     bad = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     assert bad.returncode == 0 and bad.stdout.strip() == "", bad.stdout
+
+
+@settings(max_examples=500)
+@given(
+    data=st.binary(max_size=200)
+    | st.lists(
+        st.sampled_from([b"\xff\xff", b"\x00\x00", b"\x80\x00", b"\x7f\xff"]), max_size=40
+    ).map(b"".join)
+)
+def test_the_internet_checksum_is_rfc_1071s_folded_word_sum(data: bytes) -> None:
+    """`_checksum` takes the sum modulo 0xFFFF in one step; it must give what folding the sum
+    of the 16-bit words gives, sums that are multiples of 0xFFFF (folded to 0xFFFF) included."""
+    padded = data + b"\0" * (len(data) % 2)
+    total = sum(int.from_bytes(padded[i : i + 2], "big") for i in range(0, len(padded), 2))
+    while total >> 16:
+        total = (total & 0xFFFF) + (total >> 16)
+    assert _checksum(data) == ~total & 0xFFFF

@@ -135,3 +135,34 @@ def test_a_core_with_an_origin_is_called_once_per_deadline_whatever_the_rounding
         core.cycles == 99
     )  # deadlines 0.1 .. 9.9 on the core's clock (origin 0.1: 10.0 on the loop's)
     assert core.calls == core.cycles, f"{core.calls - core.cycles} calls found nothing due"
+
+
+def test_a_callback_that_raises_is_reported_as_asyncio_reports_it_and_the_loop_goes_on() -> None:
+    """The virtual loop runs its handles itself (not through `Handle._run`): what a failing
+    callback leaves is the same report to the exception handler as on asyncio's own loop."""
+
+    def fail(what: str) -> None:
+        raise RuntimeError(what)
+
+    def reports(loop: asyncio.AbstractEventLoop) -> tuple[list[tuple[str, str]], list[str]]:
+        seen: list[tuple[str, str]] = []
+        after: list[str] = []
+        loop.set_exception_handler(
+            lambda loop, ctx: seen.append((ctx["message"], repr(ctx["exception"])))
+        )
+
+        async def main() -> None:
+            loop = asyncio.get_running_loop()
+            loop.call_later(0.01, fail, "late")
+            loop.call_soon(fail, "soon")
+            loop.call_later(0.02, after.append, "on")
+            await asyncio.sleep(0.05)
+
+        run(main, loop)
+        return seen, after
+
+    virtual, real = reports(VirtualTimeLoop()), reports(asyncio.new_event_loop())
+    assert virtual == real  # the same messages and exceptions, in the same order
+    assert [e for _, e in virtual[0]] == ["RuntimeError('soon')", "RuntimeError('late')"]
+    assert all(m.startswith("Exception in callback ") and "fail(" in m for m, _ in virtual[0])
+    assert virtual[1] == ["on"]  # the loop went on
