@@ -40,10 +40,16 @@ examples:
   ktcs-bench lab down
   ktcs-bench lab simulate --for 3600 --seed 1 --out run1   # an hour of the lab in virtual time
   ktcs-bench lab up --in-process --speed 10                # one process, 10x real time, console
+  ktcs-bench lab up spread.yaml --host west --token-file lab.token  # this computer's part of a
+                                         # lab spread over hosts (`hosts:`; docs/multihost.md)
+  ktcs-bench lab down --all              # every host's part of a spread lab
 
 Ctrl-C (or SIGTERM) stops `lab up` and `lab simulate`: exit 130 (143 on SIGTERM); a simulation
 writes its events, captures and summary up to that moment. `lab down`, or `--for` running out,
-ends `lab up` with exit 0.
+ends `lab up` with exit 0. A shared device's labgrid place (`external: {{labgrid: PLACE}}`) held by
+someone else, or a coordinator that does not answer, ends `lab up` with exit 3 naming the holder
+or the coordinator (`--wait-for-place` waits instead); the place is released however `lab up`
+ends.
 
 {SIMULATE_EXITS}"""
 
