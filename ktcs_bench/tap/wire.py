@@ -44,22 +44,23 @@ class WireTap(Tap):
         if net is None:
             raise OSError("a wire tap runs on a loop with a memory network (a lab in one process)")
         a, b = self.names
+        for end in (a, b):
+            self._ends[end] = net.serial_end(f"{self.name}/{end}")
         for end, other in ((a, b), (b, a)):
-            se = self._ends[end] = net.serial_end(f"{self.name}/{end}")
-            se.join = partial(self._line, f"{end}>{other}")
-            self._to[f"{other}>{end}"] = se  # what goes that way is delivered at this end
+            self._to[f"{other}>{end}"] = self._ends[end]  # what goes that way arrives here
+        for end, other in ((a, b), (b, a)):
+            self._ends[end].join = partial(self._line, f"{end}>{other}", self._ends[other])
 
-    def _line(self, direction: str, data: bytes, now: float) -> None:
-        """What a device's line delivered (`_on_data`, on the tap's own clock). On a clean link
-        the bytes pass as `_apply` would pass them, without an output to build and read."""
+    def _line(self, direction: str, to: SerialEnd, data: bytes, now: float) -> None:
+        """What a device's line delivered (`_on_data`, on the tap's own clock), for the end `to`.
+        On a clean link the bytes pass as `_apply` would pass them, without an output to build
+        and read."""
         now = self.timer.now()
         records = self.core.passed(direction, data, now)
         if records is None:
             self._apply(self.core.receive(direction, data, now))
             return
-        end = self._to.get(direction)
-        if end is not None:
-            end.deliver(data)
+        to.deliver(data)
         for r in records:
             for w in self._writers:
                 w.write(r)

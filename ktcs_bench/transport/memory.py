@@ -11,10 +11,10 @@ reader that stops reading pauses delivery (flow control), as TCP does.
 
 Serial wires (Type I) are `SerialEnd`s named `LINK/END` (the endpoint `virtual://LINK/END`):
 `open_serial` gives a device a `MemorySerialTransport`, a push-style transport whose sends are
-paced at the line rate by the virtual wire's pacing (`transport.virtual.VirtualWire`: a piece of
-bytes arrives when its last bit would have) and driven by the loop's timer (`LoopTimer`); what
-arrives goes to whatever joins the two ends -- a tap (`tap.wire.WireTap`) or a plain join. No
-thread, no file descriptor.
+paced at the line rate as the virtual wire paces it (`transport.virtual.VirtualWire`: a piece of
+bytes arrives when its last bit would have) on one loop timer at a time; what arrives goes to
+whatever joins the two ends -- a tap (`tap.wire.WireTap`) or a plain join. No thread, no file
+descriptor.
 
 Who owns what: every server and connection is marked with the owner in `OWNER` (a context
 variable the in-process lab sets per device) when it is made, so `drop(owner)` can do what the
@@ -34,9 +34,8 @@ from typing import Any
 
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.errors import UsageError
-from ktcs_bench.timed.aio import LoopTimer
 from ktcs_bench.transport.base import TransportBase, TransportClosed
-from ktcs_bench.transport.virtual import VirtualWire
+from ktcs_bench.transport.virtual import PIECE
 
 OWNER: contextvars.ContextVar[str] = contextvars.ContextVar("ktcs_memory_owner", default="")
 """Who makes a server or a connection now (the in-process lab sets a device's name)."""
@@ -331,29 +330,38 @@ class MemoryNetwork:
 class SerialEnd:
     """One end of a serial wire: the device's transport on one side, the join (a tap, or the
     other end) on the other. `join(data, now)` takes what the device's line delivered; `deliver`
-    hands bytes to the device."""
+    hands bytes to the device -- straight to what its transport was attached to (lost when no
+    device holds the end, as on a line whose far end is unplugged)."""
 
     def __init__(self, name: str) -> None:
         self.name = name
         self.join: Callable[[bytes, float], None] | None = None
         self.transport: MemorySerialTransport | None = None
+        self.deliver: Callable[[bytes], None] = _unplugged
 
-    def deliver(self, data: bytes) -> None:
-        """Bytes for the device at this end (lost when no device holds the end, as on a line
-        whose far end is unplugged)."""
-        if self.transport is not None:
-            self.transport._receive(data)
+
+def _unplugged(data: bytes) -> None:
+    """Bytes for an end no device holds (or whose device attached nothing yet): lost."""
 
 
 class MemorySerialTransport(TransportBase):
     """A device's end of a virtual serial wire: push style (`attach(on_data, on_closed)`), no fd.
-    Sends leave at the line rate (`VirtualWire`'s pacing on the loop's timer)."""
+
+    Sends leave at the line rate, paced as `VirtualWire` paces them (the same arithmetic, the
+    same instants): a send's pieces of `PIECE` bytes queue, and one loop timer at a time stands at
+    the earliest, re-armed after each arrival has been handed on -- the loop's timers made and
+    ordered exactly as a `LoopTimer` on a `VirtualWire` would make them, without that core asked
+    again after every piece (a device's end has no faults: a link's faults are its tap's). Every
+    byte of every Type I link of a lab comes this way."""
 
     def __init__(self, end: SerialEnd, profile: FrameProfile, byte_time: float) -> None:
         self.name = end.name
         self.end = end
-        self.wire = VirtualWire(byte_time, profile, record=False)
-        self.timer = LoopTimer(self.wire, self._on_line)
+        self.byte_time = byte_time
+        self._free_at = 0.0  # when the line has sent everything handed to it
+        self._flight: deque[tuple[float, bytes]] = deque()  # (arrives at, piece), in order
+        self._handle: asyncio.TimerHandle | None = None  # at the first piece in flight
+        self._loop: asyncio.AbstractEventLoop | None = None
         self._on_data: Callable[[bytes], None] | None = None
         self._on_closed: Callable[[BaseException], None] | None = None
         self._closed = False
@@ -365,21 +373,52 @@ class MemorySerialTransport(TransportBase):
         self, on_data: Callable[[bytes], None], on_closed: Callable[[BaseException], None]
     ) -> None:
         self._on_data, self._on_closed = on_data, on_closed
+        if not self._closed and self.end.transport is self:
+            self.end.deliver = on_data  # what arrives at this end, without a call between
 
-    def _on_line(self, now: float, data: bytes) -> None:
-        if data and self.end.join is not None and not self._closed:
-            self.end.join(data, now)
-
-    def _receive(self, data: bytes) -> None:
-        if self._on_data is not None and not self._closed:
-            self._on_data(data)
+    def _arrive(self) -> None:
+        """The first piece in flight is due: it (and any due with it) goes to the join, then the
+        timer stands at the next."""
+        self._handle = None
+        if self._closed:
+            return
+        flight = self._flight
+        loop = self._loop
+        assert loop is not None
+        now = loop.time()
+        due = flight[0][0]
+        if now < due:  # the loop's clock a hair short of the deadline it ran the timer for
+            now = due
+        out = flight.popleft()[1]  # a piece: mostly the only one due
+        if flight and flight[0][0] <= now:
+            more = bytearray(out)
+            while flight and flight[0][0] <= now:
+                more += flight.popleft()[1]
+            out = bytes(more)
+        if self.end.join is not None:
+            self.end.join(out, now)
+        if flight and self._handle is None and not self._closed:  # (a send it caused armed it)
+            self._handle = loop.call_at(flight[0][0], self._arrive)
 
     # -- Transport -------------------------------------------------------------------------------
     def send(self, data: bytes) -> None:
         if self._closed:
             raise TransportClosed(f"{self.name} is closed")
-        self.wire.put(data, self.timer.now())
-        self.timer.poke()
+        loop = self._loop
+        if loop is None:
+            loop = self._loop = asyncio.get_running_loop()
+        start = loop.time()
+        if start < self._free_at:
+            start = self._free_at
+        bt, flight = self.byte_time, self._flight
+        data = bytes(data)
+        n = len(data)
+        for i in range(0, n, PIECE):
+            chunk = data[i : i + PIECE]
+            flight.append((start + (i + len(chunk)) * bt, chunk))
+        self._free_at = start + n * bt
+        if self._handle is None and flight:
+            self._handle = loop.call_at(flight[0][0], self._arrive)
 
     def recv(self, timeout: float | None = None) -> bytes:
         raise UsageError("a virtual serial end pushes what arrives (attach), it is not polled")
@@ -388,12 +427,15 @@ class MemorySerialTransport(TransportBase):
         return None
 
     def drain(self, timeout: float | None = None) -> bool:
-        return self.wire.next_deadline() is None
+        return not self._flight
 
     def close(self) -> None:
         if self._closed:
             return
         self._closed = True
-        self.timer.cancel()
+        if self._handle is not None:
+            self._handle.cancel()
+            self._handle = None
         if self.end.transport is self:
             self.end.transport = None
+            self.end.deliver = _unplugged

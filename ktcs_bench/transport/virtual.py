@@ -26,6 +26,9 @@ from ktcs_bench.faults import Fault, FaultInjector
 from ktcs_bench.timed.virtual import VirtualClock
 from ktcs_bench.type1 import LinkEvent, Message, Type1Link
 
+PIECE = 8
+"""Bytes of a piece: a frame arrives in pieces of this many bytes, each when its last has."""
+
 
 @dataclass
 class VirtualWire:
@@ -33,7 +36,7 @@ class VirtualWire:
 
     byte_time: float
     profile: FrameProfile
-    piece: int = 8
+    piece: int = PIECE
     faults: FaultInjector | None = None
     seed: int = 0
     record: bool = True  # keep `sent` and `arrived` (a long-running wire does not)
@@ -129,7 +132,7 @@ class VirtualBench:
         a: Type1Link,
         b: Type1Link,
         *,
-        piece: int = 8,
+        piece: int = PIECE,
         faults_ab: FaultInjector | None = None,
         faults_ba: FaultInjector | None = None,
         start: float = 0.0,
