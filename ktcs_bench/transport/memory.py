@@ -35,7 +35,7 @@ from typing import Any
 from ktcs_bench.codec.profile import FrameProfile
 from ktcs_bench.errors import UsageError
 from ktcs_bench.transport.base import TransportBase, TransportClosed
-from ktcs_bench.transport.virtual import PIECE
+from ktcs_bench.transport.virtual import Flight, put_in_pieces, take_arrived
 
 OWNER: contextvars.ContextVar[str] = contextvars.ContextVar("ktcs_memory_owner", default="")
 """Who makes a server or a connection now (the in-process lab sets a device's name)."""
@@ -359,7 +359,7 @@ class MemorySerialTransport(TransportBase):
         self.end = end
         self.byte_time = byte_time
         self._free_at = 0.0  # when the line has sent everything handed to it
-        self._flight: deque[tuple[float, bytes]] = deque()  # (arrives at, piece), in order
+        self._flight: Flight = deque()
         self._handle: asyncio.TimerHandle | None = None  # at the first piece in flight
         self._loop: asyncio.AbstractEventLoop | None = None
         self._on_data: Callable[[bytes], None] | None = None
@@ -389,12 +389,7 @@ class MemorySerialTransport(TransportBase):
         due = flight[0][0]
         if now < due:  # the loop's clock a hair short of the deadline it ran the timer for
             now = due
-        out = flight.popleft()[1]  # a piece: mostly the only one due
-        if flight and flight[0][0] <= now:
-            more = bytearray(out)
-            while flight and flight[0][0] <= now:
-                more += flight.popleft()[1]
-            out = bytes(more)
+        out = take_arrived(flight, now)
         if self.end.join is not None:
             self.end.join(out, now)
         if flight and self._handle is None and not self._closed:  # (a send it caused armed it)
@@ -410,13 +405,8 @@ class MemorySerialTransport(TransportBase):
         start = loop.time()
         if start < self._free_at:
             start = self._free_at
-        bt, flight = self.byte_time, self._flight
-        data = bytes(data)
-        n = len(data)
-        for i in range(0, n, PIECE):
-            chunk = data[i : i + PIECE]
-            flight.append((start + (i + len(chunk)) * bt, chunk))
-        self._free_at = start + n * bt
+        flight = self._flight
+        self._free_at = put_in_pieces(flight, bytes(data), start, self.byte_time)
         if self._handle is None and flight:
             self._handle = loop.call_at(flight[0][0], self._arrive)
 

@@ -29,6 +29,34 @@ from ktcs_bench.type1 import LinkEvent, Message, Type1Link
 PIECE = 8
 """Bytes of a piece: a frame arrives in pieces of this many bytes, each when its last has."""
 
+Flight = deque[tuple[float, bytes]]
+"""The pieces on a line, in order: (when its last byte arrives, the piece)."""
+
+
+def put_in_pieces(
+    flight: Flight, data: bytes, start: float, byte_time: float, piece: int = PIECE
+) -> float:
+    """Put `data` on a line that is free from `start`, one piece after another at `byte_time` a
+    byte; when the line is free again."""
+    n = len(data)
+    for i in range(0, n, piece):
+        chunk = data[i : i + piece]
+        flight.append((start + (i + len(chunk)) * byte_time, chunk))
+    return start + n * byte_time
+
+
+def take_arrived(flight: Flight, now: float) -> bytes:
+    """The pieces that have arrived by `now`, joined (mostly the only one)."""
+    if not flight or flight[0][0] > now:
+        return b""
+    out = flight.popleft()[1]
+    if flight and flight[0][0] <= now:
+        more = bytearray(out)
+        while flight and flight[0][0] <= now:
+            more += flight.popleft()[1]
+        out = bytes(more)
+    return out
+
 
 @dataclass
 class VirtualWire:
@@ -43,7 +71,7 @@ class VirtualWire:
     sent: list[tuple[float, bytes]] = field(default_factory=list)  # as the sender handed them
     arrived: list[tuple[float, bytes]] = field(default_factory=list)  # as the receiver got them
     _free_at: float = 0.0
-    _flight: deque[tuple[float, bytes]] = field(default_factory=deque)
+    _flight: Flight = field(default_factory=deque)
 
     @property
     def injector(self) -> FaultInjector:
@@ -89,15 +117,9 @@ class VirtualWire:
         """The bytes that have arrived at the receiver by `now`."""
         if self.faults is not None:
             self._release(now)
-        flight = self._flight
-        if not flight or flight[0][0] > now:
+        out = take_arrived(self._flight, now)
+        if not out:
             return b""
-        out = flight.popleft()[1]  # a piece: mostly the only one due
-        if flight and flight[0][0] <= now:
-            more = bytearray(out)
-            while flight and flight[0][0] <= now:
-                more += flight.popleft()[1]
-            out = bytes(more)
         if self.record:
             self.arrived.append((now, out))
         return out
@@ -113,13 +135,9 @@ class VirtualWire:
                 self._line(data, now)
 
     def _line(self, data: bytes, now: float) -> None:
-        start = max(now, self._free_at)
-        bt = self.byte_time
-        data = bytes(data)  # its pieces are handed on as they are (a no-op for bytes)
-        for i in range(0, len(data), self.piece):
-            chunk = data[i : i + self.piece]
-            self._flight.append((start + (i + len(chunk)) * bt, chunk))
-        self._free_at = start + len(data) * bt
+        # its pieces are handed on as they are (bytes(): a no-op for bytes)
+        self._free_at = put_in_pieces(self._flight, bytes(data), max(now, self._free_at),
+                                      self.byte_time, self.piece)  # fmt: skip
 
 
 class VirtualBench:
