@@ -30,12 +30,20 @@ from typing import Any
 
 from ktcs_bench.runtime import private_dir
 from tests.lab.conftest import RunningLab, start_lab, wait_until
-from tests.lab.netns import DEVICE_IP, LAB_IP, DeviceHost, driver_main, emulated_atc, reachable
+from tests.lab.netns import (
+    DEVICE_IP,
+    LAB_IP,
+    RAILS_PORT,
+    DeviceHost,
+    driver_main,
+    emulated_atc,
+    reachable,
+    station18_lab,
+)  # fmt: skip
 
-COORDINATOR_PORT, RAILS_PORT = 20408, 7000
+COORDINATOR_PORT = 20408
 COORDINATOR = f"{LAB_IP}:{COORDINATOR_PORT}"
 PLACE = "atc18"
-LINE = Path(__file__).resolve().parents[2] / "emulators" / "lines" / "reference.yaml"
 OURS = {"LG_HOSTNAME": "labhost", "LG_USERNAME": "engineer"}  # who `lab up` is, to labgrid
 ALICE = {"LG_HOSTNAME": "bench2", "LG_USERNAME": "alice"}  # another user of the same device
 PROCEDURE = """\
@@ -113,21 +121,7 @@ def main(tmp: Path) -> dict[str, Any]:
                    lambda: f"devhost/{PLACE}/NetworkSerialPort" in must(labgrid("resources")))  # fmt: skip
         must(labgrid("-p", PLACE, "create"))
         must(labgrid("-p", PLACE, "add-match", f"devhost/{PLACE}/*"))
-        lab_file = tmp / f"{name}.yaml"
-        lab_file.write_text(
-            f"lab: {name}\nline: {LINE}\ndevices:\n"
-            "  ctc:   {kind: ctc}\n"
-            f"  tc:    {{kind: trackcircuit, host: {LAB_IP}, port: {RAILS_PORT}}}\n"
-            "  ixl18: {kind: ixl, station: 18}\n"
-            f"  atc18: {{kind: atc, station: 18, external: {{labgrid: {PLACE}, "
-            f"coordinator: '{COORDINATOR}', rails: true}}}}\n"
-            "  io18:  {kind: trackside, station: 18}\n"
-            "links:\n"
-            "  - {name: st18-ctc, type: type2, a: ixl18, b: ctc}\n"
-            "  - {name: st18-atc, type: type1, a: ixl18, b: atc18}\n"
-            "  - {name: st18-io,  type: type1, a: ixl18, b: io18}\n",
-            encoding="utf-8",
-        )  # fmt: skip
+        lab_file = station18_lab(tmp, name, f"labgrid: {PLACE}, coordinator: '{COORDINATOR}'")
         procedure = tmp / "labgrid_atc18.yaml"
         procedure.write_text(PROCEDURE, encoding="utf-8")
 

@@ -151,6 +151,30 @@ def reachable(host: str, port: int) -> bool:
         return False
 
 
+RAILS_PORT = 7000  # the lab's rails, where the device's-host ATC joins them
+LINE = ROOT / "emulators" / "lines" / "reference.yaml"
+
+
+def station18_lab(tmp: Path, name: str, atc_external: str) -> Path:
+    """A lab file of station 18 whose ATC is external (`atc_external`: the inside of its
+    `external: {...}`), on the rails at LAB_IP:RAILS_PORT, where the device's host joins them."""
+    lab_file = tmp / f"{name}.yaml"
+    lab_file.write_text(
+        f"lab: {name}\nline: {LINE}\ndevices:\n"
+        "  ctc:   {kind: ctc}\n"
+        f"  tc:    {{kind: trackcircuit, host: {LAB_IP}, port: {RAILS_PORT}}}\n"
+        "  ixl18: {kind: ixl, station: 18}\n"
+        f"  atc18: {{kind: atc, station: 18, external: {{{atc_external}, rails: true}}}}\n"
+        "  io18:  {kind: trackside, station: 18}\n"
+        "links:\n"
+        "  - {name: st18-ctc, type: type2, a: ixl18, b: ctc}\n"
+        "  - {name: st18-atc, type: type1, a: ixl18, b: atc18}\n"
+        "  - {name: st18-io,  type: type1, a: ixl18, b: io18}\n",
+        encoding="utf-8",
+    )  # fmt: skip
+    return lab_file
+
+
 def emulated_atc(
     host: DeviceHost, tmp: Path, token: Path, rails: str, station: int = 18
 ) -> tuple[subprocess.Popen[str], dict[str, Any]]:

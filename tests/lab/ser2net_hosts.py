@@ -22,10 +22,19 @@ from typing import Any
 
 from ktcs_bench.runtime import private_dir, read_token
 from tests.lab.conftest import request, start_lab, wait_until
-from tests.lab.netns import DEVICE_IP, LAB_IP, DeviceHost, driver_main, emulated_atc, reachable, sh
+from tests.lab.netns import (
+    DEVICE_IP,
+    LAB_IP,
+    RAILS_PORT,
+    DeviceHost,
+    driver_main,
+    emulated_atc,
+    reachable,
+    sh,
+    station18_lab,
+)  # fmt: skip
 
-SER2NET_PORT, RAILS_PORT = 4000, 7000
-LINE = Path(__file__).resolve().parents[2] / "emulators" / "lines" / "reference.yaml"
+SER2NET_PORT = 4000
 # ser2net's serial device here is a pty, which has no modem lines: it cannot acknowledge DTR/RTS,
 # so pyserial is told not to wait for that (a real UART behind ser2net would acknowledge them)
 URL = f"rfc2217://{DEVICE_IP}:{SER2NET_PORT}?ign_set_control"
@@ -58,20 +67,7 @@ def main(tmp: Path) -> dict[str, Any]:
         assert not reachable("127.0.0.1", SER2NET_PORT), "the device's port is on our loopback"
         seen["ser2net"] = {"pid": ser2net.pid, "serves": f"{DEVICE_IP}:{SER2NET_PORT}", "pty": pty}
 
-        lab_file = tmp / f"{name}.yaml"
-        lab_file.write_text(
-            f"lab: {name}\nline: {LINE}\ndevices:\n"
-            "  ctc:   {kind: ctc}\n"
-            f"  tc:    {{kind: trackcircuit, host: {LAB_IP}, port: {RAILS_PORT}}}\n"
-            "  ixl18: {kind: ixl, station: 18}\n"
-            f"  atc18: {{kind: atc, station: 18, external: {{serial: '{URL}', rails: true}}}}\n"
-            "  io18:  {kind: trackside, station: 18}\n"
-            "links:\n"
-            "  - {name: st18-ctc, type: type2, a: ixl18, b: ctc}\n"
-            "  - {name: st18-atc, type: type1, a: ixl18, b: atc18}\n"
-            "  - {name: st18-io,  type: type1, a: ixl18, b: io18}\n",
-            encoding="utf-8",
-        )  # fmt: skip
+        lab_file = station18_lab(tmp, name, f"serial: '{URL}'")
         with start_lab(tmp, name, path=lab_file) as lab:
 
             def alive() -> bool:
