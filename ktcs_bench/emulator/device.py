@@ -11,6 +11,7 @@ its launcher holds the other end of), it stops when the launcher is gone.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import os
@@ -159,6 +160,16 @@ class Device:
             self.timer.cancel()
         if self._server is not None:
             self._server.close()
+
+    async def end(self, tasks: list[asyncio.Task[None]]) -> None:
+        """What the end of its process does, where it runs beside other devices in one process
+        (a station's group, the lab in one process): its `tasks` cancelled -- its links and rails
+        dropped -- and its ports closed; a close that fails ends it all the same."""
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        with contextlib.suppress(Exception):
+            await self.close()
 
     def stop(self) -> None:
         if self._stop is not None:

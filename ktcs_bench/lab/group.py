@@ -93,12 +93,7 @@ class DeviceGroup:
         device = self.devices.pop(name, None)
         if device is None:
             return
-        tasks = self.running.pop(name, [])
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
-        with contextlib.suppress(Exception):
-            await device.close()
+        await device.end(self.running.pop(name, []))
         self.ended[name] = why
 
     def _end(self, name: str, why: str) -> None:

@@ -27,7 +27,6 @@ violation (`violations`, empty when none); `on_violation` hears each as it is fo
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import contextvars
 import json
 import logging
@@ -346,12 +345,7 @@ class InProcessLab:
             raise UsageError(f"{name} is not running")
         assert self.net is not None
         self.net.drop(name)
-        tasks = self.running.pop(name, [])
-        for task in tasks:
-            task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
-        with contextlib.suppress(Exception):
-            await device.close()
+        await device.end(self.running.pop(name, []))
         self._note_lab(name, "lab", "stopped")
 
     async def restart(self, name: str) -> None:
